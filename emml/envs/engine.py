@@ -1,0 +1,138 @@
+"""Start and end ViZDoom engines, by pid, whatever way their owner ends.
+
+`DoomGame.init()` forks an engine process and shares memory with it through /dev/shm/ViZDoom*<instance id>
+files. If the Python owner dies without `close()`, the engine keeps running and the files stay. So every engine
+started here is recorded with its pid and instance id, and `end_engine` closes the game, kills the pid if it
+still lives and removes its shm files. An atexit hook ends what is left on normal exit, and
+`install_signal_handlers` turns SIGTERM into SystemExit so that `finally` blocks and context managers run.
+"""
+
+from __future__ import annotations
+
+import atexit
+import glob
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass
+
+SHM_DIR = "/dev/shm"
+
+
+class EngineError(RuntimeError):
+    """The ViZDoom engine failed to start, died, or stopped answering."""
+
+
+@dataclass
+class Engine:
+    game: object
+    """The vizdoom.DoomGame."""
+    pid: int | None
+    """The engine process, a child of this process."""
+    instance_id: str | None
+    """ViZDoom's instance id: names the engine's shm files."""
+
+
+_LIVE: dict[int, Engine] = {}
+_LOCK = threading.Lock()
+
+
+def _children_named(name: str) -> dict[int, str]:
+    """pid → command line of this process's children whose executable is ``name``."""
+    me = os.getpid()
+    out = {}
+    for stat in glob.glob("/proc/[0-9]*/stat"):
+        try:
+            with open(stat) as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            if int(fields[1]) != me:
+                continue
+            pid = int(stat.split("/")[2])
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                argv = f.read().split(b"\0")
+            if os.path.basename(argv[0].decode()) == name:
+                out[pid] = " ".join(a.decode() for a in argv)
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+def start_engine(game) -> Engine:
+    """``game.init()`` and record the engine it forked. Raises EngineError on failure."""
+    before = set(_children_named("vizdoom"))
+    try:
+        game.init()
+    except Exception as e:  # vizdoom raises its own exception types
+        raise EngineError(f"ViZDoom failed to start: {e}") from e
+    new = {p: c for p, c in _children_named("vizdoom").items() if p not in before}
+    pid, instance = None, None
+    if len(new) == 1:
+        pid, cmd = next(iter(new.items()))
+        argv = cmd.split()
+        if "+viz_instance_id" in argv:
+            instance = argv[argv.index("+viz_instance_id") + 1]
+    engine = Engine(game, pid, instance)
+    if pid is not None:
+        with _LOCK:
+            _LIVE[pid] = engine
+    return engine
+
+
+def _alive(pid: int) -> bool:
+    try:
+        done, _ = os.waitpid(pid, os.WNOHANG)  # reaps it if it has exited (it is our child)
+        return done == 0
+    except ChildProcessError:
+        return False
+
+
+def end_engine(engine: Engine) -> None:
+    """Close the game, then make sure its process is gone and its shm files removed. Idempotent."""
+    try:
+        engine.game.close()
+    except Exception:
+        pass
+    if engine.pid is not None:
+        deadline = time.monotonic() + 1.0
+        while _alive(engine.pid) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if _alive(engine.pid):
+            try:
+                os.kill(engine.pid, signal.SIGKILL)
+                os.waitpid(engine.pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+        with _LOCK:
+            _LIVE.pop(engine.pid, None)
+    if engine.instance_id:
+        for path in glob.glob(os.path.join(SHM_DIR, f"ViZDoom*{engine.instance_id}")):
+            try:
+                os.unlink(path)
+            except FileNotFoundError:
+                pass
+
+
+def live_engines() -> list[int]:
+    """Pids of engines started by this process and not yet ended."""
+    with _LOCK:
+        return list(_LIVE)
+
+
+@atexit.register
+def _end_all() -> None:
+    with _LOCK:
+        engines = list(_LIVE.values())
+    for engine in engines:
+        end_engine(engine)
+
+
+def _raise_exit(signum, frame):
+    raise SystemExit(128 + signum)
+
+
+def install_signal_handlers() -> None:
+    """SIGTERM (and SIGHUP) raise SystemExit in the main thread, so cleanup code runs as on Ctrl-C."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            signal.signal(sig, _raise_exit)

@@ -1,0 +1,26 @@
+"""The image encoder's geometry, without torch: the size of the conv3 grid for an input size.
+
+Appendix A: conv1 32@8×8 stride 4, conv2 64@4×4 stride 2, conv3 V@3×3 stride 2, no padding (paper silent; with
+none, 168×300 gives the 9×17 grid). The env needs it for the aux label grid, the models for their layer sizes.
+"""
+
+from __future__ import annotations
+
+CONV_LAYERS = ((8, 4), (4, 2), (3, 2))
+"""(kernel, stride) of conv1..conv3."""
+
+
+def conv_output_size(height: int, width: int) -> tuple[int, int]:
+    """(h, w) of the conv3 output for an input of height × width; a ValueError naming the field if empty."""
+    out = []
+    for name, size in (("height", height), ("width", width)):
+        n = size
+        for kernel, stride in CONV_LAYERS:
+            n = (n - kernel) // stride + 1 if n >= kernel else 0
+        if n < 1:
+            smallest = 1
+            for kernel, stride in reversed(CONV_LAYERS):
+                smallest = (smallest - 1) * stride + kernel
+            raise ValueError(f"{name}={size} is too small for the image encoder: at least {smallest} pixels")
+        out.append(n)
+    return out[0], out[1]

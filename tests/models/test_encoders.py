@@ -1,0 +1,75 @@
+"""Encoders of Chaplot et al. 2019 (arXiv 1902.01385): conv grid arithmetic, BoW, sentence GRU."""
+
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from emml.models import conv_output_size
+from emml.models.encoders import MIN_INPUT_SIZE, ImageEncoder, TextEncoder
+
+
+def test_conv_output_size_paper_input():
+    assert conv_output_size(168, 300) == (9, 17)
+    assert conv_output_size(60, 108) == (2, 5)
+    assert conv_output_size(84, 150) == (4, 8)
+    assert conv_output_size(MIN_INPUT_SIZE, MIN_INPUT_SIZE) == (1, 1)
+
+
+@pytest.mark.parametrize(
+    "height,width,field", [(35, 300, "height"), (168, 35, "width"), (0, 0, "height")]
+)
+def test_conv_output_size_too_small_names_field(height, width, field):
+    with pytest.raises(ValueError, match=rf"{field}.*>= {MIN_INPUT_SIZE}"):
+        conv_output_size(height, width)
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(36, 90), st.integers(36, 90))
+def test_conv_output_size_matches_encoder(height, width):
+    enc = ImageEncoder(vocab_size=3)
+    with torch.no_grad():
+        out = enc(torch.zeros(1, 3, height, width, dtype=torch.uint8))
+    assert tuple(out.shape[2:]) == conv_output_size(height, width)
+
+
+def test_image_encoder_scales_uint8_and_rejects_float():
+    torch.manual_seed(0)
+    enc = ImageEncoder(vocab_size=5)
+    img = torch.randint(0, 256, (2, 3, 60, 108), dtype=torch.uint8)
+    out = enc(img)
+    assert out.shape == (2, 5, 2, 5)
+    # model-side /255: same as running the conv stack on the scaled float image
+    x = img.float() / 255
+    ref = enc.conv3(torch.relu(enc.conv2(torch.relu(enc.conv1(x)))))
+    torch.testing.assert_close(out, ref)
+    with pytest.raises(TypeError):
+        enc(img.float())
+
+
+def test_bag_of_words():
+    enc = TextEncoder(vocab_size=5, sentence=False)
+    tokens = torch.tensor([[1, 3, 3, 0], [5, 0, 0, 0], [0, 0, 0, 0]])
+    bow, sent = enc(tokens)
+    assert sent is None
+    assert list(enc.parameters()) == []
+    expected = torch.tensor(
+        [[1, 0, 1, 0, 0], [0, 0, 0, 0, 1], [0, 0, 0, 0, 0]], dtype=torch.float32
+    )
+    torch.testing.assert_close(bow, expected)
+
+
+def test_sentence_uses_last_non_pad_step():
+    torch.manual_seed(0)
+    enc = TextEncoder(vocab_size=6, embed_dim=8, gru=8)
+    padded = torch.tensor([[2, 4, 6, 0, 0], [3, 0, 0, 0, 0], [0, 0, 0, 0, 0]])
+    _, sent = enc(padded)
+    assert sent.shape == (3, 6)
+    assert torch.all(sent >= 0)  # ReLU
+    for row, length in ((0, 3), (1, 1)):
+        _, alone = enc(padded[row : row + 1, :length])
+        torch.testing.assert_close(sent[row : row + 1], alone)
+    # all-pad row: finite and equal to ReLU of the linear bias (h = 0)
+    torch.testing.assert_close(sent[2], torch.relu(enc.linear.bias))
+    sent.sum().backward()
+    assert torch.isfinite(enc.gru.weight_ih_l0.grad).all()

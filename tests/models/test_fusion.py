@@ -1,0 +1,169 @@
+"""Fusion units of Chaplot et al. 2019 (arXiv 1902.01385): Dual-Attention Eq. 1-5, ablations, baselines."""
+
+import math
+
+import pytest
+import torch
+
+from emml.models.fusion import (
+    Concat,
+    DualAttention,
+    FiLM,
+    GatedAttention,
+    ImageOnly,
+    Pacman,
+    TextOnly,
+)
+
+# Vocabulary of the hand-made example: 0 pillar, 1 torch, 2 red, 3 green.
+PILLAR, TORCH, RED, GREEN = range(4)
+
+
+def _scene() -> torch.Tensor:
+    """x_I (1, 4, 1, 2): a red pillar at column 0, a green torch at column 1."""
+    x = torch.zeros(1, 4, 1, 2)
+    x[0, PILLAR, 0, 0] = x[0, RED, 0, 0] = 1.0
+    x[0, TORCH, 0, 1] = x[0, GREEN, 0, 1] = 1.0
+    return x
+
+
+def _question():
+    """'Which color is the pillar?': BoW = {pillar}, x_sent attends to colour channels."""
+    bow = torch.tensor([[1.0, 0.0, 0.0, 0.0]])
+    sent = torch.tensor([[0.0, 0.0, 1.0, 1.0]])
+    return bow, sent
+
+
+def test_dual_attention_hand_example():
+    x_i = _scene()
+    bow, sent = _question()
+    out = DualAttention(4, 1, 2)(x_i, bow, sent)
+    # Eq. 1: words absent from the text zero their channel (checked through Eq. 2's input)
+    x_ga1 = x_i * bow[:, :, None, None]
+    assert torch.all(x_ga1[0, TORCH] == 0) and torch.all(x_ga1[0, GREEN] == 0)
+    # Eq. 2: spatial map is a softmax over HxW of the pillar channel -> favours column 0
+    p = math.e / (math.e + 1)
+    torch.testing.assert_close(out.attention, torch.tensor([[[p, 1 - p]]]))
+    assert out.attention.sum().item() == pytest.approx(1.0)
+    torch.testing.assert_close(out.state, out.attention.reshape(1, 2))  # x_S = vec(x_spat)
+    # Eq. 3-5: answer logits are the spatially-attended colour channels only
+    torch.testing.assert_close(out.answer_logits, torch.tensor([[0.0, 0.0, p, 1 - p]]))
+    x_ans = torch.softmax(out.answer_logits, dim=1)
+    assert x_ans.sum().item() == pytest.approx(1.0)
+    assert x_ans.argmax().item() == RED
+
+
+def test_dual_attention_object_question_follows_gated_channels():
+    """'Which object is green?': BoW = {green}, x_sent attends to object channels."""
+    bow = torch.tensor([[0.0, 0.0, 0.0, 1.0]])
+    sent = torch.tensor([[1.0, 1.0, 0.0, 0.0]])
+    out = DualAttention(4, 1, 2)(_scene(), bow, sent)
+    assert out.attention[0, 0, 1] > out.attention[0, 0, 0]
+    assert torch.softmax(out.answer_logits, 1).argmax().item() == TORCH
+
+
+def test_absent_word_channel_does_not_move_attention():
+    x_i = _scene()
+    bow, sent = _question()
+    fusion = DualAttention(4, 1, 2)
+    base = fusion(x_i, bow, sent).attention
+    changed = x_i.clone()
+    changed[0, GREEN] = torch.tensor([[5.0, -3.0]])  # 'green' is not in the text
+    torch.testing.assert_close(fusion(changed, bow, sent).attention, base)
+
+
+def test_dual_attention_has_no_parameters():
+    assert list(DualAttention(4, 1, 2).parameters()) == []
+
+
+def test_ablation_no_ga1_uses_all_channels():
+    x_i = _scene()
+    bow, sent = _question()
+    out = DualAttention(4, 1, 2, ga1=False)(x_i, None, sent)
+    torch.testing.assert_close(out.attention, torch.full((1, 1, 2), 0.5))  # both columns sum to 2
+
+
+def test_ablation_no_ga2_answers_from_x_sa():
+    x_i = _scene()
+    bow, _ = _question()
+    out = DualAttention(4, 1, 2, ga2=False)(x_i, bow, None)
+    p = math.e / (math.e + 1)
+    torch.testing.assert_close(out.answer_logits, torch.tensor([[p, 1 - p, p, 1 - p]]))
+
+
+def test_ablation_no_sa_state_is_gated_image():
+    x_i = _scene()
+    bow, sent = _question()
+    fusion = DualAttention(4, 1, 2, spatial=False)
+    out = fusion(x_i, bow, sent)
+    assert out.attention is None
+    assert fusion.state_dim == 4 * 1 * 2
+    torch.testing.assert_close(out.state, (x_i * bow[:, :, None, None]).flatten(1))
+    torch.testing.assert_close(out.answer_logits, torch.tensor([[0.0, 0.0, 1.0, 1.0]]))
+
+
+@pytest.fixture
+def inputs():
+    torch.manual_seed(0)
+    v, h, w = 5, 2, 3
+    x_i = torch.rand(4, v, h, w)
+    bow = (torch.rand(4, v) > 0.5).float()
+    sent = torch.rand(4, v)
+    return x_i, bow, sent
+
+
+@pytest.mark.parametrize(
+    "cls,expected",
+    [
+        (TextOnly, lambda x, b, s: torch.cat([b, s], 1)),
+        (ImageOnly, lambda x, b, s: x.flatten(1)),
+        (Concat, lambda x, b, s: torch.cat([x.flatten(1), b, s], 1)),
+        (GatedAttention, lambda x, b, s: (x * s[:, :, None, None]).flatten(1)),
+    ],
+)
+def test_baseline_states_and_answer_head(cls, expected, inputs):
+    x_i, bow, sent = inputs
+    fusion = cls(5, 2, 3)
+    out = fusion(x_i, bow, sent)
+    ref = expected(x_i, bow, sent)
+    assert out.state.shape[1] == fusion.state_dim
+    torch.testing.assert_close(out.state, ref)
+    # answer = softmax(ReLU(Linear(x_S))): logits are the ReLU output
+    torch.testing.assert_close(out.answer_logits, torch.relu(fusion.answer.linear(ref)))
+    assert out.attention is None
+
+
+def test_film_state(inputs):
+    x_i, bow, sent = inputs
+    fusion = FiLM(5, 2, 3)
+    out = fusion(x_i, bow, sent)
+    gamma, beta = fusion.gamma(sent), fusion.beta(sent)
+    ref = (gamma[:, :, None, None] * x_i + beta[:, :, None, None]).flatten(1)
+    torch.testing.assert_close(out.state, ref)
+
+
+def test_pacman_attention_over_frames(inputs):
+    torch.manual_seed(1)
+    _, _, sent = inputs
+    frames = torch.rand(4, 5, 5, 2, 3)
+    fusion = Pacman(5, 2, 3)
+    weights, proj = fusion.frame_attention(frames, sent)
+    assert weights.shape == (4, 5)
+    torch.testing.assert_close(weights.sum(1), torch.ones(4))
+    out = fusion(frames, None, sent)
+    ref = (weights[:, :, None] * frames.flatten(2)).sum(1)
+    torch.testing.assert_close(out.state, ref)
+    attended = (weights[:, :, None] * proj).sum(1)
+    torch.testing.assert_close(
+        out.answer_logits, fusion.classifier(torch.cat([attended, sent], 1))
+    )
+
+
+def test_pacman_attends_to_matching_frame():
+    fusion = Pacman(2, 1, 1)
+    with torch.no_grad():
+        fusion.project.weight.copy_(torch.eye(2) * 10)
+        fusion.project.bias.zero_()
+    frames = torch.tensor([[[1.0, 0.0], [0.0, 1.0], [1.0, 0.0]]]).reshape(1, 3, 2, 1, 1)
+    weights, _ = fusion.frame_attention(frames, torch.tensor([[0.0, 1.0]]))
+    assert weights.argmax().item() == 1

@@ -1,0 +1,256 @@
+"""Shared model and policy module of Chaplot et al. 2019 (arXiv 1902.01385): shapes,
+gradients, ablations, recurrent-state resets and the PACMAN frame window."""
+
+import pytest
+import torch
+
+from emml.models import (
+    MODELS,
+    EmmlModel,
+    ModelConfig,
+    build_model,
+    model_table,
+)
+
+V, H, W, MAX_STEPS = 6, 60, 108, 20
+
+
+def make_obs(t, b, height=H, width=W, vocab=V, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    tokens = torch.randint(1, vocab + 1, (t, b, 4), generator=g)
+    tokens[..., -1] = 0  # right padding
+    return {
+        "image": torch.randint(0, 256, (t, b, 3, height, width), dtype=torch.uint8, generator=g),
+        "tokens": tokens,
+        "task": torch.randint(0, 2, (t, b), generator=g),
+        "time": torch.randint(0, MAX_STEPS + 1, (t, b), generator=g),
+    }
+
+
+def starts(t, b, first=True):
+    es = torch.zeros(t, b, dtype=torch.bool)
+    es[0] = first
+    return es
+
+
+def check_shapes(model, out, state, t, b, grid, vocab=V):
+    h, w = grid
+    assert out.logits.shape == (t, b, 4)
+    assert out.value.shape == (t, b)
+    assert out.answer_logits.shape == (t, b, vocab)
+    assert out.aux_logits.shape == (t, b, vocab, h, w)
+    if model.cfg.name == "dual_attention" and model.cfg.spatial_attention:
+        assert out.attention.shape == (t, b, h, w)
+        torch.testing.assert_close(out.attention.sum((2, 3)), torch.ones(t, b))
+    else:
+        assert out.attention is None
+    assert state["h"].shape == (b, 128)
+    for x in (out.logits, out.value, out.answer_logits, out.aux_logits):
+        assert torch.isfinite(x).all()
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+@pytest.mark.parametrize("t", [1, 3])
+def test_shapes_smoke_size(name, t):
+    torch.manual_seed(0)
+    model = build_model(name, V, H, W, MAX_STEPS)
+    state = model.initial_state(2)
+    with torch.no_grad():
+        out, new_state = model(make_obs(t, 2), state, starts(t, 2))
+    check_shapes(model, out, new_state, t, 2, (2, 5))
+    assert set(new_state) == set(state)
+    if name == "pacman":
+        assert new_state["frames"].shape == (2, 4, 3, H, W)
+        assert new_state["frames"].dtype == torch.uint8
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_shapes_paper_size(name):
+    torch.manual_seed(0)
+    model = build_model(name, 22, 168, 300, MAX_STEPS)
+    with torch.no_grad():
+        out, state = model(make_obs(1, 2, 168, 300, 22), model.initial_state(2), starts(1, 2))
+    check_shapes(model, out, state, 1, 2, (9, 17), vocab=22)
+
+
+@pytest.mark.parametrize("name", ["dual_attention", "pacman"])
+def test_long_rollout_t128(name):
+    model = build_model(name, V, 36, 36, 200)
+    obs = make_obs(128, 1, 36, 36)
+    es = torch.zeros(128, 1, dtype=torch.bool)
+    es[[0, 50]] = True
+    with torch.no_grad():
+        out, _ = model(obs, model.initial_state(1), es)
+    assert out.logits.shape == (128, 1, 4)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_gradients_reach_every_parameter(name):
+    torch.manual_seed(0)
+    model = build_model(name, V, H, W, MAX_STEPS)
+    t, b = 3, 2
+    out, _ = model(make_obs(t, b), model.initial_state(b), starts(t, b))
+    g = torch.Generator().manual_seed(1)
+    loss = sum(
+        (torch.randn(x.shape, generator=g) * x).sum()
+        for x in (out.logits, out.value, out.answer_logits, out.aux_logits)
+    )
+    loss.backward()
+    for pname, p in model.named_parameters():
+        assert p.grad is not None, f"{name}: no gradient for {pname}"
+        assert p.grad.abs().sum() > 0, f"{name}: zero gradient for {pname}"
+
+
+def _policy_in(name):
+    return build_model(name, V, H, W, MAX_STEPS).policy.linear.in_features
+
+
+def test_ablation_parameters():
+    full = _policy_in("dual_attention")
+    assert full == 2 * 5 + V + 32 + 2  # vec(x_spat) + x_Ans + time + indicator
+    assert _policy_in("da_no_indicator") == full - 2
+    assert _policy_in("da_no_sa") == V * 2 * 5 + V + 32 + 2
+    no_ga2 = build_model("da_no_ga2", V, H, W, MAX_STEPS)
+    assert not any(n.startswith("text_encoder.") for n, _ in no_ga2.named_parameters())
+    assert not any(n.startswith("text_encoder.") for n, _ in
+                   build_model("image_only", V, H, W, MAX_STEPS).named_parameters())
+    assert list(build_model("dual_attention", V, H, W, MAX_STEPS).fusion.parameters()) == []
+
+
+def test_no_ga1_attention_ignores_text():
+    torch.manual_seed(0)
+    model = build_model("da_no_ga1", V, H, W, MAX_STEPS)
+    obs = make_obs(1, 2)
+    other = dict(obs, tokens=torch.flip(obs["tokens"], dims=[1]))
+    with torch.no_grad():
+        a, _ = model(obs, model.initial_state(2), starts(1, 2))
+        b, _ = model(other, model.initial_state(2), starts(1, 2))
+    torch.testing.assert_close(a.attention, b.attention)
+
+
+def test_no_indicator_ignores_task():
+    torch.manual_seed(0)
+    model = build_model("da_no_indicator", V, H, W, MAX_STEPS)
+    obs = make_obs(1, 2)
+    with torch.no_grad():
+        a, _ = model(obs, model.initial_state(2), starts(1, 2))
+        b, _ = model(dict(obs, task=1 - obs["task"]), model.initial_state(2), starts(1, 2))
+    torch.testing.assert_close(a.logits, b.logits)
+
+
+@pytest.mark.parametrize("name", ["dual_attention", "concat"])
+def test_gru_state_resets_at_episode_start(name):
+    torch.manual_seed(0)
+    model = build_model(name, V, H, W, MAX_STEPS)
+    obs = make_obs(4, 2, seed=3)
+    es = starts(4, 2)
+    es[2, 1] = True  # env 1 starts a new episode at step 2
+    with torch.no_grad():
+        seq, _ = model(obs, model.initial_state(2), es)
+        tail = {k: v[2:] for k, v in obs.items()}
+        fresh, _ = model(tail, model.initial_state(2), starts(2, 2))
+        # a dirty state is ignored at an episode start
+        dirty = {"h": torch.randn(2, 128)}
+        reset, _ = model({k: v[:1] for k, v in obs.items()}, dirty, starts(1, 2))
+        first, _ = model({k: v[:1] for k, v in obs.items()}, model.initial_state(2), starts(1, 2))
+    torch.testing.assert_close(seq.logits[2:, 1], fresh.logits[:, 1])
+    torch.testing.assert_close(seq.value[2:, 1], fresh.value[:, 1])
+    assert not torch.allclose(seq.value[2:, 0], fresh.value[:, 0])  # env 0 kept its memory
+    torch.testing.assert_close(reset.logits, first.logits)
+    torch.testing.assert_close(reset.value, first.value)
+
+
+def _pacman_run_stepwise(model, obs, es, state):
+    outs = []
+    for t in range(es.shape[0]):
+        out, state = model({k: v[t : t + 1] for k, v in obs.items()}, state, es[t : t + 1])
+        outs.append(out)
+    cat = {f: torch.cat([getattr(o, f) for o in outs]) for f in ("logits", "value", "answer_logits")}
+    return cat, state
+
+
+def test_pacman_stepwise_equals_sequence():
+    torch.manual_seed(0)
+    model = build_model("pacman", V, 36, 36, MAX_STEPS)
+    t, b = 8, 2
+    obs = make_obs(t, b, 36, 36, seed=5)
+    es = starts(t, b)
+    es[5, 1] = True
+    with torch.no_grad():
+        seq, seq_state = model(obs, model.initial_state(b), es)
+        step, step_state = _pacman_run_stepwise(model, obs, es, model.initial_state(b))
+    for f in ("logits", "value", "answer_logits"):
+        torch.testing.assert_close(getattr(seq, f), step[f], atol=1e-5, rtol=1e-4)
+    assert torch.equal(seq_state["frames"], step_state["frames"])
+    torch.testing.assert_close(seq_state["h"], step_state["h"], atol=1e-5, rtol=1e-4)
+
+
+def test_pacman_window_contents_and_reset():
+    torch.manual_seed(0)
+    model = build_model("pacman", V, 36, 36, MAX_STEPS)
+    t, b = 7, 1
+    obs = make_obs(t, b, 36, 36, seed=7)
+    es = starts(t, b)
+    with torch.no_grad():
+        # episode start pads the window with the first frame
+        _, state = model({k: v[:1] for k, v in obs.items()}, model.initial_state(b), es[:1])
+        assert torch.equal(state["frames"][0], obs["image"][0, 0].expand(4, 3, 36, 36))
+        # after 7 steps the carried frames are the last 4 observed
+        _, state = model(obs, model.initial_state(b), es)
+        assert torch.equal(state["frames"][0], obs["image"][3:, 0])
+        # the window spans 5 frames: frame t-4 matters at step t, frame t-5 does not
+        base, _ = model(obs, model.initial_state(b), es)
+        for changed_step, matters in ((2, True), (1, False)):
+            img = obs["image"].clone()
+            img[changed_step] = 255 - img[changed_step]
+            alt, _ = model(dict(obs, image=img), model.initial_state(b), es)
+            # compare answers at step 6 (answer depends only on the window, not on h)
+            same = torch.allclose(alt.answer_logits[6], base.answer_logits[6])
+            assert same != matters
+        # an episode start discards a dirty window
+        dirty = {"h": torch.zeros(b, 128), "frames": torch.randint(0, 256, (b, 4, 3, 36, 36), dtype=torch.uint8)}
+        a, _ = model({k: v[:1] for k, v in obs.items()}, dirty, es[:1])
+        c, _ = model({k: v[:1] for k, v in obs.items()}, model.initial_state(b), es[:1])
+    torch.testing.assert_close(a.answer_logits, c.answer_logits)
+    torch.testing.assert_close(a.logits, c.logits)
+
+
+def test_unknown_model_name_lists_known_names():
+    with pytest.raises(ValueError) as err:
+        build_model("transformer", V, H, W, MAX_STEPS)
+    for name in MODELS:
+        assert name in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "kwargs,field",
+    [
+        ({"name": "bogus"}, "name"),
+        ({"hidden": 0}, "hidden"),
+        ({"pacman_frames": -1}, "pacman_frames"),
+        ({"name": "concat", "ga1": False}, "ga1"),
+        ({"task_indicator": "yes"}, "task_indicator"),
+    ],
+)
+def test_config_validate_names_field(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        ModelConfig(**kwargs).validate()
+
+
+def test_build_model_overrides_and_too_small_image():
+    model = build_model("pacman", V, H, W, MAX_STEPS, pacman_frames=3, hidden=64)
+    assert model.initial_state(1)["frames"].shape[1] == 2
+    assert model.policy.gru.hidden_size == 64
+    with pytest.raises(ValueError, match="unknown ModelConfig field"):
+        build_model("concat", V, H, W, MAX_STEPS, hiden=64)
+    with pytest.raises(ValueError, match="width"):
+        build_model("concat", V, 60, 20, MAX_STEPS)
+    assert isinstance(model, EmmlModel)
+
+
+def test_model_table():
+    rows = model_table(V, H, W, MAX_STEPS)
+    assert [r["name"] for r in rows] == list(MODELS)
+    for r in rows:
+        assert isinstance(r["parameters"], int) and r["parameters"] > 0
+        assert r["description"]

@@ -1,0 +1,87 @@
+"""emml.tracking against a throwaway sqlite store (one module: mlflow import + migration are slow)."""
+
+import pytest
+
+from emml import tracking
+
+
+@pytest.fixture(scope="module")
+def uri(tmp_path_factory):
+    # a directory that does not exist yet: the tracker must create it
+    db = tmp_path_factory.mktemp("mlf") / "missing" / "sub" / "mlflow.db"
+    return f"sqlite:///{db}"
+
+
+@pytest.fixture(autouse=True)
+def _env(uri, monkeypatch):
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    monkeypatch.setenv("MLFLOW_DISABLE_TELEMETRY", "true")
+
+
+def test_tracking_uri_default_and_env(monkeypatch, uri):
+    assert tracking.tracking_uri() == uri
+    monkeypatch.delenv("MLFLOW_TRACKING_URI")
+    default = tracking.tracking_uri()
+    assert default.startswith("sqlite:///") and default.endswith("/mlflow.db")
+
+
+def test_flatten():
+    assert tracking.flatten({"ppo": {"lr": 0.1, "clip": {"a": 1}}, "seed": 3}) == {
+        "ppo.lr": "0.1",
+        "ppo.clip.a": "1",
+        "seed": "3",
+    }
+
+
+def test_start_log_resume_find(tmp_path, uri):
+    t = tracking.Tracker()
+    rid = t.start("exp-a", "run1", tags={"model": "dual", "seed": 1}, params={"ppo": {"lr": 2.5e-4}, "seed": 1})
+    assert t.run_id == rid
+    t.log_metrics({"loss": 1.0, "acc": 0.1}, step=10)
+    t.log_metrics({"loss": 0.5, "acc": 0.2}, step=20)
+    art = tmp_path / "note.txt"
+    art.write_text("hi")
+    t.log_artifact(art)
+    t.finish("KILLED")
+
+    t2 = tracking.Tracker()
+    with pytest.warns(UserWarning, match="ppo.lr"):
+        rid2 = t2.start("exp-a", "run1", tags={"resumed": "yes"}, params={"ppo": {"lr": 1.0}, "extra": 5}, run_id=rid)
+    assert rid2 == rid
+    t2.log_metrics({"loss": 0.25}, step=30)
+    t2.finish()
+
+    assert tracking.metric_history(rid, "loss") == [(10, 1.0), (20, 0.5), (30, 0.25)]
+    tracking.Tracker().start("exp-a", "run2", tags={"model": "ga", "seed": 1}, params={})
+    runs = tracking.find_runs("exp-a", {"model": "dual"})
+    assert [r["run_id"] for r in runs] == [rid]
+    r = runs[0]
+    assert r["status"] == "FINISHED" and r["tags"]["resumed"] == "yes"
+    assert r["params"] == {"ppo.lr": "0.00025", "seed": "1", "extra": "5"}
+    assert r["metrics"]["loss"] == 0.25
+    assert len(tracking.find_runs("exp-a", {"seed": 1})) == 2
+    assert tracking.find_runs("no-such-exp", {}) == []
+    # artifacts go beside the (previously missing) db directory, not into the cwd
+    stored = list((tmp_path_db(uri) / "mlartifacts").rglob("note.txt"))
+    assert len(stored) == 1 and stored[0].read_text() == "hi" and rid in str(stored[0])
+
+
+def tmp_path_db(uri):
+    from pathlib import Path
+
+    return Path(uri[len("sqlite:///") :]).parent
+
+
+def test_retry_on_database_locked(monkeypatch):
+    monkeypatch.setattr(tracking.time, "sleep", lambda s: None)
+    calls = []
+
+    def flaky():
+        calls.append(1)
+        if len(calls) < 3:
+            raise RuntimeError("(sqlite3.OperationalError) database is locked")
+        return "ok"
+
+    assert tracking._retry(flaky) == "ok" and len(calls) == 3
+    with pytest.raises(ValueError):
+        tracking._retry(lambda: (_ for _ in ()).throw(ValueError("other")))
