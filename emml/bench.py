@@ -1,6 +1,7 @@
 """`emml bench env`: throughput of our env against the raw engine it wraps, measured in one run.
 
-Raw: the same DoomGame (same map, resolution, buffers, tics per step) stepped with `make_action` + `get_state`.
+Raw: the same DoomGame (same map and objects, resolution, buffers, tics per step) stepped with `make_action` +
+`get_state`.
 Ours: `DoomEnv.step` (action mapping, resize, labels, rewards, observation dict). Both with random moves; reset
 time is measured apart (ours: sampling a scene, placing 5 objects; raw: `new_episode`). Then the vector env with
 1 and 2 worker processes, resets included.
@@ -18,10 +19,10 @@ from emml.envs.vector import make_vector_env
 
 
 def _raw(env: DoomEnv, steps: int, rng) -> tuple[float, float]:
+    env.reset(seed=0)  # the same room with the same 5 objects; raw steps never end the episode
     game = env._game()
     turn = env._turn
     choices = [[1, 0], [0, -turn], [0, turn], [0, 0]]
-    game.new_episode()
     t0 = time.perf_counter()
     for _ in range(steps):
         game.make_action(choices[rng.integers(4)], env.cfg.frame_skip)

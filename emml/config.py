@@ -49,8 +49,9 @@ class DoomConfig:
     episode)."""
     render: str = "auto"
     """ViZDoom render resolution 'WxH' (16:9); 'auto' takes the smallest one at least the observation size."""
-    interpolation: str = "area"
-    """Resize filter from render to observation size: 'area' (the reference env's cv2.INTER_AREA), 'linear'."""
+    interpolation: str = "linear"
+    """Resize filter from render to observation size: 'linear' (our choice: 5× faster than 'area', the reference
+    env's cv2.INTER_AREA, and alike at the 0.94 scale of 320×180 → 300×168), 'area' or 'nearest'."""
     max_words: int = 10
     """Token sequence length (padded with 0)."""
     vocabulary: tuple[str, ...] | None = None
@@ -105,4 +106,136 @@ def config_from_dict(cls, values: dict):
     return cls(**fixed)
 
 
-__all__ = ["DoomConfig", "config_from_dict", "RESOLUTIONS_16_9", "field"]
+
+
+
+@dataclass
+class TrainConfig:
+    """One training run: environment, model, PPO and the run's own settings (issue: one trainer for all tables).
+
+    Defaults are the paper's protocol (Appendix A); profiles in reproduce/profiles.toml change cost, not
+    protocol, and every report states its profile."""
+
+    model: str = "dual_attention"
+    """Registry name of the model (`emml models`), ablations included."""
+    aux: bool = False
+    """Train with the auxiliary detection task (§3.2); turns on the env's aux labels."""
+    seed: int = 0
+    """Seeds Python, NumPy, torch and the envs (worker i gets seed + i)."""
+    frames: int = 10_000_000
+    """Agent steps to train, summed over actors (§5.1: 10M Easy, 50M Hard)."""
+    num_envs: int = 8
+    """Parallel actors (Appendix A: 8)."""
+    num_steps: int = 128
+    """Rollout horizon per actor and update (Appendix A: 128)."""
+    profile: str = "paper"
+    """Name of the profile the run came from (smoke, demo, quick, paper), recorded everywhere."""
+    eval_every: int = 0
+    """Evaluate every this many frames for the curves; 0: only at the end."""
+    eval_episodes: int = 100
+    """Greedy evaluation episodes per (task, split)."""
+    checkpoint_every: int = 10
+    """Write the checkpoint every this many updates (and at the end)."""
+    log_every: int = 10
+    """A log line every this many updates (metrics go to MLflow every update)."""
+    answer_supervision: str = "eqa_steps"
+    """Which steps train the answer cross-entropy: 'eqa_steps' (every step of an EQA episode: the correct answer
+    is fixed for the episode) or 'answer_steps' (only steps where the agent answered). Paper silent."""
+    device: str = "cpu"
+    """'cpu' or 'cuda'."""
+    threads: int = 0
+    """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
+    asynchronous: bool = True
+    """Env workers in processes (True) or in the learner process (False, for debugging)."""
+    table: str = "adhoc"
+    """MLflow experiment / results table the run belongs to."""
+    run_root: str = "runs"
+    """Where run directories (checkpoints, results.json) go, relative to the project root unless absolute."""
+    env: DoomConfig = field(default_factory=DoomConfig)
+    """The environment (its aux_labels follows `aux`)."""
+    ppo: object = None
+    """PPOConfig (emml/rl/ppo.py); None: the paper's defaults."""
+    model_options: dict = field(default_factory=dict)
+    """Overrides of the model registry entry's ModelConfig fields."""
+
+    def __post_init__(self):
+        if self.ppo is None:
+            from emml.rl.ppo import PPOConfig
+
+            self.ppo = PPOConfig()
+        self.env.aux_labels = self.aux
+
+    def validate(self) -> TrainConfig:
+        from emml.models import model_config
+
+        model_config(self.model, **self.model_options)  # names the model and any unknown option
+        self.env.validate()
+        self.ppo.validate()
+        check_choice("answer_supervision", self.answer_supervision, ("eqa_steps", "answer_steps"))
+        check_choice("device", self.device.split(":")[0], ("cpu", "cuda"))
+        for name in ("frames", "num_envs", "num_steps", "eval_episodes", "checkpoint_every", "log_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
+        for name in ("eval_every", "threads"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
+        if self.device.startswith("cuda"):
+            import torch
+
+            if not torch.cuda.is_available():
+                raise ValueError("device='cuda' but torch sees no CUDA device; use device='cpu'")
+        return self
+
+    @property
+    def frames_per_update(self) -> int:
+        """Derived: num_envs × num_steps (1,024 under the paper's protocol)."""
+        return self.num_envs * self.num_steps
+
+    @property
+    def num_updates(self) -> int:
+        """Derived: updates to reach `frames` (rounded up)."""
+        return -(-self.frames // self.frames_per_update)
+
+    def run_name(self) -> str:
+        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, seed, profile."""
+        parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
+        if self.env.tasks != "both":
+            parts.append(f"{self.env.tasks}only")
+        if not self.env.shaping:
+            parts.append("noshaping")
+        return "-".join([*parts, f"s{self.seed}", self.profile])
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["ppo"] = asdict(self.ppo)
+        return d
+
+    @classmethod
+    def from_dict(cls, values: dict) -> TrainConfig:
+        """Inverse of to_dict (unknown keys are rejected by name)."""
+        from emml.rl.ppo import PPOConfig
+
+        values = dict(values)
+        env = config_from_dict(DoomConfig, values.pop("env", {}))
+        ppo = config_from_dict(PPOConfig, values.pop("ppo", {}) or {})
+        cfg = config_from_dict(cls, {k: v for k, v in values.items()})
+        cfg.env, cfg.ppo = env, ppo
+        cfg.env.aux_labels = cfg.aux
+        return cfg
+
+
+def apply_overrides(cfg: TrainConfig, overrides: dict) -> TrainConfig:
+    """Set fields by dotted name ('frames', 'env.height', 'ppo.lr'); unknown names fail listing the known ones."""
+    for key, value in overrides.items():
+        target, name = cfg, key
+        if "." in key:
+            section, name = key.split(".", 1)
+            if section not in ("env", "ppo"):
+                raise ValueError(f"override {key!r}: section {section!r} is not one of 'env', 'ppo'")
+            target = getattr(cfg, section)
+        known = [f.name for f in fields(target)]
+        if name not in known:
+            raise ValueError(f"override {key!r}: unknown field; known: {', '.join(known)}")
+        setattr(target, name, value)
+    cfg.env.aux_labels = cfg.aux
+    return cfg

@@ -10,17 +10,26 @@ CONV_LAYERS = ((8, 4), (4, 2), (3, 2))
 """(kernel, stride) of conv1..conv3."""
 
 
+def _min_input_size() -> int:
+    size = 1
+    for kernel, stride in reversed(CONV_LAYERS):
+        size = (size - 1) * stride + kernel
+    return size
+
+
+MIN_INPUT_SIZE = _min_input_size()
+"""Smallest image height/width the conv stack accepts (36): conv3 keeps one output cell."""
+
+
 def conv_output_size(height: int, width: int) -> tuple[int, int]:
     """(h, w) of the conv3 output for an input of height × width; a ValueError naming the field if empty."""
     out = []
     for name, size in (("height", height), ("width", width)):
+        if isinstance(size, bool) or not isinstance(size, int) or size < MIN_INPUT_SIZE:
+            raise ValueError(f"{name}={size!r} is too small for the image encoder: {name} must be an integer >= "
+                             f"{MIN_INPUT_SIZE}")
         n = size
         for kernel, stride in CONV_LAYERS:
-            n = (n - kernel) // stride + 1 if n >= kernel else 0
-        if n < 1:
-            smallest = 1
-            for kernel, stride in reversed(CONV_LAYERS):
-                smallest = (smallest - 1) * stride + kernel
-            raise ValueError(f"{name}={size} is too small for the image encoder: at least {smallest} pixels")
+            n = (n - kernel) // stride + 1
         out.append(n)
     return out[0], out[1]

@@ -65,6 +65,8 @@ class DoomEnv(gym.Env):
     """The EMML Doom environment. Construct with keyword arguments of `DoomConfig` (or ``config=``)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 35 / 5}
+    objects_info = False
+    """Ask the engine for every actor's position (``state.objects``): off for speed; tests turn it on."""
 
     def __init__(self, config: DoomConfig | None = None, render_mode: str | None = None, **kwargs):
         cfg = config if config is not None else config_from_dict(DoomConfig, kwargs)
@@ -126,8 +128,9 @@ class DoomEnv(gym.Env):
             g.set_doom_map(map_name(0))
             w, h = self.render_wh
             g.set_screen_resolution(getattr(vzd.ScreenResolution, f"RES_{w}X{h}"))
-            g.set_screen_format(vzd.ScreenFormat.RGB24)
+            g.set_screen_format(vzd.ScreenFormat.CRCGCB)  # planar 3×H×W: no transpose needed
             g.set_labels_buffer_enabled(self.cfg.aux_labels)
+            g.set_objects_info_enabled(self.objects_info)
             for setter in ("hud", "weapon", "crosshair", "decals", "particles", "messages", "corpses"):
                 getattr(g, f"set_render_{setter}")(False)
             g.set_available_buttons([vzd.Button.MOVE_FORWARD, vzd.Button.TURN_LEFT_RIGHT_DELTA])
@@ -225,13 +228,17 @@ class DoomEnv(gym.Env):
     # --- observation ------------------------------------------------------------------------------------------
     def _read_state(self):
         state = self._engine.game.get_state()
+        self.state = state
         if state is None:
             raise eng.EngineError("ViZDoom returned no state: the episode ended inside the engine")
         self.pose = tuple(float(v) for v in state.game_variables)
-        frame = state.screen_buffer
-        if frame.shape[0] != self.cfg.height or frame.shape[1] != self.cfg.width:
-            frame = cv2.resize(frame, (self.cfg.width, self.cfg.height), interpolation=self._interp)
-        self.frame = frame  # H×W×3, for render()
+        frame = state.screen_buffer  # 3×h×w
+        if frame.shape[1] != self.cfg.height or frame.shape[2] != self.cfg.width:
+            out = np.empty((3, self.cfg.height, self.cfg.width), dtype=np.uint8)
+            for c in range(3):  # per plane: cheaper than resizing H×W×3 and transposing
+                cv2.resize(frame[c], (self.cfg.width, self.cfg.height), dst=out[c], interpolation=self._interp)
+            frame = out
+        self.frame = frame
         self.aux = self._labels(state.labels_buffer, state.labels) if self._labels else None
 
     def _distances(self) -> np.ndarray:
@@ -240,7 +247,7 @@ class DoomEnv(gym.Env):
 
     def _obs(self) -> dict:
         obs = {
-            "image": np.ascontiguousarray(self.frame.transpose(2, 0, 1)),
+            "image": self.frame,
             "tokens": self.tokens.copy(),
             "task": self.task_id,
             "time": min(self.t, self.cfg.max_steps),
@@ -259,7 +266,7 @@ class DoomEnv(gym.Env):
         }
 
     def render(self):
-        return None if self.render_mode is None else self.frame.copy()
+        return None if self.render_mode is None else np.ascontiguousarray(self.frame.transpose(1, 2, 0))
 
     def close(self):
         if self._engine is not None:

@@ -25,6 +25,25 @@ def _make_env(config: dict):
     return DoomEnv(DoomConfig(**config))
 
 
+class _Closing:
+    """Context manager protocol for the vector envs: ``with make_vector_env(...) as venv``."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
+    pass
+
+
+class SyncDoomVectorEnv(_Closing, SyncVectorEnv):
+    pass
+
+
 class _EnvFactory:
     """Picklable env constructor (lambdas don't survive forkserver)."""
 
@@ -41,8 +60,8 @@ def make_vector_env(config: DoomConfig, num_envs: int, asynchronous: bool = True
     config.validate()
     fns = [_EnvFactory(config) for _ in range(num_envs)]
     if not asynchronous:
-        return SyncVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP)
-    return AsyncVectorEnv(
+        return SyncDoomVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP)
+    return AsyncDoomVectorEnv(
         fns,
         shared_memory=True,
         context="forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn",

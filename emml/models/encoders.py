@@ -14,39 +14,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-# (kernel, stride) of conv1..conv3, appendix "Hyperparameters and network details".
-_CONV_LAYERS: tuple[tuple[int, int], ...] = ((8, 4), (4, 2), (3, 2))
-
-
-def _min_input_size() -> int:
-    """Smallest input side for which conv3 still has one output cell."""
-    size = 1
-    for kernel, stride in reversed(_CONV_LAYERS):
-        size = (size - 1) * stride + kernel
-    return size
-
-
-MIN_INPUT_SIZE: int = _min_input_size()
-"""Smallest image height/width accepted by the conv stack (36)."""
-
-
-def conv_output_size(height: int, width: int) -> tuple[int, int]:
-    """Spatial size (h, w) of conv3's output for a (height, width) image.
-
-    Pure arithmetic, no padding: ``out = (in - kernel) // stride + 1`` per layer.
-    168x300 (the paper's input) gives 9x17.
-    """
-    sizes = []
-    for field, value in (("height", height), ("width", width)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < MIN_INPUT_SIZE:
-            raise ValueError(
-                f"image {field}={value!r} is too small for the conv stack; "
-                f"{field} must be an integer >= {MIN_INPUT_SIZE}"
-            )
-        for kernel, stride in _CONV_LAYERS:
-            value = (value - kernel) // stride + 1
-        sizes.append(value)
-    return sizes[0], sizes[1]
+from emml.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv geometry
+from emml.geometry import MIN_INPUT_SIZE, conv_output_size  # noqa: F401  (re-exported)
 
 
 class ImageEncoder(nn.Module):

@@ -1,5 +1,5 @@
-"""The demo job: the scripted expert acting in Easy and Hard episodes, recorded as a captioned GIF plus a short
-Markdown summary in `reports/`. (The trainer issue turns `make demo` into a short training run.)"""
+"""`emml oracle --video`: the scripted expert acting in Easy and Hard episodes, recorded as a captioned GIF plus
+a short Markdown summary."""
 
 from __future__ import annotations
 
