@@ -23,15 +23,32 @@ def obs_to_torch(obs: dict, device) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(np.asarray(v)).to(device, non_blocking=True).unsqueeze(0) for k, v in obs.items()}
 
 
+def eval_settings(env_cfg: DoomConfig) -> list[tuple[str, str, tuple[str, ...] | None]]:
+    """(task, split, instructions) to evaluate: the tasks the run trains on (a single-task run is scored on its
+    task only, as in Table 3), both splits; a run restricted to some sentences is scored on those only."""
+    tasks = ("sgn", "eqa") if env_cfg.tasks == "both" else (env_cfg.tasks,)
+    if not env_cfg.instructions:
+        return [(t, s, None) for t, s in SETTINGS if t in tasks]
+    from emml.tasks.language import load_dataset
+
+    ds = load_dataset(env_cfg.dataset)
+    found = [ds.find(text) for text in env_cfg.instructions]
+    out = []
+    for task, split in SETTINGS:
+        chosen = tuple(x.text for x in found if x.kind == task and x.split == split)
+        if task in tasks and chosen:
+            out.append((task, split, chosen))
+    return out
+
+
 @torch.no_grad()
-def evaluate(model, env_cfg: DoomConfig, episodes: int, seed: int = 10_000, device="cpu", batch: int = 8,
-             settings=SETTINGS) -> dict[str, float]:
+def evaluate(model, env_cfg: DoomConfig, episodes: int, seed: int = 10_000, device="cpu", batch: int = 8) -> dict[str, float]:
     """Accuracy per '<task>_<split>' over ``episodes`` greedy episodes each."""
     was_training = model.training
     model.eval()
     results = {}
-    for task, split in settings:
-        cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=False)
+    for task, split, instructions in eval_settings(env_cfg):
+        cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=False, instructions=instructions)
         n_envs = min(batch, episodes)
         envs = [DoomEnv(cfg) for _ in range(n_envs)]
         try:
