@@ -9,7 +9,7 @@ BACKEND ?= local
 TCMALLOC := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib/x86_64-linux-gnu/libtcmalloc.so.4))
 EMML := $(if $(TCMALLOC),LD_PRELOAD=$(TCMALLOC) )$(VENV)/bin/emml
 
-.PHONY: setup demo test lint bench
+.PHONY: setup demo test lint bench ui
 
 setup: $(VENV)/.installed
 
@@ -32,3 +32,6 @@ lint: setup
 
 bench: setup
 	$(EMML) bench env
+
+ui: setup
+	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///mlflow.db

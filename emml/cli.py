@@ -7,7 +7,11 @@ from pathlib import Path
 
 import typer
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="EMML: reproduce 'Embodied Multimodal Multitask Learning' (Chaplot et al., 2019) on ViZDoom.",
+)
 tasks_app = typer.Typer(no_args_is_help=True, help="The datasets: instructions and questions with their splits.")
 bench_app = typer.Typer(no_args_is_help=True, help="Throughput benchmarks (ratios measured in one run).")
 app.add_typer(tasks_app, name="tasks")
@@ -24,7 +28,10 @@ def _echo(data, as_json: bool, text: str) -> None:
 
 
 @tasks_app.command("show")
-def tasks_show(dataset: str = typer.Argument("doom", help="doom (house: not built yet)"), as_json: bool = typer.Option(False, "--json")):
+def tasks_show(
+    dataset: str = typer.Argument("doom", help="doom (house: not built yet)"),
+    as_json: bool = typer.Option(False, "--json"),
+):
     """List a dataset's instructions and questions by task and split."""
     from emml.tasks.language import KINDS, SPLITS, Vocabulary, load_dataset
 
@@ -80,8 +87,12 @@ def oracle(
         from emml.report.oracle_video import oracle_demo
 
         result["video"] = [str(p) for p in oracle_demo(video, episodes=min(episodes, 3), seed=seed)]
-    _echo(result, as_json, f"oracle {difficulty}/{task}/{split}: accuracy {result['accuracy']:.3f} "
-          f"over {episodes} episodes, mean {result['mean_steps']:.1f} steps (max {result['max_steps']})")
+    _echo(
+        result,
+        as_json,
+        f"oracle {difficulty}/{task}/{split}: accuracy {result['accuracy']:.3f} "
+        f"over {episodes} episodes, mean {result['mean_steps']:.1f} steps (max {result['max_steps']})",
+    )
 
 
 @bench_app.command("env")
@@ -108,7 +119,8 @@ def bench_env(
         r = result[key]
         text.append(
             f"  {key}: raw {r['raw_steps_per_s']:.0f} steps/s, ours {r['env_steps_per_s']:.0f} steps/s "
-            f"(ratio {r['ratio']:.2f}); reset {r['env_reset_ms']:.2f} ms vs new_episode {r['raw_new_episode_ms']:.2f} ms"
+            f"(ratio {r['ratio']:.2f}); reset {r['env_reset_ms']:.2f} ms "
+            f"vs new_episode {r['raw_new_episode_ms']:.2f} ms"
         )
     for w in (1, 2):
         text.append(f"  vector env, {w} worker(s): {result[f'vector_{w}_workers_steps_per_s']:.0f} steps/s")
@@ -192,8 +204,9 @@ def train(
     if frames:
         overrides["frames"] = frames
     try:
-        cfg = profile_config(profile, difficulty, overrides, model=model, aux=aux, seed=seed, table=table,
-                             device=device).validate()
+        cfg = profile_config(
+            profile, difficulty, overrides, model=model, aux=aux, seed=seed, table=table, device=device
+        ).validate()
     except ValueError as e:
         _fail(str(e))
     _use_tcmalloc()
@@ -201,11 +214,22 @@ def train(
     from emml.rl.trainer import train as run
 
     result = run(cfg, quiet=quiet or as_json)
-    data = {"run_dir": str(result.run_dir), "run_id": result.run_id, "frames": result.frames,
-            "skipped": result.skipped, "resumed": result.resumed, **result.metrics}
-    _echo(data, as_json, ("already finished: " if result.skipped else "") +
-          f"{cfg.run_name()} after {result.frames:,} frames: " +
-          ", ".join(f"{k} {v:.3f}" for k, v in result.metrics.items()) + f"\n  run dir {result.run_dir}")
+    data = {
+        "run_dir": str(result.run_dir),
+        "run_id": result.run_id,
+        "frames": result.frames,
+        "skipped": result.skipped,
+        "resumed": result.resumed,
+        **result.metrics,
+    }
+    _echo(
+        data,
+        as_json,
+        ("already finished: " if result.skipped else "")
+        + f"{cfg.run_name()} after {result.frames:,} frames: "
+        + ", ".join(f"{k} {v:.3f}" for k, v in result.metrics.items())
+        + f"\n  run dir {result.run_dir}",
+    )
 
 
 @app.command("eval")

@@ -106,9 +106,6 @@ def config_from_dict(cls, values: dict):
     return cls(**fixed)
 
 
-
-
-
 @dataclass
 class TrainConfig:
     """One training run: environment, model, PPO and the run's own settings (issue: one trainer for all tables).

@@ -42,7 +42,9 @@ def eval_settings(env_cfg: DoomConfig) -> list[tuple[str, str, tuple[str, ...] |
 
 
 @torch.no_grad()
-def evaluate(model, env_cfg: DoomConfig, episodes: int, seed: int = 10_000, device="cpu", batch: int = 8) -> dict[str, float]:
+def evaluate(
+    model, env_cfg: DoomConfig, episodes: int, seed: int = 10_000, device="cpu", batch: int = 8
+) -> dict[str, float]:
     """Accuracy per '<task>_<split>' over ``episodes`` greedy episodes each."""
     was_training = model.training
     model.eval()

@@ -26,8 +26,9 @@ def conv_output_size(height: int, width: int) -> tuple[int, int]:
     out = []
     for name, size in (("height", height), ("width", width)):
         if isinstance(size, bool) or not isinstance(size, int) or size < MIN_INPUT_SIZE:
-            raise ValueError(f"{name}={size!r} is too small for the image encoder: {name} must be an integer >= "
-                             f"{MIN_INPUT_SIZE}")
+            raise ValueError(
+                f"{name}={size!r} is too small for the image encoder: {name} must be an integer >= {MIN_INPUT_SIZE}"
+            )
         n = size
         for kernel, stride in CONV_LAYERS:
             n = (n - kernel) // stride + 1

@@ -47,3 +47,11 @@ def no_leftovers():
 
 def pytest_configure(config):
     os.environ.setdefault("MLFLOW_TRACKING_URI", "sqlite:////tmp/emml-tests-mlflow.db")
+
+
+@pytest.fixture
+def tracking(tmp_path, monkeypatch):
+    """A private MLflow store and run root for one test."""
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    return {"uri": uri, "run_root": str(tmp_path / "runs")}

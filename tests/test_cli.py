@@ -17,8 +17,23 @@ def test_tasks_show_json():
 
 
 def test_oracle_json(no_leftovers):
-    result = runner.invoke(app, ["oracle", "--difficulty", "easy", "--task", "sgn", "--episodes", "5",
-                                 "--height", "60", "--width", "108", "--json"])
+    result = runner.invoke(
+        app,
+        [
+            "oracle",
+            "--difficulty",
+            "easy",
+            "--task",
+            "sgn",
+            "--episodes",
+            "5",
+            "--height",
+            "60",
+            "--width",
+            "108",
+            "--json",
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert json.loads(result.output)["accuracy"] == 1.0
 

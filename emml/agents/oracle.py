@@ -47,8 +47,10 @@ def waypoint(agent, target, obstacles) -> tuple[float, float]:
                     a = 2 * math.pi * k / 16
                     w = (o[0] + radius * math.cos(a), o[1] + radius * math.sin(a))
                     inside = ROOM.x_min + 20 < w[0] < ROOM.x_max - 20 and ROOM.y_min + 20 < w[1] < ROOM.y_max - 20
-                    if inside and _clear(agent, w, obstacles, target, clearance) and _clear(
-                        w, target, obstacles, target, clearance
+                    if (
+                        inside
+                        and _clear(agent, w, obstacles, target, clearance)
+                        and _clear(w, target, obstacles, target, clearance)
                     ):
                         cost = math.dist(agent, w) + math.dist(w, target)
                         if cost < best_cost:
@@ -76,7 +78,9 @@ class Oracle:
         obstacles = [p for i, p in enumerate(env.positions) if i != ep.target]
         if ep is not self._episode:
             self._episode, self._detour = ep, None
-        if self._detour is not None and (math.dist((x, y), self._detour) < 20 or _clear((x, y), target, obstacles, target)):
+        if self._detour is not None and (
+            math.dist((x, y), self._detour) < 20 or _clear((x, y), target, obstacles, target)
+        ):
             self._detour = None
         if self._detour is None:
             w = waypoint((x, y), target, obstacles)
@@ -95,12 +99,12 @@ def run_oracle(env: DoomEnv, episodes: int, seed: int = 0) -> dict:
     successes, steps, failures = 0, [], []
     for i in range(episodes):
         env.reset(seed=seed + i)
-        for t in range(env.cfg.max_steps):
+        for _ in range(env.cfg.max_steps):
             _, _, terminated, truncated, info = env.step(oracle.act())
             if terminated or truncated:
                 break
         successes += info["success"]
-        steps.append(t + 1)
+        steps.append(env.t)
         if not info["success"]:
             failures.append({"seed": seed + i, "text": info["text"], "scene": list(env.episode.scene)})
     return {

@@ -90,7 +90,9 @@ class DoomEnv(gym.Env):
             for s in sents:
                 self.vocab.encode(s.text, cfg.max_words)  # every word known, and it fits: fail now, not mid-run
         self.grid_hw = conv_output_size(cfg.height, cfg.width)
-        self.aux_words = tuple(cfg.aux_words) if cfg.aux_words is not None else default_aux_words(self.vocab, self.dataset)
+        self.aux_words = (
+            tuple(cfg.aux_words) if cfg.aux_words is not None else default_aux_words(self.vocab, self.dataset)
+        )
         self.render_wh = cfg.render_size()
 
         V = len(self.vocab)

@@ -17,7 +17,9 @@ from emml.tasks.language import Dataset, Vocabulary
 
 def default_aux_words(vocab: Vocabulary, dataset: Dataset) -> tuple[str, ...]:
     """Object, colour and size words of the vocabulary: the words a detector can see."""
-    visible = set(dataset.word_groups["objects"]) | set(dataset.word_groups["colors"]) | set(dataset.word_groups["sizes"])
+    visible = (
+        set(dataset.word_groups["objects"]) | set(dataset.word_groups["colors"]) | set(dataset.word_groups["sizes"])
+    )
     return tuple(w for w in vocab.words if w in visible)
 
 

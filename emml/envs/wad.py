@@ -72,7 +72,7 @@ def textmap(room: Room, start: tuple[int, int], angle: int) -> str:
         parts.append(f"linedef {{ v1 = {i}; v2 = {(i + 1) % 4}; sidefront = {i}; blocking = true; }}")
         parts.append(f'sidedef {{ sector = 0; texturemiddle = "{room.wall_texture}"; }}')
     parts.append(
-        f"sector {{ heightfloor = 0; heightceiling = {room.ceiling}; texturefloor = \"{room.floor_texture}\"; "
+        f'sector {{ heightfloor = 0; heightceiling = {room.ceiling}; texturefloor = "{room.floor_texture}"; '
         f'textureceiling = "{room.ceiling_texture}"; lightlevel = {room.light}; }}'
     )
     return "\n".join(parts) + "\n"

@@ -28,12 +28,8 @@ MODELS: dict[str, ModelSpec] = {
     "image_only": ModelSpec("Image only: x_S = vec(x_I)", {"name": "image_only"}),
     "concat": ModelSpec("Concat: x_S = [vec(x_I), x_BoW, x_sent]", {"name": "concat"}),
     "ga": ModelSpec("Gated-Attention: x_S = vec(x_I ⊙ x_sent)", {"name": "ga"}),
-    "film": ModelSpec(
-        "FiLM: x_S = vec(gamma(x_sent) ⊙ x_I + beta(x_sent))", {"name": "film"}
-    ),
-    "pacman": ModelSpec(
-        "PACMAN: QA attention over the last 5 frames", {"name": "pacman"}
-    ),
+    "film": ModelSpec("FiLM: x_S = vec(gamma(x_sent) ⊙ x_I + beta(x_sent))", {"name": "film"}),
+    "pacman": ModelSpec("PACMAN: QA attention over the last 5 frames", {"name": "pacman"}),
     "dual_attention": ModelSpec(
         "Dual-Attention (proposed): GA1 -> SA -> GA2, x_S = vec(x_spat)",
         {"name": "dual_attention"},
@@ -42,12 +38,8 @@ MODELS: dict[str, ModelSpec] = {
         "Dual-Attention w/o Spatial-Attention (x_S = vec(x_GA1))",
         {"name": "dual_attention", "spatial_attention": False},
     ),
-    "da_no_ga1": ModelSpec(
-        "Dual-Attention w/o GA1 (no BoW gating)", {"name": "dual_attention", "ga1": False}
-    ),
-    "da_no_ga2": ModelSpec(
-        "Dual-Attention w/o GA2 (no sentence gating)", {"name": "dual_attention", "ga2": False}
-    ),
+    "da_no_ga1": ModelSpec("Dual-Attention w/o GA1 (no BoW gating)", {"name": "dual_attention", "ga1": False}),
+    "da_no_ga2": ModelSpec("Dual-Attention w/o GA2 (no sentence gating)", {"name": "dual_attention", "ga2": False}),
     "da_no_indicator": ModelSpec(
         "Dual-Attention w/o task indicator", {"name": "dual_attention", "task_indicator": False}
     ),
@@ -62,15 +54,12 @@ def model_config(name: str, **overrides: Any) -> ModelConfig:
     unknown = set(overrides) - set(ModelConfig.__dataclass_fields__)
     if unknown:
         raise ValueError(
-            f"unknown ModelConfig field(s) {sorted(unknown)}; allowed: "
-            + ", ".join(ModelConfig.__dataclass_fields__)
+            f"unknown ModelConfig field(s) {sorted(unknown)}; allowed: " + ", ".join(ModelConfig.__dataclass_fields__)
         )
     return replace(ModelConfig(), **{**MODELS[name].options, **overrides}).validate()
 
 
-def build_model(
-    name: str, vocab_size: int, height: int, width: int, max_steps: int, **overrides: Any
-) -> EmmlModel:
+def build_model(name: str, vocab_size: int, height: int, width: int, max_steps: int, **overrides: Any) -> EmmlModel:
     """Build registry model `name` for a V-word vocabulary and (height, width) images."""
     return EmmlModel(model_config(name, **overrides), vocab_size, height, width, max_steps)
 
@@ -86,9 +75,7 @@ def model_table(vocab_size: int, height: int, width: int, max_steps: int) -> lis
         {
             "name": name,
             "description": spec.description,
-            "parameters": count_parameters(
-                build_model(name, vocab_size, height, width, max_steps)
-            ),
+            "parameters": count_parameters(build_model(name, vocab_size, height, width, max_steps)),
         }
         for name, spec in MODELS.items()
     ]

@@ -46,19 +46,14 @@ class ModelConfig:
     task_indicator: bool = True
     """Feed the SGN/EQA task one-hot to the policy; False = 'w/o task indicator' ablation."""
 
-    def validate(self) -> "ModelConfig":
+    def validate(self) -> ModelConfig:
         """Raise `ValueError` naming the offending field; return self when valid."""
         if self.name not in ARCHITECTURES:
-            raise ValueError(
-                f"ModelConfig.name={self.name!r} is unknown; known names: "
-                + ", ".join(ARCHITECTURES)
-            )
+            raise ValueError(f"ModelConfig.name={self.name!r} is unknown; known names: " + ", ".join(ARCHITECTURES))
         for field in ("embed_dim", "gru_text", "hidden", "time_dim", "pacman_frames"):
             value = getattr(self, field)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(
-                    f"ModelConfig.{field}={value!r} must be a positive integer (>= 1)"
-                )
+                raise ValueError(f"ModelConfig.{field}={value!r} must be a positive integer (>= 1)")
         for field in ("spatial_attention", "ga1", "ga2", "task_indicator"):
             value = getattr(self, field)
             if not isinstance(value, bool):

@@ -52,9 +52,7 @@ class TextEncoder(nn.Module):
     (for fusions that never read it, so no dead parameters exist).
     """
 
-    def __init__(
-        self, vocab_size: int, embed_dim: int = 32, gru: int = 32, sentence: bool = True
-    ) -> None:
+    def __init__(self, vocab_size: int, embed_dim: int = 32, gru: int = 32, sentence: bool = True) -> None:
         super().__init__()
         self.vocab_size = vocab_size
         self.sentence = sentence

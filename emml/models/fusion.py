@@ -249,9 +249,7 @@ BASELINES: dict[str, type[nn.Module]] = {
 def build_fusion(cfg, vocab_size: int, height: int, width: int) -> nn.Module:
     """Fusion unit named by `cfg.name` for a conv3 grid of (height, width) = (h, w)."""
     if cfg.name == "dual_attention":
-        return DualAttention(
-            vocab_size, height, width, ga1=cfg.ga1, ga2=cfg.ga2, spatial=cfg.spatial_attention
-        )
+        return DualAttention(vocab_size, height, width, ga1=cfg.ga1, ga2=cfg.ga2, spatial=cfg.spatial_attention)
     if cfg.name in BASELINES:
         return BASELINES[cfg.name](vocab_size, height, width)
     known = ", ".join(["dual_attention", *BASELINES])

@@ -122,9 +122,7 @@ class EmmlModel(nn.Module):
     black frames).
     """
 
-    def __init__(
-        self, cfg: ModelConfig, vocab_size: int, height: int, width: int, max_steps: int
-    ) -> None:
+    def __init__(self, cfg: ModelConfig, vocab_size: int, height: int, width: int, max_steps: int) -> None:
         super().__init__()
         cfg.validate()
         if isinstance(vocab_size, bool) or not isinstance(vocab_size, int) or vocab_size < 1:
@@ -136,9 +134,7 @@ class EmmlModel(nn.Module):
         self.grid = conv_output_size(height, width)
         self.image_encoder = ImageEncoder(vocab_size)
         self.fusion = build_fusion(cfg, vocab_size, *self.grid)
-        self.text_encoder = TextEncoder(
-            vocab_size, cfg.embed_dim, cfg.gru_text, sentence=self.fusion.uses_sent
-        )
+        self.text_encoder = TextEncoder(vocab_size, cfg.embed_dim, cfg.gru_text, sentence=self.fusion.uses_sent)
         self.policy = PolicyModule(
             self.fusion.state_dim,
             vocab_size,
@@ -154,8 +150,13 @@ class EmmlModel(nn.Module):
         state = {"h": self.policy.initial_state(batch_size, device)}
         if self.window:
             state["frames"] = torch.zeros(
-                batch_size, self.window - 1, 3, self.height, self.width,
-                dtype=torch.uint8, device=device,
+                batch_size,
+                self.window - 1,
+                3,
+                self.height,
+                self.width,
+                dtype=torch.uint8,
+                device=device,
             )
         return state
 
@@ -197,9 +198,7 @@ class EmmlModel(nn.Module):
         image = obs["image"]
         t_len, batch = image.shape[:2]
         if episode_start.shape != (t_len, batch):
-            raise ValueError(
-                f"episode_start shape {tuple(episode_start.shape)} != (T, B) = {(t_len, batch)}"
-            )
+            raise ValueError(f"episode_start shape {tuple(episode_start.shape)} != (T, B) = {(t_len, batch)}")
         x_bow, x_sent = self.text_encoder(obs["tokens"].flatten(0, 1))
         new_state: dict[str, Tensor] = {}
         if self.window:

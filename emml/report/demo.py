@@ -12,9 +12,11 @@ from emml.tracking import tracking_uri
 def write_demo_report(cfg: TrainConfig, result, out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     name = cfg.run_name()
-    png = plot_run(result.run_id, out / f"{name}.png",
-                   f"{cfg.model}, Doom {cfg.env.difficulty}, aux={cfg.aux}: profile {cfg.profile}, "
-                   f"{result.frames:,} frames")
+    png = plot_run(
+        result.run_id,
+        out / f"{name}.png",
+        f"{cfg.model}, Doom {cfg.env.difficulty}, aux={cfg.aux}: profile {cfg.profile}, {result.frames:,} frames",
+    )
     m = result.metrics
     lines = [
         f"# Demo run: {name}",

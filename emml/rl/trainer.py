@@ -40,8 +40,9 @@ RESULTS = "results.json"
 
 def git_sha() -> str:
     try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=project_root(), capture_output=True,
-                             text=True, timeout=5)
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=project_root(), capture_output=True, text=True, timeout=5
+        )
         return out.stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
@@ -133,8 +134,9 @@ class Trainer:
             torch.set_num_threads(cfg.threads)
         _seed_everything(cfg.seed)
         env_cfg = cfg.env
-        model = build_model(cfg.model, len(self.vocab), env_cfg.height, env_cfg.width, env_cfg.max_steps,
-                            **cfg.model_options).to(self.device)
+        model = build_model(
+            cfg.model, len(self.vocab), env_cfg.height, env_cfg.width, env_cfg.max_steps, **cfg.model_options
+        ).to(self.device)
         optimizer = make_optimizer(model.parameters(), cfg.ppo)
         update, frames = 0, 0
         if saved is not None:
@@ -142,11 +144,21 @@ class Trainer:
             optimizer.load_state_dict(saved["optimizer"])
             set_rng_state(saved["rng"])
             update, frames = saved["update"], saved["frames"]
-        tags = {"table": cfg.table, "model": cfg.model, "difficulty": env_cfg.difficulty, "aux": cfg.aux,
-                "seed": cfg.seed, "profile": cfg.profile, "git_sha": git_sha(), "allocator": allocator(),
-                "tasks": env_cfg.tasks, "shaping": env_cfg.shaping}
-        run_id = self.tracker.start(cfg.table, cfg.run_name(), tags, cfg.to_dict(),
-                                    run_id=saved["run_id"] if saved else None)
+        tags = {
+            "table": cfg.table,
+            "model": cfg.model,
+            "difficulty": env_cfg.difficulty,
+            "aux": cfg.aux,
+            "seed": cfg.seed,
+            "profile": cfg.profile,
+            "git_sha": git_sha(),
+            "allocator": allocator(),
+            "tasks": env_cfg.tasks,
+            "shaping": env_cfg.shaping,
+        }
+        run_id = self.tracker.start(
+            cfg.table, cfg.run_name(), tags, cfg.to_dict(), run_id=saved["run_id"] if saved else None
+        )
         try:
             metrics = self._loop(model, optimizer, update, frames)
         except BaseException:
@@ -170,8 +182,14 @@ class Trainer:
             episode_start = torch.ones(B, dtype=torch.bool, device=device)
             recent = {0: deque(maxlen=100), 1: deque(maxlen=100)}  # training-episode success per task
             next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
-            bar = tqdm(total=cfg.num_updates * cfg.frames_per_update, initial=frames, unit="frame",
-                       disable=self.quiet, dynamic_ncols=True, smoothing=0.1)
+            bar = tqdm(
+                total=cfg.num_updates * cfg.frames_per_update,
+                initial=frames,
+                unit="frame",
+                disable=self.quiet,
+                dynamic_ncols=True,
+                smoothing=0.1,
+            )
             timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
@@ -194,9 +212,17 @@ class Trainer:
                     target = np.where(tasks == 1, answers, -1)
                     if cfg.answer_supervision == "answer_steps":
                         target = np.where(move.cpu().numpy() == ANSWER, target, -1)
-                    buffer.insert(t, {k: v[0] for k, v in obs_t.items()}, move, torch.as_tensor(target),
-                                  dist.log_prob(move), out.value[0], torch.as_tensor(reward, dtype=torch.float32),
-                                  torch.as_tensor(done), episode_start)
+                    buffer.insert(
+                        t,
+                        {k: v[0] for k, v in obs_t.items()},
+                        move,
+                        torch.as_tensor(target),
+                        dist.log_prob(move),
+                        out.value[0],
+                        torch.as_tensor(reward, dtype=torch.float32),
+                        torch.as_tensor(done),
+                        episode_start,
+                    )
                     if done.any():
                         final = info["final_info"]
                         for i in np.flatnonzero(done):
@@ -225,8 +251,9 @@ class Trainer:
                 metrics["charts/update"] = update
                 self.tracker.log_metrics(metrics, step=frames)
                 bar.update(B * T)
-                bar.set_postfix(sgn=f"{metrics.get('train/success_sgn', 0):.2f}",
-                                eqa=f"{metrics.get('train/success_eqa', 0):.2f}")
+                bar.set_postfix(
+                    sgn=f"{metrics.get('train/success_sgn', 0):.2f}", eqa=f"{metrics.get('train/success_eqa', 0):.2f}"
+                )
                 if update % cfg.log_every == 0 and not self.quiet:
                     bar.write(_log_line(update, frames, metrics, timing))
                 if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
@@ -249,24 +276,36 @@ class Trainer:
         return acc
 
     def _checkpoint(self, model, optimizer, update: int, frames: int, finished: bool) -> None:
-        save_checkpoint(self.dir / CHECKPOINT, {
-            "model": model.state_dict(),
-            "optimizer": optimizer.state_dict(),
-            "rng": rng_state(),
-            "update": update,
-            "frames": frames,
-            "vocabulary": list(self.vocab.words),
-            "config": self.cfg.to_dict(),
-            "run_id": self.tracker.run_id,
-            "finished": finished,
-        })
+        save_checkpoint(
+            self.dir / CHECKPOINT,
+            {
+                "model": model.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "rng": rng_state(),
+                "update": update,
+                "frames": frames,
+                "vocabulary": list(self.vocab.words),
+                "config": self.cfg.to_dict(),
+                "run_id": self.tracker.run_id,
+                "finished": finished,
+            },
+        )
 
     def _write_results(self, metrics: dict, frames: int) -> None:
         cfg = self.cfg
         payload = {
-            "run_name": cfg.run_name(), "table": cfg.table, "model": cfg.model, "difficulty": cfg.env.difficulty,
-            "aux": cfg.aux, "seed": cfg.seed, "profile": cfg.profile, "frames": frames, "git_sha": git_sha(),
-            "run_id": self.tracker.run_id, "eval_episodes": cfg.eval_episodes, "metrics": metrics,
+            "run_name": cfg.run_name(),
+            "table": cfg.table,
+            "model": cfg.model,
+            "difficulty": cfg.env.difficulty,
+            "aux": cfg.aux,
+            "seed": cfg.seed,
+            "profile": cfg.profile,
+            "frames": frames,
+            "git_sha": git_sha(),
+            "run_id": self.tracker.run_id,
+            "eval_episodes": cfg.eval_episodes,
+            "metrics": metrics,
         }
         tmp = self.dir / (RESULTS + ".tmp")
         tmp.write_text(json.dumps(payload, indent=2))
@@ -280,11 +319,14 @@ def _dtype(space) -> torch.dtype:
 def _log_line(update: int, frames: int, m: dict, timing: dict) -> str:
     total = sum(timing.values()) or 1.0
     split = "/".join(f"{100 * v / total:.0f}" for v in timing.values())
-    return (f"update {update:>5} frames {frames:>9,} fps {m['charts/fps']:6.0f} "
-            f"sgn {m.get('train/success_sgn', float('nan')):.2f} eqa {m.get('train/success_eqa', float('nan')):.2f} "
-            f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
-            f"ans {m['losses/answer']:.3f}" + (f" aux {m['losses/aux']:.3f}" if "losses/aux" in m else "")
-            + f" | sim/infer/learn % {split}")
+    return (
+        f"update {update:>5} frames {frames:>9,} fps {m['charts/fps']:6.0f} "
+        f"sgn {m.get('train/success_sgn', float('nan')):.2f} eqa {m.get('train/success_eqa', float('nan')):.2f} "
+        f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
+        f"ans {m['losses/answer']:.3f}"
+        + (f" aux {m['losses/aux']:.3f}" if "losses/aux" in m else "")
+        + f" | sim/infer/learn % {split}"
+    )
 
 
 def train(cfg: TrainConfig, quiet: bool = False) -> RunResult:

@@ -9,9 +9,10 @@ config carries and its checkpoints save.
 from __future__ import annotations
 
 import functools
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+
+import tomllib
 
 SPLITS = ("train", "test")
 KINDS = ("sgn", "eqa")
@@ -189,7 +190,12 @@ def describe(sentence: Sentence | str, dataset: Dataset) -> Description:
     text = sentence.text if isinstance(sentence, Sentence) else normalize(sentence)
     found: dict[str, str] = {}
     for w in text.split():
-        for key, group in (("object", "objects"), ("color", "colors"), ("size", "sizes"), ("superlative", "superlatives")):
+        for key, group in (
+            ("object", "objects"),
+            ("color", "colors"),
+            ("size", "sizes"),
+            ("superlative", "superlatives"),
+        ):
             if w in dataset.word_groups[group]:
                 found[key] = w
     return Description(**found)

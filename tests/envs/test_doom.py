@@ -58,7 +58,7 @@ def test_hard_positions_spaced_and_placed(make):
     for seed in range(8):
         env.reset(seed=seed)
         pts = [env.pose[:2], *env.positions]
-        d = [np.hypot(a[0] - b[0], a[1] - b[1]) for i, a in enumerate(pts) for b in pts[i + 1:]]
+        d = [np.hypot(a[0] - b[0], a[1] - b[1]) for i, a in enumerate(pts) for b in pts[i + 1 :]]
         assert min(d) >= 90
         engine = sorted((round(o.position_x), round(o.position_y)) for o in env.state.objects if o.name != "DoomPlayer")
         assert engine == sorted(env.positions)
@@ -123,7 +123,7 @@ def test_eqa_answer_and_time_limit(make):
     _, r, term, _, info2 = env.step(np.array([ANSWER, wrong]))
     assert term and not info2["success"] and r == pytest.approx(-0.201)
     env.reset(seed=2)
-    for t in range(5):
+    for _ in range(5):
         obs, _, term, trunc, _ = env.step(np.array([FORWARD, 0]))  # touching objects does not end EQA
         assert not term
     assert trunc and obs["time"] == 5
@@ -191,9 +191,9 @@ def test_engine_death_raises_clear_error(make):
 
 def test_close_after_exception_leaves_nothing(no_leftovers):
     env = DoomEnv(**SMOKE)
-    with pytest.raises(ZeroDivisionError):
+    with pytest.raises(RuntimeError, match="mid-episode"):
         try:
             env.reset(seed=0)
-            1 / 0
+            raise RuntimeError("mid-episode failure")
         finally:
             env.close()

@@ -16,9 +16,7 @@ def test_conv_output_size_paper_input():
     assert conv_output_size(MIN_INPUT_SIZE, MIN_INPUT_SIZE) == (1, 1)
 
 
-@pytest.mark.parametrize(
-    "height,width,field", [(35, 300, "height"), (168, 35, "width"), (0, 0, "height")]
-)
+@pytest.mark.parametrize("height,width,field", [(35, 300, "height"), (168, 35, "width"), (0, 0, "height")])
 def test_conv_output_size_too_small_names_field(height, width, field):
     with pytest.raises(ValueError, match=rf"{field}.*>= {MIN_INPUT_SIZE}"):
         conv_output_size(height, width)
@@ -53,9 +51,7 @@ def test_bag_of_words():
     bow, sent = enc(tokens)
     assert sent is None
     assert list(enc.parameters()) == []
-    expected = torch.tensor(
-        [[1, 0, 1, 0, 0], [0, 0, 0, 0, 1], [0, 0, 0, 0, 0]], dtype=torch.float32
-    )
+    expected = torch.tensor([[1, 0, 1, 0, 0], [0, 0, 0, 0, 1], [0, 0, 0, 0, 0]], dtype=torch.float32)
     torch.testing.assert_close(bow, expected)
 
 

@@ -154,9 +154,7 @@ def test_pacman_attention_over_frames(inputs):
     ref = (weights[:, :, None] * frames.flatten(2)).sum(1)
     torch.testing.assert_close(out.state, ref)
     attended = (weights[:, :, None] * proj).sum(1)
-    torch.testing.assert_close(
-        out.answer_logits, fusion.classifier(torch.cat([attended, sent], 1))
-    )
+    torch.testing.assert_close(out.answer_logits, fusion.classifier(torch.cat([attended, sent], 1)))
 
 
 def test_pacman_attends_to_matching_frame():

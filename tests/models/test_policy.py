@@ -112,8 +112,9 @@ def test_ablation_parameters():
     assert _policy_in("da_no_sa") == V * 2 * 5 + V + 32 + 2
     no_ga2 = build_model("da_no_ga2", V, H, W, MAX_STEPS)
     assert not any(n.startswith("text_encoder.") for n, _ in no_ga2.named_parameters())
-    assert not any(n.startswith("text_encoder.") for n, _ in
-                   build_model("image_only", V, H, W, MAX_STEPS).named_parameters())
+    assert not any(
+        n.startswith("text_encoder.") for n, _ in build_model("image_only", V, H, W, MAX_STEPS).named_parameters()
+    )
     assert list(build_model("dual_attention", V, H, W, MAX_STEPS).fusion.parameters()) == []
 
 

@@ -54,7 +54,7 @@ def test_vocabulary_encode_pads_and_extends():
     ids = vocab.encode("go to the torch", 6)
     assert ids[4:] == [0, 0] and all(i >= 1 for i in ids[:4])
     bigger = vocab.extend(["red", "pillar", "red"])
-    assert bigger.words[: len(vocab)] == vocab.words and bigger.words[len(vocab):] == ("red", "pillar")
+    assert bigger.words[: len(vocab)] == vocab.words and bigger.words[len(vocab) :] == ("red", "pillar")
     with pytest.raises(ValueError, match="red"):
         vocab.encode("go to the red torch", 10)
     with pytest.raises(ValueError, match="max_words"):
@@ -70,7 +70,10 @@ def test_actor_attributes():
 
 def test_describe_and_satisfies():
     assert describe("go to the short red pillar", DS).__dict__ == {
-        "object": "pillar", "color": "red", "size": "short", "superlative": None
+        "object": "pillar",
+        "color": "red",
+        "size": "short",
+        "superlative": None,
     }
     scene = ("ShortRedColumn", "RedTorch", "GreenArmor", "BlueCard", "YellowSkull")
     assert satisfies("go to the red pillar", 0, scene, DS)

@@ -1,0 +1,154 @@
+"""The trainer end to end at the smoke profile: every model, resume after a kill, reproducible evaluation, bad
+configs, and a learning test that PPO + answer CE + aux BCE beat chance."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from emml.config import TrainConfig
+from emml.evaluate import evaluate_checkpoint
+from emml.models import MODELS
+from emml.profiles import profile_config
+from emml.rl.checkpoint import load_checkpoint
+from emml.rl.trainer import CHECKPOINT, RESULTS, run_dir, train
+from emml.tracking import metric_history
+
+
+def smoke(tracking, **over) -> TrainConfig:
+    fields = {k: over.pop(k) for k in ("model", "aux", "seed") if k in over}
+    return profile_config("smoke", "easy", {"run_root": tracking["run_root"], "table": "test", **over}, **fields)
+
+
+@pytest.mark.parametrize("model", sorted(MODELS))
+def test_every_model_trains_a_few_hundred_frames(model, tracking, no_leftovers):
+    cfg = smoke(tracking, model=model, aux=model != "text_only", frames=128, eval_episodes=2)
+    result = train(cfg, quiet=True)
+    assert result.frames == 128
+    assert set(result.metrics) == {"sgn_train", "sgn_test", "eqa_train", "eqa_test"}
+    assert all(0.0 <= v <= 1.0 for v in result.metrics.values())
+    saved = json.loads((result.run_dir / RESULTS).read_text())
+    assert saved["frames"] == 128 and saved["profile"] == "smoke" and saved["git_sha"]
+    losses = metric_history(result.run_id, "losses/answer")
+    assert len(losses) == 2  # one point per update (2 updates of 2 x 32 frames)
+
+
+def test_finished_run_is_not_retrained(tracking, no_leftovers):
+    cfg = smoke(tracking, frames=64, eval_episodes=1)
+    first = train(cfg, quiet=True)
+    again = train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
+    assert again.skipped and again.run_id == first.run_id and again.metrics == first.metrics
+
+
+def test_resume_after_sigkill_continues_the_same_run(tracking, tmp_path, no_leftovers):
+    args = [
+        sys.executable,
+        "-m",
+        "emml.cli",
+        "train",
+        "--profile",
+        "smoke",
+        "--table",
+        "test",
+        "--frames",
+        "2048",
+        "--set",
+        f'run_root="{tracking["run_root"]}"',
+        "--set",
+        "checkpoint_every=2",
+        "--set",
+        "eval_episodes=1",
+        "--quiet",
+    ]
+    env = {**os.environ, "EMML_NO_TCMALLOC": "1"}
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    cfg = smoke(tracking, frames=2048, checkpoint_every=2, eval_episodes=1)
+    path = run_dir(cfg) / CHECKPOINT
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if path.exists() and load_checkpoint(path)["update"] >= 4:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("no checkpoint written")
+        os.kill(proc.pid, signal.SIGKILL)  # no cleanup in the parent: its workers must end their engines alone
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    killed = load_checkpoint(path)
+    assert not killed["finished"] and killed["update"] < 32
+    result = train(cfg, quiet=True)
+    assert result.resumed and result.run_id == killed["run_id"] and result.frames == 2048
+    done = load_checkpoint(path)
+    assert done["finished"] and done["update"] == 32 and done["frames"] == 2048
+    steps = [s for s, _ in metric_history(result.run_id, "charts/update")]
+    assert steps[0] == 64 and steps[-1] == 2048
+    assert all(b - a <= 64 for a, b in zip(steps, steps[1:]))  # the curve has no gap: at most redone steps
+
+
+def test_eval_of_a_checkpoint_reproduces_its_numbers(tracking, no_leftovers):
+    cfg = smoke(tracking, frames=128, eval_episodes=3, seed=3)
+    result = train(cfg, quiet=True)
+    again = evaluate_checkpoint(result.run_dir / CHECKPOINT, episodes=3, seed=10_000)
+    assert again == result.metrics
+    assert evaluate_checkpoint(result.run_dir / CHECKPOINT, episodes=3, seed=10_000) == again
+
+
+@pytest.mark.parametrize(
+    "over, field",
+    [
+        ({"model": "transformer"}, "transformer"),
+        ({"env.difficulty": "medium"}, "difficulty"),
+        ({"ppo.lr": -1.0}, "lr"),
+        ({"answer_supervision": "never"}, "answer_supervision"),
+        ({"frames": 0}, "frames"),
+        ({"env.height": 20}, "height"),
+    ],
+)
+def test_bad_config_fails_before_any_compute(over, field, tracking, no_leftovers):
+    model = over.pop("model", "dual_attention")
+    with pytest.raises(ValueError, match=field):
+        train(smoke(tracking, model=model, **over), quiet=True)
+    assert not os.path.exists(tracking["run_root"])
+
+
+def test_unknown_override_is_named():
+    with pytest.raises(ValueError, match="nosuch"):
+        profile_config("smoke", "easy", {"nosuch": 1})
+    with pytest.raises(ValueError, match="profile='huge'"):
+        profile_config("huge")
+
+
+def test_resume_refuses_a_different_config(tracking, no_leftovers):
+    train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
+    with pytest.raises(ValueError, match="ppo.lr"):
+        train(smoke(tracking, frames=64, eval_episodes=1, **{"ppo.lr": 1e-3}), quiet=True)
+
+
+LEARNING_QUESTIONS = ["what color is the pillar", "what color is the tall pillar", "what color is the short pillar"]
+
+
+def test_learning_beats_chance(tracking, no_leftovers):
+    """EQA on Easy about the pillars (answers red or green: chance 0.5), smoke resolution, with aux labels.
+    PPO must learn to answer and the answer head to read the colour: measured 0.90 greedy accuracy after 64k
+    frames (~0.88 training success from 13k frames on) with this seed; we assert 0.75 (3 sd above chance at 40
+    episodes). lr 1e-3 instead of the paper's 2.5e-4 so that it fits in CI's time."""
+    cfg = smoke(
+        tracking,
+        aux=True,
+        frames=32768,
+        num_envs=8,
+        num_steps=32,
+        eval_episodes=40,
+        checkpoint_every=50,
+        **{"env.tasks": "eqa", "env.instructions": tuple(LEARNING_QUESTIONS), "ppo.lr": 1e-3},
+    )
+    result = train(cfg, quiet=True)
+    assert result.metrics["eqa_train"] >= 0.75, result.metrics
+    assert metric_history(result.run_id, "train/success_eqa")[-1][1] >= 0.7
