@@ -100,6 +100,7 @@ def bench_env(
     height: int = 168,
     width: int = 300,
     difficulty: str = "easy",
+    interpolation: str = typer.Option("linear", help="linear | area | nearest"),
     steps: int = typer.Option(2000, min=100),
     as_json: bool = typer.Option(False, "--json"),
 ):
@@ -110,7 +111,7 @@ def bench_env(
 
     install_signal_handlers()
     try:
-        cfg = DoomConfig(height=height, width=width, difficulty=difficulty).validate()
+        cfg = DoomConfig(height=height, width=width, difficulty=difficulty, interpolation=interpolation).validate()
     except ValueError as e:
         _fail(str(e))
     result = run(cfg, steps=steps, vector_steps=steps)
