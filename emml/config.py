@@ -148,6 +148,9 @@ class TrainConfig:
     """MLflow experiment / results table the run belongs to."""
     run_root: str = "runs"
     """Where run directories (checkpoints, results.json) go, relative to the project root unless absolute."""
+    results_root: str = "results"
+    """Where finished runs are recorded as rows of `<table>/<profile>.csv` (small, committed), relative to the
+    project root unless absolute."""
     env: DoomConfig = field(default_factory=DoomConfig)
     """The environment (its aux_labels follows `aux`)."""
     ppo: object = None

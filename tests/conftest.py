@@ -54,4 +54,4 @@ def tracking(tmp_path, monkeypatch):
     """A private MLflow store and run root for one test."""
     uri = f"sqlite:///{tmp_path}/mlflow.db"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
-    return {"uri": uri, "run_root": str(tmp_path / "runs")}
+    return {"uri": uri, "run_root": str(tmp_path / "runs"), "results_root": str(tmp_path / "results")}

@@ -83,7 +83,16 @@ def _seed_everything(seed: int) -> None:
 
 def _check_same_config(saved: dict, current: dict, path: Path) -> None:
     """A rerun resumes only the same experiment: differing fields fail by name before anything is touched."""
-    ignore = {"eval_every", "checkpoint_every", "log_every", "threads", "asynchronous", "device", "run_root"}
+    ignore = {
+        "eval_every",
+        "checkpoint_every",
+        "log_every",
+        "threads",
+        "asynchronous",
+        "device",
+        "run_root",
+        "results_root",
+    }
     diffs = []
     for key in sorted(set(saved) | set(current)):
         if key in ignore:
@@ -129,6 +138,7 @@ class Trainer:
             _check_same_config(saved["config"], cfg.to_dict(), ckpt_path)
             if saved.get("finished"):
                 results = json.loads((self.dir / RESULTS).read_text())
+                record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
                 return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
@@ -310,6 +320,32 @@ class Trainer:
         tmp = self.dir / (RESULTS + ".tmp")
         tmp.write_text(json.dumps(payload, indent=2))
         os.replace(tmp, self.dir / RESULTS)
+        record_result(payload, cfg)
+
+
+def results_csv(cfg: TrainConfig) -> Path:
+    root = Path(cfg.results_root)
+    if not root.is_absolute():
+        root = project_root() / root
+    return root / cfg.table / f"{cfg.profile}.csv"
+
+
+def record_result(payload: dict, cfg: TrainConfig) -> Path:
+    """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv, written atomically."""
+    import pandas as pd
+
+    row = {k: v for k, v in payload.items() if k != "metrics"}
+    row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, **payload["metrics"])
+    path = results_csv(cfg)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table = pd.read_csv(path) if path.exists() else pd.DataFrame()
+    if not table.empty:
+        table = table[table["run_name"] != row["run_name"]]
+    table = pd.concat([table, pd.DataFrame([row])], ignore_index=True).sort_values("run_name")
+    tmp = path.with_suffix(".csv.tmp")
+    table.to_csv(tmp, index=False)
+    os.replace(tmp, path)
+    return path
 
 
 def _dtype(space) -> torch.dtype:

@@ -21,7 +21,8 @@ from emml.tracking import metric_history
 
 def smoke(tracking, **over) -> TrainConfig:
     fields = {k: over.pop(k) for k in ("model", "aux", "seed") if k in over}
-    return profile_config("smoke", "easy", {"run_root": tracking["run_root"], "table": "test", **over}, **fields)
+    roots = {"run_root": tracking["run_root"], "results_root": tracking["results_root"]}
+    return profile_config("smoke", "easy", {**roots, "table": "test", **over}, **fields)
 
 
 @pytest.mark.parametrize("model", sorted(MODELS))
@@ -33,6 +34,11 @@ def test_every_model_trains_a_few_hundred_frames(model, tracking, no_leftovers):
     assert all(0.0 <= v <= 1.0 for v in result.metrics.values())
     saved = json.loads((result.run_dir / RESULTS).read_text())
     assert saved["frames"] == 128 and saved["profile"] == "smoke" and saved["git_sha"]
+    import pandas as pd
+
+    rows = pd.read_csv(os.path.join(tracking["results_root"], "test", "smoke.csv"))
+    assert rows["run_name"].tolist() == [cfg.run_name()]
+    assert rows.loc[0, "frames"] == 128 and rows.loc[0, "seed"] == 0 and rows.loc[0, "model"] == model
     losses = metric_history(result.run_id, "losses/answer")
     assert len(losses) == 2  # one point per update (2 updates of 2 x 32 frames)
 
@@ -115,7 +121,7 @@ def test_bad_config_fails_before_any_compute(over, field, tracking, no_leftovers
     model = over.pop("model", "dual_attention")
     with pytest.raises(ValueError, match=field):
         train(smoke(tracking, model=model, **over), quiet=True)
-    assert not os.path.exists(tracking["run_root"])
+    assert not os.path.exists(tracking["run_root"]) and not os.path.exists(tracking["results_root"])
 
 
 def test_unknown_override_is_named():
