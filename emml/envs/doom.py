@@ -22,7 +22,7 @@ from gymnasium import spaces
 
 from emml.config import DoomConfig, config_from_dict
 from emml.envs import engine as eng
-from emml.envs.labels import LabelGrid, default_aux_words
+from emml.envs.labels import LabelGrid, channel_mask, default_aux_words
 from emml.envs.objects import ACTORS, iwad_path
 from emml.envs.wad import ROOM, map_name, wad_path
 from emml.geometry import conv_output_size
@@ -93,6 +93,8 @@ class DoomEnv(gym.Env):
         self.aux_words = (
             tuple(cfg.aux_words) if cfg.aux_words is not None else default_aux_words(self.vocab, self.dataset)
         )
+        self.aux_mask = channel_mask(self.vocab, self.aux_words)
+        """bool (V,): the channels the aux labels supervise (no superlatives, no function words)."""
         self.render_wh = cfg.render_size()
 
         V = len(self.vocab)

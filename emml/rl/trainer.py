@@ -114,8 +114,11 @@ def _norm(v):
 
 
 class Trainer:
-    def __init__(self, cfg: TrainConfig, tracker: Tracker | None = None, quiet: bool = False):
+    def __init__(
+        self, cfg: TrainConfig, tracker: Tracker | None = None, quiet: bool = False, parent_run_id: str | None = None
+    ):
         self.cfg = cfg.validate()
+        self.parent_run_id = parent_run_id
         self.dir = run_dir(cfg)
         self.tracker = tracker or Tracker()
         self.quiet = quiet
@@ -165,9 +168,15 @@ class Trainer:
             "allocator": allocator(),
             "tasks": env_cfg.tasks,
             "shaping": env_cfg.shaping,
+            "checkpoint": str(self.dir / CHECKPOINT),
         }
         run_id = self.tracker.start(
-            cfg.table, cfg.run_name(), tags, cfg.to_dict(), run_id=saved["run_id"] if saved else None
+            cfg.table,
+            cfg.run_name(),
+            tags,
+            cfg.to_dict(),
+            run_id=saved["run_id"] if saved else None,
+            parent_run_id=self.parent_run_id,
         )
         try:
             metrics = self._loop(model, optimizer, update, frames)
@@ -365,5 +374,6 @@ def _log_line(update: int, frames: int, m: dict, timing: dict) -> str:
     )
 
 
-def train(cfg: TrainConfig, quiet: bool = False) -> RunResult:
-    return Trainer(cfg, quiet=quiet).train()
+def train(cfg: TrainConfig, quiet: bool = False, parent_run_id: str | None = None) -> RunResult:
+    """Train (or resume, or skip if finished) one run; `parent_run_id` nests its MLflow run (emml/launch.py)."""
+    return Trainer(cfg, quiet=quiet, parent_run_id=parent_run_id).train()

@@ -156,6 +156,8 @@ def test_aux_labels_line_up_with_bounding_boxes(make):
     assert obs["aux"].sum() > 0
     for w in ("smallest", "largest", "go", "the", "object"):
         assert obs["aux"][vocab.index(w)].sum() == 0
+        assert not env.aux_mask[vocab.index(w)]
+    assert env.aux_mask.sum() == 11  # 5 object classes, 4 colours, 2 sizes
 
 
 @pytest.mark.parametrize(
