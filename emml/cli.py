@@ -272,5 +272,124 @@ def demo(
         typer.echo(f"wrote {path}")
 
 
+@app.command("list")
+def list_experiments(
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper: which results count as finished."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Every table in reproduce/ with its runs and how many are finished under the profile."""
+    from emml.launch import run_states
+    from emml.profiles import load_profiles
+    from emml.registry import list_tables, load_table
+
+    if profile not in load_profiles():
+        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
+    data, lines = [], []
+    for name in list_tables():
+        try:
+            table = load_table(name)
+            states = run_states(name, profile)
+        except ValueError as e:
+            _fail(str(e))
+        runs = [{"run_name": rname, "row": spec.row, "state": state} for rname, (spec, state) in states.items()]
+        finished = sum(r["state"] in ("finished", "unrecorded") for r in runs)
+        data.append(
+            {
+                "table": name,
+                "status": table.status,
+                "title": table.title,
+                "finished": finished,
+                "total": len(runs),
+                "runs": runs,
+            }
+        )
+        head = f"{name} ({table.paper_label}): {table.status}"
+        lines.append(head + ("" if table.placeholder else f", {finished}/{len(runs)} runs finished [{profile}]"))
+        lines += [f"  {r['state']:<10} {r['run_name']}" for r in runs]
+    _echo({"profile": profile, "tables": data}, as_json, "\n".join(lines))
+
+
+@app.command("run")
+def run_table(
+    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5 (reproduce/<table>.toml)"),
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
+    backend: str = typer.Option("local", help="local (process pool) | slurm (submitit)"),
+    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores)."),
+    device: str = typer.Option("cpu", help="cpu | cuda"),
+    partition: str = typer.Option(None, help="Slurm partition."),
+    time_min: int = typer.Option(24 * 60, help="Slurm time limit per run, minutes."),
+    gpus: int = typer.Option(0, help="GPUs per Slurm job."),
+    cpus: int = typer.Option(8, help="CPUs per Slurm job."),
+    wait: bool = typer.Option(False, help="Slurm: wait for the jobs to end."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Train every run of a table (skips finished runs, resumes interrupted ones); a placeholder table exits 0."""
+    from dataclasses import asdict
+
+    from emml.launch import run_table as launch
+    from emml.registry import load_table
+
+    try:
+        placeholder = load_table(table).placeholder
+    except ValueError as e:
+        _fail(str(e))
+    if backend == "local" and not placeholder:
+        _use_tcmalloc()  # ~2x CPU training speed; the pool's workers inherit LD_PRELOAD
+    try:
+        report = launch(
+            table,
+            profile,
+            backend=backend,
+            jobs=jobs or None,
+            device=device,
+            partition=partition,
+            time_min=time_min,
+            gpus=gpus,
+            cpus=cpus,
+            wait=wait,
+            log=(lambda m: None) if as_json else typer.echo,
+        )
+    except ValueError as e:
+        _fail(str(e))
+    data = asdict(report)
+    _echo(
+        data,
+        as_json,
+        f"{table} [{profile}]: {len(report.done)} trained, {len(report.skipped)} already finished, "
+        f"{len(report.failed)} failed" + (f", {len(report.submitted)} jobs submitted" if report.submitted else ""),
+    )
+    if report.failed:
+        raise typer.Exit(1)
+
+
+@app.command()
+def report(
+    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5"),
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper"),
+    curves: bool = typer.Option(True, "--curves/--no-curves", help="Also plot training curves (needs MLflow)."),
+    out: Path = typer.Option(None, help="Output folder (default: reports/)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Ours beside the paper: reports/TABLE-PROFILE.md/.tex (mean [95% CI] | paper) and -curves.png/.pdf."""
+    from emml.profiles import load_profiles
+    from emml.report.tables import report_table
+
+    if profile not in load_profiles():
+        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
+    try:
+        data = report_table(table, profile, out=out)
+    except ValueError as e:
+        _fail(str(e))
+    data["notes"] = []
+    if curves:
+        from emml.report.curves import plot_table
+
+        paths, notes = plot_table(table, profile, out=out)
+        data["paths"] += [str(p) for p in paths]
+        data["notes"] = notes
+    text = "\n".join([data["caption"], *[f"note: {n}" for n in data["notes"]], *[f"wrote {p}" for p in data["paths"]]])
+    _echo(data, as_json, text)
+
+
 if __name__ == "__main__":
     app()

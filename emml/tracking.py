@@ -158,16 +158,20 @@ class Tracker:
         tags: Mapping[str, Any] | None = None,
         params: Mapping[str, Any] | Any = None,
         run_id: str | None = None,
+        parent_run_id: str | None = None,
     ) -> str:
         """Create a run (creating the experiment if missing) or resume ``run_id``.
 
-        On resume, params already logged are left alone; new keys are added and
+        ``parent_run_id`` nests the run under a parent (tag ``mlflow.parentRunId``, which MLflow reads across
+        processes). On resume, params already logged are left alone; new keys are added and
         keys whose value changed are skipped with a warning (MLflow params are
         immutable). Returns the run id.
         """
         from mlflow.entities import Param
 
         flat = flatten(params or {})
+        if parent_run_id is not None:
+            tags = {**(tags or {}), "mlflow.parentRunId": parent_run_id}
         if run_id is None:
             exp_id = self._experiment_id(experiment)
             tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
@@ -225,6 +229,31 @@ class Tracker:
     def __exit__(self, exc_type, exc, tb) -> None:
         if self._run_id is not None:
             self.finish("FINISHED" if exc_type is None else ("KILLED" if exc_type is KeyboardInterrupt else "FAILED"))
+
+
+def parent_run(experiment: str, run_name: str, tags: Mapping[str, Any], uri: str | None = None) -> str:
+    """The id of the parent run of ``experiment`` tagged ``tags`` (plus ``emml.role=parent``), created if missing.
+
+    Create it before fanning out workers (one writer), then pass its id to each child's ``Tracker.start``.
+    A relaunch finds the same parent, so resumed children stay nested under one run.
+    """
+    tags = {**tags, "emml.role": "parent"}
+    found = find_runs(experiment, tags, uri=uri)
+    if found:
+        return min(found, key=lambda r: r["start_time"])["run_id"]
+    tracker = Tracker(uri)
+    return tracker.start(experiment, run_name, tags)
+
+
+def set_run_status(run_id: str, status: str, uri: str | None = None) -> None:
+    """Mark a run (e.g. a parent run once its children are done) FINISHED, FAILED, KILLED or RUNNING."""
+    if status not in (*_STATUSES, "RUNNING"):
+        raise ValueError(f"status must be one of {(*_STATUSES, 'RUNNING')}, got {status!r}")
+    client = _client(uri)
+    if status == "RUNNING":
+        _retry(lambda: client.update_run(run_id, status="RUNNING"))
+    else:
+        _retry(lambda: client.set_terminated(run_id, status=status))
 
 
 def metric_history(run_id: str, key: str, uri: str | None = None) -> list[tuple[int, float]]:

@@ -84,6 +84,7 @@ def _seed_everything(seed: int) -> None:
 def _check_same_config(saved: dict, current: dict, path: Path) -> None:
     """A rerun resumes only the same experiment: differing fields fail by name before anything is touched."""
     ignore = {
+        "frames",  # asking for more frames continues a run (finished or not) to the new target
         "eval_every",
         "checkpoint_every",
         "log_every",
@@ -139,7 +140,7 @@ class Trainer:
         saved = load_checkpoint(ckpt_path) if ckpt_path.exists() else None
         if saved is not None:
             _check_same_config(saved["config"], cfg.to_dict(), ckpt_path)
-            if saved.get("finished"):
+            if saved.get("finished") and saved["frames"] >= cfg.num_updates * cfg.frames_per_update:
                 results = json.loads((self.dir / RESULTS).read_text())
                 record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
                 return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
@@ -340,20 +341,27 @@ def results_csv(cfg: TrainConfig) -> Path:
 
 
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
-    """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv, written atomically."""
+    """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv, written atomically.
+
+    Runs of one table finish in parallel processes: an exclusive lock on a side file serialises the
+    read-modify-write, so that no row is lost."""
+    import fcntl
+
     import pandas as pd
 
     row = {k: v for k, v in payload.items() if k != "metrics"}
     row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, **payload["metrics"])
     path = results_csv(cfg)
     path.parent.mkdir(parents=True, exist_ok=True)
-    table = pd.read_csv(path) if path.exists() else pd.DataFrame()
-    if not table.empty:
-        table = table[table["run_name"] != row["run_name"]]
-    table = pd.concat([table, pd.DataFrame([row])], ignore_index=True).sort_values("run_name")
-    tmp = path.with_suffix(".csv.tmp")
-    table.to_csv(tmp, index=False)
-    os.replace(tmp, path)
+    with open(path.with_suffix(".csv.lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        table = pd.read_csv(path) if path.exists() else pd.DataFrame()
+        if not table.empty:
+            table = table[table["run_name"] != row["run_name"]]
+        table = pd.concat([table, pd.DataFrame([row])], ignore_index=True).sort_values("run_name")
+        tmp = path.with_suffix(f".csv.{os.getpid()}.tmp")
+        table.to_csv(tmp, index=False)
+        os.replace(tmp, path)
     return path
 
 

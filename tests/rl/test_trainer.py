@@ -43,11 +43,14 @@ def test_every_model_trains_a_few_hundred_frames(model, tracking, no_leftovers):
     assert len(losses) == 2  # one point per update (2 updates of 2 x 32 frames)
 
 
-def test_finished_run_is_not_retrained(tracking, no_leftovers):
+def test_finished_run_is_not_retrained_but_can_be_extended(tracking, no_leftovers):
     cfg = smoke(tracking, frames=64, eval_episodes=1)
     first = train(cfg, quiet=True)
     again = train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
     assert again.skipped and again.run_id == first.run_id and again.metrics == first.metrics
+    longer = train(smoke(tracking, frames=192, eval_episodes=1), quiet=True)
+    assert not longer.skipped and longer.resumed and longer.run_id == first.run_id and longer.frames == 192
+    assert [s for s, _ in metric_history(first.run_id, "charts/update")] == [64, 128, 192]
 
 
 def test_resume_after_sigkill_continues_the_same_run(tracking, tmp_path, no_leftovers):

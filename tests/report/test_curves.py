@@ -1,0 +1,44 @@
+"""A table's training curves from MLflow histories, on a FIXTURE: made-up runs logged to a private MLflow store and
+a results CSV in tmp_path pointing at them (never results)."""
+
+import pandas as pd
+
+from emml.report.curves import _mean_band, plot_table
+from emml.tracking import Tracker
+
+
+def test_mean_band_averages_seeds_on_a_common_grid():
+    import numpy as np
+
+    x = np.array([0.0, 10.0, 20.0])
+    grid, mean, band = _mean_band([(x, np.array([0.0, 0.2, 0.4])), (x, np.array([0.0, 0.4, 0.8]))])
+    assert grid[0] == 0 and grid[-1] == 20
+    assert abs(mean[-1] - 0.6) < 1e-9
+    assert np.all(band[0] <= mean + 1e-12) and np.all(mean <= band[1] + 1e-12)
+    _, _, none = _mean_band([(x, np.array([0.0, 0.2, 0.4]))])
+    assert none is None
+
+
+def test_plot_table_skips_runs_without_history(tracking, tmp_path):
+    rows = []
+    for seed in (0, 1, 2):
+        name = f"dual_attention-easy-noaux-s{seed}-quick"
+        tracker = Tracker()
+        run_id = tracker.start("table3", name)
+        for step in (1024, 2048, 3072):
+            tracker.log_metrics({"train/success_sgn": 0.1 * seed + step / 4096, "train/success_eqa": 0.2}, step=step)
+        tracker.finish()
+        rows.append({"run_name": name, "run_id": run_id, "seed": seed, "frames": 3072})
+    rows.append({"run_name": "da_no_sa-easy-aux-s0-quick", "run_id": "not-in-this-store", "seed": 0, "frames": 3072})
+    csv = tmp_path / "results" / "table3" / "quick.csv"
+    csv.parent.mkdir(parents=True)
+    pd.DataFrame(rows).to_csv(csv, index=False)
+    paths, notes = plot_table("table3", "quick", results_root=tmp_path / "results", out=tmp_path / "reports")
+    assert [p.name for p in paths] == ["table3-quick-curves.png", "table3-quick-curves.pdf"]
+    assert all(p.stat().st_size > 1000 for p in paths)
+    assert any("da_no_sa-easy-aux-s0-quick" in n and "no MLflow history" in n for n in notes)
+
+
+def test_plot_table_placeholder(tracking, tmp_path):
+    paths, notes = plot_table("table5", "quick", results_root=tmp_path, out=tmp_path)
+    assert paths == [] and "placeholder" in notes[0]

@@ -1,0 +1,136 @@
+"""The launcher with a fake trainer (no training here): finished runs are skipped, interrupted and unrecorded ones
+go to the trainer, a failure does not stop the table, runs nest under one MLflow parent, and the Slurm path
+through submitit's in-process debug executor."""
+
+from pathlib import Path
+
+import pytest
+
+from emml.launch import run_states, run_table
+from emml.rl.checkpoint import save_checkpoint
+from emml.rl.trainer import CHECKPOINT, RESULTS, record_result, run_dir
+from emml.tracking import Tracker, find_runs
+
+PROFILE = "smoke"  # one seed: table3 has 16 runs
+
+
+def fake_train(cfg, quiet=False, parent_run_id=None):
+    """Stands in for emml.rl.trainer.train: logs the call and records the run as finished (module level: picklable)."""
+    calls = Path(cfg.run_root) / "calls.txt"
+    calls.parent.mkdir(parents=True, exist_ok=True)
+    with open(calls, "a") as f:
+        f.write(f"{cfg.run_name()} {parent_run_id} {cfg.threads}\n")
+    if cfg.model == "da_no_ga1" and cfg.aux:
+        raise RuntimeError("boom")
+    payload = {
+        "run_name": cfg.run_name(),
+        "table": cfg.table,
+        "frames": cfg.frames,
+        "seed": cfg.seed,
+        "run_id": "fake",
+        "metrics": {"sgn_test": 0.5, "eqa_test": 0.25},
+    }
+    record_result(payload, cfg)
+
+
+def calls(tracking) -> list[list[str]]:
+    path = Path(tracking["run_root"]) / "calls.txt"
+    return [line.split() for line in path.read_text().splitlines()] if path.exists() else []
+
+
+def launch(tracking, **kw):
+    return run_table(
+        "table3",
+        PROFILE,
+        run_root=tracking["run_root"],
+        results_root=tracking["results_root"],
+        train_fn=fake_train,
+        log=lambda m: None,
+        **kw,
+    )
+
+
+def test_finished_runs_are_skipped_and_failures_kept(tracking):
+    first = launch(tracking, jobs=1)
+    assert first.total == 16 and first.skipped == []
+    assert len(first.done) == 15 and list(first.failed) == ["da_no_ga1-easy-aux-s0-smoke"]
+    assert "boom" in first.failed["da_no_ga1-easy-aux-s0-smoke"]
+    assert len(calls(tracking)) == 16
+    assert {c[1] for c in calls(tracking)} == {first.parent_run_id}
+    second = launch(tracking, jobs=1)  # only the failed run is tried again
+    assert len(second.skipped) == 15 and list(second.failed) == ["da_no_ga1-easy-aux-s0-smoke"]
+    assert len(calls(tracking)) == 17
+    assert second.parent_run_id == first.parent_run_id  # one parent per (table, profile)
+    parents = find_runs("table3", {"emml.role": "parent", "profile": PROFILE})
+    assert len(parents) == 1 and parents[0]["status"] == "FAILED"
+
+
+def test_partial_and_unrecorded_runs_go_to_the_trainer(tracking):
+    states = run_states("table3", PROFILE, tracking["run_root"], tracking["results_root"])
+    specs = {name: spec for name, (spec, _) in states.items()}
+    partial = run_dir(specs["da_no_sa-easy-noaux-s0-smoke"].to_config(PROFILE, run_root=tracking["run_root"]))
+    save_checkpoint(partial / CHECKPOINT, {"finished": False})
+    done = run_dir(specs["da_no_sa-easy-aux-s0-smoke"].to_config(PROFILE, run_root=tracking["run_root"]))
+    save_checkpoint(done / CHECKPOINT, {"finished": True})
+    (done / RESULTS).write_text("{}")
+    states = run_states("table3", PROFILE, tracking["run_root"], tracking["results_root"])
+    assert states["da_no_sa-easy-noaux-s0-smoke"][1] == "partial"
+    assert states["da_no_sa-easy-aux-s0-smoke"][1] == "unrecorded"
+    assert states["dual_attention-easy-aux-s0-smoke"][1] == "missing"
+    launch(tracking, jobs=1)
+    called = [c[0] for c in calls(tracking)]
+    assert "da_no_sa-easy-noaux-s0-smoke" in called and "da_no_sa-easy-aux-s0-smoke" in called
+    states = run_states("table3", PROFILE, tracking["run_root"], tracking["results_root"])
+    assert sum(s == "finished" for _, s in states.values()) == 15
+
+
+def test_process_pool(tracking):
+    report = launch(tracking, jobs=2)
+    assert len(report.done) == 15 and len(report.failed) == 1
+    assert {c[2] for c in calls(tracking)} == {str(max(1, (__import__("os").cpu_count() or 1) // 2))}
+
+
+def test_slurm_backend_through_submitit_debug_executor(tracking):
+    pytest.importorskip("submitit")
+    report = launch(tracking, backend="slurm", slurm_cluster="debug", partition="gpu", gpus=1, wait=True)
+    assert len(report.submitted) == 16 and len(report.done) == 15 and len(report.failed) == 1
+    assert (Path(tracking["run_root"]) / "slurm" / "table3-smoke").is_dir()
+
+
+def test_placeholder_and_bad_arguments(tracking):
+    assert run_table("table4", PROFILE, log=lambda m: None).placeholder
+    with pytest.raises(ValueError, match="backend"):
+        run_table("table3", PROFILE, backend="k8s")
+    with pytest.raises(ValueError, match="profile"):
+        run_table("table3", "huge")
+
+
+def test_tracker_nests_a_child_under_its_parent(tracking):
+    parent = Tracker().start("nest", "parent")
+    child = Tracker().start("nest", "child", parent_run_id=parent)
+    runs = {r["run_id"]: r for r in find_runs("nest")}
+    assert runs[child]["tags"]["mlflow.parentRunId"] == parent
+
+
+def test_cli_run_list_report(tmp_path, monkeypatch):
+    monkeypatch.setenv("EMML_NO_TCMALLOC", "1")  # `emml run` would re-exec this process under tcmalloc
+    import json
+
+    from typer.testing import CliRunner
+
+    from emml.cli import app
+
+    runner = CliRunner()
+    result = runner.invoke(app, ["run", "table5", "--profile", "smoke"])
+    assert result.exit_code == 0 and "placeholder" in result.output
+    result = runner.invoke(app, ["run", "table2", "--profile", "huge"])
+    assert result.exit_code == 2 and "profile" in result.output
+    result = runner.invoke(app, ["list", "--profile", "smoke", "--json"])
+    assert result.exit_code == 0, result.output
+    tables = {t["table"]: t for t in json.loads(result.output)["tables"]}
+    assert tables["table2"]["total"] == 28 and tables["table3"]["total"] == 16 and tables["table4"]["total"] == 0
+    result = runner.invoke(
+        app, ["report", "table4", "--profile", "smoke", "--no-curves", "--out", str(tmp_path), "--json"]
+    )
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "table4-smoke.md").exists() and "PLACEHOLDER" in json.loads(result.output)["caption"]

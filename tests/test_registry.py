@@ -1,0 +1,165 @@
+"""The experiment registry: every reproduce/ TOML loads, tables expand to the paper's settings, bad files fail
+naming the file and the key; the paper's numbers are complete."""
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from emml.registry import REPRODUCE_DIR, list_tables, load_table
+from emml.report.tables import paper_numbers
+
+SEEDS = [0, 1, 2]
+
+
+@pytest.mark.parametrize("name", list_tables())
+def test_every_table_loads(name):
+    table = load_table(name)
+    assert table.status in ("active", "placeholder")
+    if table.placeholder:
+        assert table.runs(SEEDS) == []
+    else:
+        runs = table.runs(SEEDS)
+        names = [r.run_name("quick") for r in runs]
+        assert len(set(names)) == len(names), "run names must be unique within a table"
+        for r in runs[:3]:
+            assert r.to_config("smoke").validate().table == name
+
+
+def test_every_toml_in_reproduce_is_a_known_kind():
+    assert {p.stem for p in REPRODUCE_DIR.glob("*.toml")} == {"profiles", *list_tables()}
+    assert list_tables() == ["table2", "table3", "table4", "table5"]
+
+
+def test_table2_expands_to_28_settings_per_seed():
+    table = load_table("table2")
+    runs = table.runs(SEEDS)
+    assert len(runs) == 28 * len(SEEDS)
+    settings = {(r.model, r.difficulty, r.aux) for r in runs}
+    assert len(settings) == 28
+    assert {r.model for r in runs} == {"text_only", "image_only", "concat", "ga", "film", "pacman", "dual_attention"}
+    assert table.columns()[0] == ("easy", False, "sgn_test") and len(table.columns()) == 8
+
+
+def test_table3_expands_to_ablations_and_single_task_runs():
+    table = load_table("table3")
+    runs = table.runs([0])
+    # 6 one-setting rows + DA single-task (SGN-only, EQA-only) = 8 settings, × No Aux/Aux
+    assert len(runs) == 16
+    assert {r.difficulty for r in runs} == {"easy"}
+    names = {r.run_name("quick") for r in runs}
+    assert "dual_attention-easy-noaux-noshaping-s0-quick" in names
+    assert "dual_attention-easy-aux-sgnonly-s0-quick" in names and "dual_attention-easy-aux-eqaonly-s0-quick" in names
+    single = [r for r in runs if r.row == "DA Single-Task"]
+    assert {(r.overrides["env.tasks"], r.metrics) for r in single} == {("sgn", ("sgn_test",)), ("eqa", ("eqa_test",))}
+    cfg = next(r for r in runs if r.row == "w/o Reward Shaping").to_config("smoke")
+    assert cfg.env.shaping is False and cfg.model == "dual_attention"
+
+
+def test_run_spec_takes_seeds_and_size_from_the_profile():
+    spec = load_table("table2").runs([7])[-1]  # Dual-Attention, Hard, Aux
+    cfg = spec.to_config("paper")
+    assert (cfg.seed, cfg.aux, cfg.env.difficulty, cfg.frames, cfg.profile) == (7, True, "hard", 50_000_000, "paper")
+    assert cfg.run_name() == "dual_attention-hard-aux-s7-paper"
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "tableX.toml"
+    path.write_text(text)
+    return path
+
+
+GOOD = """
+title = "t"
+paper_label = "tab:x"
+status = "active"
+[columns]
+difficulties = ["easy"]
+aux = [false]
+metrics = { SGN = "sgn_test" }
+[[rows]]
+label = "DA"
+model = "dual_attention"
+"""
+
+
+def test_a_good_fixture_loads(tmp_path):
+    assert len(load_table("tableX", _write(tmp_path, GOOD)).runs([0])) == 1
+
+
+@pytest.mark.parametrize(
+    "old, new, key, what",
+    [
+        ('model = "dual_attention"', 'model = "transformer"', "rows[0].model", "transformer"),
+        ('status = "active"', 'status = "done"', "status", "placeholder"),
+        ('difficulties = ["easy"]', 'difficulties = ["medium"]', "columns.difficulties", "medium"),
+        ('{ SGN = "sgn_test" }', '{ SGN = "sgn_val" }', "columns.metrics.SGN", "sgn_val"),
+        ('label = "DA"', 'lable = "DA"', "rows[0].lable", "unknown key"),
+        (
+            'model = "dual_attention"',
+            'model = "dual_attention"\noverrides = { "env.colour" = 1 }',
+            "rows[0].overrides",
+            "colour",
+        ),
+        (
+            'model = "dual_attention"',
+            'model = "dual_attention"\noverrides = { "env.tasks" = "all" }',
+            "rows[0].overrides",
+            "tasks",
+        ),
+        ('title = "t"\n', "", "title", "missing"),
+        ("aux = [false]", 'aux = ["no"]', "columns.aux", "booleans"),
+    ],
+)
+def test_malformed_toml_names_file_and_key(tmp_path, old, new, key, what):
+    path = _write(tmp_path, GOOD.replace(old, new))
+    with pytest.raises(ValueError) as err:
+        load_table("tableX", path)
+    msg = str(err.value)
+    assert str(path) in msg and repr(key) in msg and what in msg
+
+
+def test_invalid_toml_syntax_names_file(tmp_path):
+    path = _write(tmp_path, GOOD + "\n[[rows]\n")
+    with pytest.raises(ValueError, match="tableX.toml"):
+        load_table("tableX", path)
+
+
+def test_rows_colliding_on_run_name_are_rejected(tmp_path):
+    extra = '\n[[rows]]\nlabel = "DA lr"\nmodel = "dual_attention"\noverrides = { "ppo.lr" = 0.1 }\n'
+    with pytest.raises(ValueError, match="same run name"):
+        load_table("tableX", _write(tmp_path, GOOD + extra))
+
+
+def test_placeholder_declares_no_runs(tmp_path):
+    text = 'title = "t"\npaper_label = "x"\nstatus = "placeholder"\n[[rows]]\nlabel = "a"\nmodel = "ga"\n'
+    with pytest.raises(ValueError, match="placeholder"):
+        load_table("tableX", _write(tmp_path, text))
+
+
+def test_unknown_table_lists_the_known_ones():
+    with pytest.raises(ValueError, match="table2"):
+        load_table("table9")
+
+
+@pytest.mark.parametrize("name, cells", [("table2", 56), ("table3", 28), ("table4", 16), ("table5", 28)])
+def test_paper_csvs_are_complete(name, cells):
+    df = paper_numbers(name)
+    assert list(df.columns) == ["row", "difficulty", "aux", "metric", "value"]
+    assert len(df) == cells
+    assert not df.duplicated(["row", "difficulty", "aux", "metric"]).any()
+    values = pd.to_numeric(df["value"])
+    assert values.between(0, 1).all()
+    table = load_table(name)
+    if not table.placeholder:  # every cell of the registry has the paper's number, and vice versa
+        declared = {(r.label, d, a, m) for r in table.rows for d, a, m in table.columns()}
+        assert declared == set(zip(df["row"], df["difficulty"], df["aux"], df["metric"]))
+
+
+def test_paper_numbers_are_kept_as_printed():
+    df = paper_numbers("table2").set_index(["row", "difficulty", "aux", "metric"])["value"]
+    assert df[("Text only", "easy", False, "sgn_test")] == "0.2"
+    assert df[("Dual-Attention", "hard", True, "eqa_test")] == "0.59"
+    assert df[("PACMAN", "hard", False, "eqa_test")] == "0.33"
+    t3 = paper_numbers("table3").set_index(["row", "aux", "metric"])["value"]
+    assert t3[("w/o GA2", True, "sgn_test")] == "0.97" and t3[("DA Single-Task", False, "eqa_test")] == "0.31"
