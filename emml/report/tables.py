@@ -256,7 +256,8 @@ def report_table(
     flat = md_df.copy()
     if isinstance(flat.columns, pd.MultiIndex):
         flat.columns = [" · ".join(c) for c in flat.columns]
-    md_path.write_text(f"# {name} ({profile})\n\n{text}\n\n{flat.to_markdown()}\n\nResults: `{path}`\n")
+    shown = path.relative_to(project_root()) if path.is_relative_to(project_root()) else path
+    md_path.write_text(f"# {name} ({profile})\n\n{text}\n\n{flat.to_markdown()}\n\nResults: `{shown}`\n")
     tex_df, _ = layout(table, cells, tex=True)
     tex_df.index = pd.Index([_tex_escape(str(i)) for i in tex_df.index], name=table.row_header)
     tex = tex_df.reset_index().to_latex(
