@@ -145,9 +145,11 @@ LEARNING_QUESTIONS = ["what color is the pillar", "what color is the tall pillar
 
 def test_learning_beats_chance(tracking, no_leftovers):
     """EQA on Easy about the pillars (answers red or green: chance 0.5), smoke resolution, with aux labels.
-    PPO must learn to answer and the answer head to read the colour: measured 0.90 greedy accuracy after 64k
-    frames (~0.88 training success from 13k frames on) with this seed; we assert 0.75 (3 sd above chance at 40
-    episodes). lr 1e-3 instead of the paper's 2.5e-4 so that it fits in CI's time."""
+    PPO must learn to answer and the answer head to read the colour. Measured with this seed (0): 0.90 greedy
+    accuracy after 32k frames; we assert 0.75, 3 sd above chance at 40 episodes. lr 1e-3 instead of the paper's
+    2.5e-4 so that it fits in CI's time. Seed-sensitive: with seed 1 the answer head learns too slowly and the
+    policy settles at 0.40 even after 64k frames; training is deterministic under a seed on CPU, so this test is
+    stable, but it pins one seed."""
     cfg = smoke(
         tracking,
         aux=True,
