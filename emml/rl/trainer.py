@@ -132,6 +132,7 @@ class Trainer:
 
             cfg.env.aux_words = default_aux_words(self.vocab, dataset)
         self.device = torch.device(cfg.device)
+        self.git_sha = git_sha()  # the code this process runs: read once, before the tree can change under it
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
@@ -165,7 +166,7 @@ class Trainer:
             "aux": cfg.aux,
             "seed": cfg.seed,
             "profile": cfg.profile,
-            "git_sha": git_sha(),
+            "git_sha": self.git_sha,
             "allocator": allocator(),
             "tasks": env_cfg.tasks,
             "shaping": env_cfg.shaping,
@@ -322,7 +323,7 @@ class Trainer:
             "seed": cfg.seed,
             "profile": cfg.profile,
             "frames": frames,
-            "git_sha": git_sha(),
+            "git_sha": self.git_sha,
             "run_id": self.tracker.run_id,
             "eval_episodes": cfg.eval_episodes,
             "metrics": metrics,
