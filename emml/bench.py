@@ -90,3 +90,121 @@ def bench_env(config: DoomConfig, steps: int = 2000, vector_steps: int = 2000) -
     for workers in (1, 2):
         out[f"vector_{workers}_workers_steps_per_s"] = round(_vector(config, workers, vector_steps), 1)
     return out
+
+
+# --- `emml bench train` ---------------------------------------------------------------------------------------
+
+
+class MemoryTracker:
+    """Stands in for tracking.Tracker in benchmarks: keeps metrics in memory, writes nothing."""
+
+    def __init__(self):
+        self.run_id = "bench"
+        self.history: list[tuple[int, dict]] = []
+
+    def start(self, *args, **kwargs) -> str:
+        return self.run_id
+
+    def log_metrics(self, metrics: dict, step: int) -> None:
+        self.history.append((step, dict(metrics)))
+
+    def finish(self, status: str = "FINISHED") -> None:
+        pass
+
+
+def _model_only(cfg, updates: int) -> float:
+    """Frames/s of acting (T batched forward steps) + one PPO update on synthetic observations of the real shapes."""
+    import torch
+
+    from emml.envs.labels import channel_mask, default_aux_words
+    from emml.geometry import conv_output_size
+    from emml.models import build_model
+    from emml.rl.ppo import make_optimizer, ppo_update
+    from emml.rl.rollout import RolloutBuffer
+    from emml.tasks.language import Vocabulary, load_dataset
+
+    env = cfg.env
+    vocab = Vocabulary.from_dataset(load_dataset(env.dataset))
+    V, (h, w), B, T = len(vocab), conv_output_size(env.height, env.width), cfg.num_envs, cfg.num_steps
+    model = build_model(cfg.model, V, env.height, env.width, env.max_steps)
+    optimizer = make_optimizer(model.parameters(), cfg.ppo)
+    shapes = {
+        "image": ((3, env.height, env.width), torch.uint8),
+        "tokens": ((env.max_words,), torch.int64),
+        "task": ((), torch.int64),
+        "time": ((), torch.int64),
+    }
+    if cfg.aux:
+        shapes["aux"] = ((V, h, w), torch.uint8)
+    buffer = RolloutBuffer(T, B, shapes)
+    gen = torch.Generator().manual_seed(0)
+    for key, tensor in buffer.obs.items():
+        high = {"image": 256, "tokens": V + 1, "task": 2, "time": env.max_steps, "aux": 2}[key]
+        tensor.copy_(torch.randint(0, high, tensor.shape, generator=gen))
+    buffer.rewards.normal_(generator=gen)
+    mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))))
+
+    def forward(o, s, e):
+        return vars(model(o, s, e)[0])
+
+    def one_update():
+        state = model.initial_state(B)
+        buffer.set_initial_state(state)
+        with torch.no_grad():
+            for t in range(T):  # acting: one batched step at a time, as in a rollout
+                out, state = model(
+                    {k: v[t : t + 1] for k, v in buffer.obs.items()}, state, buffer.episode_starts[t : t + 1]
+                )
+                buffer.values[t] = out.value[0]
+        buffer.compute_returns(torch.zeros(B), cfg.ppo.gamma, cfg.ppo.gae_lambda)
+        ppo_update(forward, optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux)
+
+    one_update()  # warm-up
+    t0 = time.perf_counter()
+    for _ in range(updates):
+        one_update()
+    return updates * B * T / (time.perf_counter() - t0)
+
+
+def bench_train(cfg, updates: int = 5) -> dict:
+    """Model-only vs end-to-end training frames/s for one config, measured in one run, and the end-to-end time
+    split (simulate / infer / learn) per update."""
+    import dataclasses
+    import tempfile
+
+    from emml.rl.trainer import Trainer
+
+    model_fps = _model_only(cfg, updates)
+    with tempfile.TemporaryDirectory() as tmp:
+        run = dataclasses.replace(
+            cfg,
+            frames=(updates + 1) * cfg.frames_per_update,
+            eval_episodes=1,
+            checkpoint_every=10**6,
+            log_every=10**6,
+            run_root=tmp,
+            results_root=tmp,
+            table="bench",
+        )
+        run.env = dataclasses.replace(cfg.env)
+        tracker = MemoryTracker()
+        trainer = Trainer(run, tracker=tracker, quiet=True)
+        trainer.train()
+    fps = [m["charts/fps"] for _, m in tracker.history if "charts/fps" in m][1:]  # the first pays for warm-up
+    split = trainer.timing
+    total = sum(split.values()) or 1.0
+    e2e = sum(fps) / len(fps)
+    return {
+        "model": cfg.model,
+        "aux": cfg.aux,
+        "height": cfg.env.height,
+        "width": cfg.env.width,
+        "num_envs": cfg.num_envs,
+        "num_steps": cfg.num_steps,
+        "device": cfg.device,
+        "updates": updates,
+        "model_only_fps": round(model_fps, 1),
+        "end_to_end_fps": round(e2e, 1),
+        "ratio": round(e2e / model_fps, 3),
+        "time_split": {k: round(v / total, 3) for k, v in split.items()},
+    }

@@ -128,6 +128,38 @@ def bench_env(
     _echo(result, as_json, "\n".join(text))
 
 
+@bench_app.command("train")
+def bench_train_cmd(
+    model: str = "dual_attention",
+    aux: bool = typer.Option(True, "--aux/--no-aux"),
+    profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
+    updates: int = typer.Option(5, min=1),
+    device: str = "cpu",
+    sets: list[str] = typer.Option([], "--set", help="Override any config field."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split."""
+    from emml.bench import bench_train
+    from emml.envs.engine import install_signal_handlers
+    from emml.profiles import profile_config
+
+    try:
+        cfg = profile_config(profile, "easy", _parse_sets(sets), model=model, aux=aux, device=device).validate()
+    except ValueError as e:
+        _fail(str(e))
+    _use_tcmalloc()
+    install_signal_handlers()
+    r = bench_train(cfg, updates)
+    split = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r["time_split"].items())
+    _echo(
+        r,
+        as_json,
+        f"{model} at {r['width']}x{r['height']}, {r['num_envs']}x{r['num_steps']} per update: model-only "
+        f"{r['model_only_fps']:.0f} frames/s, end-to-end {r['end_to_end_fps']:.0f} frames/s "
+        f"(ratio {r['ratio']:.2f}); end-to-end time: {split}",
+    )
+
+
 @app.command()
 def models(
     height: int = 168,

@@ -211,7 +211,7 @@ class Trainer:
                 dynamic_ncols=True,
                 smoothing=0.1,
             )
-            timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
+            timing = self.timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
                 buffer.set_initial_state(state)
