@@ -273,7 +273,8 @@ class DoomEnv(gym.Env):
         return None if self.render_mode is None else np.ascontiguousarray(self.frame.transpose(1, 2, 0))
 
     def close(self):
-        if self._engine is not None:
-            engine, self._engine = self._engine, None
-            eng.end_engine(engine)
-        self._map = None
+        with eng.signals_held():  # an interrupt must not drop the engine between these lines
+            if self._engine is not None:
+                engine, self._engine = self._engine, None
+                eng.end_engine(engine)
+            self._map = None

@@ -10,7 +10,9 @@ still lives and removes its shm files. An atexit hook ends what is left on norma
 from __future__ import annotations
 
 import atexit
+import contextlib
 import glob
+import multiprocessing.util
 import os
 import signal
 import threading
@@ -89,6 +91,22 @@ def _alive(pid: int) -> bool:
 
 def end_engine(engine: Engine) -> None:
     """Close the game, then make sure its process is gone and its shm files removed. Idempotent."""
+    with signals_held():
+        _end(engine)
+
+
+@contextlib.contextmanager
+def signals_held():
+    """Hold SIGINT and SIGTERM back (they are delivered right after): a second signal, such as the parent's
+    terminate() after a Ctrl-C that already reached this worker, must not cut a cleanup short."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+def _end(engine: Engine) -> None:
     try:
         engine.game.close()
     except Exception:
@@ -125,6 +143,11 @@ def _end_all() -> None:
         engines = list(_LIVE.values())
     for engine in engines:
         end_engine(engine)
+
+
+# Worker processes of multiprocessing leave through os._exit, which skips atexit; multiprocessing's own exit
+# finalizers do run there, so the same net is hung on them too (it ends what an interrupted close left).
+multiprocessing.util.Finalize(None, _end_all, exitpriority=100)
 
 
 def _raise_exit(signum, frame):

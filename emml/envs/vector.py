@@ -13,6 +13,7 @@ import multiprocessing as mp
 from dataclasses import asdict
 
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
+from gymnasium.vector.async_vector_env import AsyncState
 
 from emml.config import DoomConfig
 
@@ -37,7 +38,20 @@ class _Closing:
 
 
 class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
-    pass
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+        return False
+
+    def abort(self) -> None:
+        """End the workers without talking to them: after an interrupt (SIGTERM, Ctrl-C) the parent may have
+        stopped in the middle of reading a message, and a graceful close would then wait forever on a pipe out
+        of step. Each worker gets SIGTERM instead; its handler raises SystemExit and its `finally` ends its
+        engine."""
+        self._state = AsyncState.DEFAULT  # forget the pending call: its reply may be half read
+        self.close(terminate=True)
 
 
 class SyncDoomVectorEnv(_Closing, SyncVectorEnv):
