@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml.registry import RunSpec, load_table
-from emml.tracking import project_root
+from emml.tracking import project_path
 
 BACKENDS = ("local", "slurm")
 STATES = ("finished", "unrecorded", "partial", "missing")
@@ -157,10 +157,7 @@ def run_table(
         fields["threads"] = max(1, (os.cpu_count() or 1) // jobs)
     args = [(spec, profile, fields, report.parent_run_id, train_fn) for spec in todo]
     if backend == "slurm":
-        root = Path(run_root) if run_root is not None else project_root() / "runs"
-        if not root.is_absolute():
-            root = project_root() / root
-        folder = root / "slurm" / f"{name}-{profile}"
+        folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile}"
         return _submit(report, args, folder, partition, time_min, gpus, cpus, slurm_cluster, wait, log)
     set_run_status(report.parent_run_id, "RUNNING")
     if jobs == 1:

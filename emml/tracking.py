@@ -47,6 +47,12 @@ def project_root() -> Path:
     return Path.cwd()
 
 
+def project_path(path: str | Path) -> Path:
+    """``path`` as given when absolute, else under the project root (run and results roots are set this way)."""
+    path = Path(path)
+    return path if path.is_absolute() else project_root() / path
+
+
 def tracking_uri() -> str:
     """``$MLFLOW_TRACKING_URI`` if set, else ``sqlite:///<project root>/mlflow.db``."""
     env = os.environ.get("MLFLOW_TRACKING_URI")

@@ -16,7 +16,7 @@ import pandas as pd
 from scipy import stats
 
 from emml.registry import REPRODUCE_DIR, Table, load_table
-from emml.tracking import project_root
+from emml.tracking import project_path, project_root
 
 CONFIDENCE = 0.95
 N_RESAMPLES = 9999
@@ -236,8 +236,7 @@ def _tex_escape(text: str) -> str:
 
 
 def results_path(name: str, profile: str, results_root: str | Path | None = None) -> Path:
-    root = Path(results_root) if results_root is not None else project_root() / "results"
-    return root / name / f"{profile}.csv"
+    return project_path(results_root if results_root is not None else "results") / name / f"{profile}.csv"
 
 
 def report_table(

@@ -32,7 +32,7 @@ from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_
 from emml.rl.ppo import make_optimizer, ppo_update
 from emml.rl.rollout import RolloutBuffer
 from emml.tasks.language import Vocabulary, load_dataset
-from emml.tracking import Tracker, project_root
+from emml.tracking import Tracker, project_path, project_root
 
 CHECKPOINT = "checkpoint.pt"
 RESULTS = "results.json"
@@ -59,10 +59,7 @@ def allocator() -> str:
 
 
 def run_dir(cfg: TrainConfig) -> Path:
-    root = Path(cfg.run_root)
-    if not root.is_absolute():
-        root = project_root() / root
-    return root / cfg.table / cfg.run_name()
+    return project_path(cfg.run_root) / cfg.table / cfg.run_name()
 
 
 @dataclass
@@ -133,6 +130,8 @@ class Trainer:
             cfg.env.aux_words = default_aux_words(self.vocab, dataset)
         self.device = torch.device(cfg.device)
         self.git_sha = git_sha()  # the code this process runs: read once, before the tree can change under it
+        self.timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
+        """Seconds spent per part of an update in this process (log lines, `emml bench train`)."""
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
@@ -211,7 +210,7 @@ class Trainer:
                 dynamic_ncols=True,
                 smoothing=0.1,
             )
-            timing = self.timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
+            timing = self.timing
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
                 buffer.set_initial_state(state)
@@ -335,10 +334,7 @@ class Trainer:
 
 
 def results_csv(cfg: TrainConfig) -> Path:
-    root = Path(cfg.results_root)
-    if not root.is_absolute():
-        root = project_root() / root
-    return root / cfg.table / f"{cfg.profile}.csv"
+    return project_path(cfg.results_root) / cfg.table / f"{cfg.profile}.csv"
 
 
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
