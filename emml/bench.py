@@ -166,15 +166,14 @@ def _model_only(cfg, updates: int) -> float:
     return updates * B * T / (time.perf_counter() - t0)
 
 
-def bench_train(cfg, updates: int = 5) -> dict:
-    """Model-only vs end-to-end training frames/s for one config, measured in one run, and the end-to-end time
-    split (simulate / infer / learn) per update."""
+def _end_to_end(cfg, updates: int) -> tuple[float, dict]:
+    """Frames/s of the trainer's own loop (real envs) over ``updates`` updates after a warm-up one, and its time
+    split. Writes nothing outside a temporary directory."""
     import dataclasses
     import tempfile
 
     from emml.rl.trainer import Trainer
 
-    model_fps = _model_only(cfg, updates)
     with tempfile.TemporaryDirectory() as tmp:
         run = dataclasses.replace(
             cfg,
@@ -191,20 +190,85 @@ def bench_train(cfg, updates: int = 5) -> dict:
         trainer = Trainer(run, tracker=tracker, quiet=True)
         trainer.train()
     fps = [m["charts/fps"] for _, m in tracker.history if "charts/fps" in m][1:]  # the first pays for warm-up
-    split = trainer.timing
-    total = sum(split.values()) or 1.0
-    e2e = sum(fps) / len(fps)
-    return {
+    total = sum(trainer.timing.values()) or 1.0
+    return sum(fps) / len(fps), {k: round(v / total, 3) for k, v in trainer.timing.items()}
+
+
+def _raw_steps(config: DoomConfig, seconds: float) -> float:
+    """Raw engine steps/s of one process (the simulator alone: make_action + get_state, nothing else)."""
+    env = DoomEnv(config)
+    try:
+        env.reset(seed=0)
+        game, turn = env._game(), env._turn
+        choices = [[1, 0], [0, -turn], [0, turn]]
+        steps, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            game.make_action(choices[steps % 3], env.cfg.frame_skip)
+            game.get_state()
+            steps += 1
+            if game.is_episode_finished():
+                game.new_episode()
+        return steps / (time.perf_counter() - t0)
+    finally:
+        env.close()
+
+
+def _pool(n: int):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("forkserver"))
+
+
+def simulator_limit(config: DoomConfig, processes: int, seconds: float = 5.0) -> float:
+    """Aggregate raw engine steps/s of ``processes`` engines stepped at once: what the machine's cores can
+    simulate at most, the ceiling of any number of packed runs."""
+    with _pool(processes) as pool:
+        return sum(pool.map(_raw_steps, [config] * processes, [seconds] * processes))
+
+
+def bench_train(cfg, updates: int = 5, runs: int = 0) -> dict:
+    """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
+    split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
+    N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
+    the raw simulator limit of all cores."""
+    import dataclasses
+    import os
+
+    model_fps = _model_only(cfg, updates)
+    e2e, split = _end_to_end(cfg, updates)
+    out = {
         "model": cfg.model,
         "aux": cfg.aux,
         "height": cfg.env.height,
         "width": cfg.env.width,
         "num_envs": cfg.num_envs,
         "num_steps": cfg.num_steps,
+        "env_groups": cfg.env_groups,
         "device": cfg.device,
         "updates": updates,
         "model_only_fps": round(model_fps, 1),
         "end_to_end_fps": round(e2e, 1),
         "ratio": round(e2e / model_fps, 3),
-        "time_split": {k: round(v / total, 3) for k, v in split.items()},
+        "time_split": split,
     }
+    if cfg.env_groups > 1:
+        lockstep, _ = _end_to_end(dataclasses.replace(cfg, env_groups=1), updates)
+        out["lockstep_fps"] = round(lockstep, 1)
+        out["double_buffer_gain"] = round(e2e / lockstep, 3)
+    if runs:
+        cores = os.cpu_count() or 1
+        packed = dataclasses.replace(cfg, threads=max(1, cores // runs))
+        with _pool(runs) as pool:
+            per_run = [fps for fps, _ in pool.map(_end_to_end, [packed] * runs, [updates] * runs)]
+        limit = simulator_limit(cfg.env, cores)
+        out["packed"] = {
+            "runs": runs,
+            "threads_per_run": packed.threads,
+            "per_run_fps": [round(f, 1) for f in per_run],
+            "aggregate_fps": round(sum(per_run), 1),
+            "simulator_limit_fps": round(limit, 1),
+            "fraction_of_limit": round(sum(per_run) / limit, 3),
+            "cores": cores,
+        }
+    return out

@@ -135,10 +135,12 @@ def bench_train_cmd(
     profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
     updates: int = typer.Option(5, min=1),
     device: str = "cpu",
+    runs: int = typer.Option(0, min=0, help="Also pack N end-to-end runs side by side: aggregate vs simulator limit."),
     sets: list[str] = typer.Option([], "--set", help="Override any config field."),
     as_json: bool = typer.Option(False, "--json"),
 ):
-    """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split."""
+    """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
+    with --runs N, the aggregate of N packed runs against the raw simulator limit of the machine's cores."""
     from emml.bench import bench_train
     from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
@@ -149,15 +151,24 @@ def bench_train_cmd(
         _fail(str(e))
     _use_tcmalloc()
     install_signal_handlers()
-    r = bench_train(cfg, updates)
+    r = bench_train(cfg, updates, runs)
     split = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r["time_split"].items())
-    _echo(
-        r,
-        as_json,
-        f"{model} at {r['width']}x{r['height']}, {r['num_envs']}x{r['num_steps']} per update: model-only "
-        f"{r['model_only_fps']:.0f} frames/s, end-to-end {r['end_to_end_fps']:.0f} frames/s "
-        f"(ratio {r['ratio']:.2f}); end-to-end time: {split}",
-    )
+    lines = [
+        f"{model} at {r['width']}x{r['height']} on {r['device']}, {r['num_envs']}x{r['num_steps']} per update, "
+        f"{r['env_groups']} env group(s): model-only {r['model_only_fps']:.0f} frames/s, end-to-end "
+        f"{r['end_to_end_fps']:.0f} frames/s (ratio {r['ratio']:.2f}); end-to-end time: {split}"
+    ]
+    if "lockstep_fps" in r:
+        gain = r["double_buffer_gain"]
+        lines.append(f"lockstep (1 group): {r['lockstep_fps']:.0f} frames/s (double buffering ×{gain})")
+    if "packed" in r:
+        p = r["packed"]
+        lines.append(
+            f"{p['runs']} packed runs ({p['threads_per_run']} threads each): {p['aggregate_fps']:.0f} frames/s in all "
+            f"{p['per_run_fps']}; raw simulator limit of {p['cores']} cores {p['simulator_limit_fps']:.0f} steps/s "
+            f"(fraction {p['fraction_of_limit']:.2f})"
+        )
+    _echo(r, as_json, "\n".join(lines))
 
 
 @app.command()

@@ -144,6 +144,18 @@ class TrainConfig:
     """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
     asynchronous: bool = True
     """Env workers in processes (True) or in the learner process (False, for debugging)."""
+    env_groups: int = 2
+    """Actors are stepped in this many groups, in turn: one group simulates while the policy acts for the next
+    (double-buffered sampling; same algorithm, see emml/rl/sampler.py). 1: all actors in lockstep. Must divide
+    num_envs."""
+    acting_threads: int = 1
+    """torch threads while acting (batches of num_envs/env_groups, one step): one is about as fast as two for
+    such small batches and leaves the other cores to the env workers; 0: as many as the learner."""
+    max_engine_restarts: int = 3
+    """An env worker restarts its engine when it dies (the episode in flight is dropped and counted); this many
+    deaths in a row, less than `engine_restart_window` steps apart, end the run with an EngineError."""
+    engine_restart_window: int = 1000
+    """Steps of a worker after which an engine death no longer counts as repeated."""
     table: str = "adhoc"
     """MLflow experiment / results table the run belongs to."""
     run_root: str = "runs"
@@ -176,7 +188,9 @@ class TrainConfig:
         for name in ("frames", "num_envs", "num_steps", "eval_episodes", "checkpoint_every", "log_every"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
-        for name in ("eval_every", "threads"):
+        if self.env_groups < 1 or self.num_envs % self.env_groups:
+            raise ValueError(f"env_groups={self.env_groups!r} must be a positive divisor of num_envs={self.num_envs}")
+        for name in ("eval_every", "threads", "acting_threads", "max_engine_restarts", "engine_restart_window"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
         if self.device.startswith("cuda"):

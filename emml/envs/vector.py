@@ -1,10 +1,11 @@
-"""N Doom envs in worker processes, observations through shared memory (uint8), clean shutdown.
+"""N Doom envs in worker processes, observations through shared memory (uint8), clean shutdown, engine restarts.
 
 Gymnasium's AsyncVectorEnv does the protocol (step/reset/close over pipes, observations in shared memory).
 What this module adds: workers that end their engine however they end — normal close, an exception, Ctrl-C,
-SIGTERM, or the parent dying (the worker's pipe read fails, its `finally` closes the env) — and same-step
+SIGTERM, or the parent dying (the worker's pipe read fails, its `finally` closes the env) — same-step
 autoreset, so that a PPO rollout never holds a dummy transition: after an episode ends, the step returns the next
-episode's first observation, and the ended episode's info under ``final_info``.
+episode's first observation, and the ended episode's info under ``final_info`` — and engine restarts: a worker
+whose engine dies starts a new one and goes on (`RestartingEnv`).
 """
 
 from __future__ import annotations
@@ -12,18 +13,71 @@ from __future__ import annotations
 import multiprocessing as mp
 from dataclasses import asdict
 
+import gymnasium as gym
+import numpy as np
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 from gymnasium.vector.async_vector_env import AsyncState
 
 from emml.config import DoomConfig
+from emml.envs.engine import EngineError
 
 
-def _make_env(config: dict):
+class RestartingEnv(gym.Wrapper):
+    """Survives engine deaths: when a step finds the engine dead, the episode in flight is dropped — it ends
+    there as truncated, with reward 0 and ``engine_restart=True`` in its info, so that the trainer leaves it out
+    of the success rates and counts it — and the next reset (same-step autoreset: at once) starts a new engine.
+    ``max_restarts`` deaths in a row, each less than ``window`` steps after the previous restart, raise
+    EngineError: an engine that cannot stay up ends the run with a clear error instead of looping.
+
+    Every info carries ``engine_restart`` (False normally) so that batched infos have the key for every env."""
+
+    def __init__(self, env, max_restarts: int = 3, window: int = 1000):
+        super().__init__(env)
+        self.max_restarts = max_restarts
+        self.window = window
+        self.engine_restarts = 0
+        """Engines this worker restarted (all of the run)."""
+        self._in_a_row = 0
+        self._steps_since = 0
+        self._blank = {k: np.zeros(s.shape, s.dtype) for k, s in env.observation_space.spaces.items()}
+
+    @property
+    def engine_pid(self) -> int | None:
+        """The pid of this env's engine process (None before the first reset)."""
+        engine = self.env.unwrapped._engine
+        return engine.pid if engine is not None else None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        info["engine_restart"] = False
+        return obs, info
+
+    def step(self, action):
+        try:
+            obs, reward, terminated, truncated, info = self.env.step(action)
+        except EngineError as e:
+            self.env.close()  # ends what is left of the dead engine: its pid, its shm files (idempotent)
+            self._steps_since, self._in_a_row = 0, (self._in_a_row + 1 if self._steps_since < self.window else 1)
+            if self._in_a_row > self.max_restarts:
+                raise EngineError(
+                    f"the engine died {self._in_a_row} times in a row, each within {self.window} steps of the "
+                    f"last restart (max_engine_restarts={self.max_restarts}); last error: {e}"
+                ) from e
+            self.engine_restarts += 1
+            episode = self.env.unwrapped
+            info = {"task": episode.task_id, "answer": episode.answer_id, "success": False, "engine_restart": True}
+            return self._blank, 0.0, False, True, info
+        self._steps_since += 1
+        info["engine_restart"] = False
+        return obs, reward, terminated, truncated, info
+
+
+def _make_env(config: dict, max_restarts: int, window: int):
     from emml.envs.doom import DoomEnv
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()  # in the worker: SIGTERM → SystemExit → the worker's finally closes the env
-    return DoomEnv(DoomConfig(**config))
+    return RestartingEnv(DoomEnv(DoomConfig(**config)), max_restarts, window)
 
 
 class _Closing:
@@ -61,22 +115,35 @@ class SyncDoomVectorEnv(_Closing, SyncVectorEnv):
 class _EnvFactory:
     """Picklable env constructor (lambdas don't survive forkserver)."""
 
-    def __init__(self, config: DoomConfig):
+    def __init__(self, config: DoomConfig, max_restarts: int, window: int):
         self.config = asdict(config)
+        self.max_restarts = max_restarts
+        self.window = window
 
     def __call__(self):
-        return _make_env(self.config)
+        return _make_env(self.config, self.max_restarts, self.window)
 
 
-def make_vector_env(config: DoomConfig, num_envs: int, asynchronous: bool = True):
+def make_vector_env(
+    config: DoomConfig,
+    num_envs: int,
+    asynchronous: bool = True,
+    copy: bool = True,
+    max_restarts: int = 3,
+    restart_window: int = 1000,
+):
     """``num_envs`` copies of the env. Asynchronous: one worker process each (forkserver: workers don't inherit
-    the learner's torch threads or open files). Use it as a context manager, or call ``close()``."""
+    the learner's torch threads or open files). Use it as a context manager, or call ``close()``.
+
+    ``copy=False`` returns observations as views of the shared buffers (no copy): valid until the next step of
+    this vector env. ``max_restarts``/``restart_window``: see `RestartingEnv`."""
     config.validate()
-    fns = [_EnvFactory(config) for _ in range(num_envs)]
+    fns = [_EnvFactory(config, max_restarts, restart_window) for _ in range(num_envs)]
     if not asynchronous:
-        return SyncDoomVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP)
+        return SyncDoomVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP, copy=copy)
     return AsyncDoomVectorEnv(
         fns,
+        copy=copy,
         shared_memory=True,
         context="forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn",
         daemon=True,

@@ -135,14 +135,15 @@ class RolloutBuffer:
         self.returns = torch.zeros(tb, dtype=torch.float32, device=self.device)
         self.initial_state: dict[str, torch.Tensor] = {}
 
-    def _put(self, name: str, dest: torch.Tensor, value, t: int) -> None:
+    def _put(self, name: str, dest: torch.Tensor, value, t: int, envs: slice = slice(None)) -> None:
         src = torch.as_tensor(value).detach()  # never let autograd history into storage
         if src.is_floating_point() and not dest.is_floating_point():
             # Refuse silent truncation (e.g. a normalised float image into uint8 storage).
             raise TypeError(f"{name}: cannot store floating {src.dtype} into {dest.dtype} storage")
-        if src.shape != dest.shape[1:]:
-            raise ValueError(f"{name}: expected shape {tuple(dest.shape[1:])}, got {tuple(src.shape)}")
-        dest[t].copy_(src)
+        target = dest[t, envs]
+        if src.shape != target.shape:
+            raise ValueError(f"{name}: expected shape {tuple(target.shape)}, got {tuple(src.shape)}")
+        target.copy_(src, non_blocking=True)
 
     def insert(
         self,
@@ -155,24 +156,38 @@ class RolloutBuffer:
         reward,
         done,
         episode_start,
+        envs: slice = slice(None),
     ) -> None:
-        """Store step ``t`` for all B envs (every argument has leading dim B).
+        """Store step ``t`` for the envs ``envs`` (all B by default; every argument has their leading dim).
 
         ``obs`` must hold exactly the keys given at construction.
         """
+        self.insert_policy(t, obs, action, answer_target, logprob, value, episode_start, envs)
+        self.insert_outcome(t, reward, done, envs)
+
+    def insert_policy(
+        self, t: int, obs, action, answer_target, logprob, value, episode_start, envs: slice = slice(None)
+    ) -> None:
+        """The half of step ``t`` known when the policy acts: observation, action, log-prob, value, episode start.
+        (Double-buffered sampling stores it before the env has stepped; `insert_outcome` follows.)"""
         if not 0 <= t < self.num_steps:
             raise IndexError(f"t={t} outside [0, {self.num_steps})")
         if set(obs) != set(self.obs):
             raise KeyError(f"obs keys {sorted(obs)} != buffer keys {sorted(self.obs)}")
         for key, tensor in obs.items():
-            self._put(f"obs[{key!r}]", self.obs[key], tensor, t)
-        self._put("action", self.actions, action, t)
-        self._put("answer_target", self.answer_targets, answer_target, t)
-        self._put("logprob", self.logprobs, logprob, t)
-        self._put("value", self.values, value, t)
-        self._put("reward", self.rewards, reward, t)
-        self._put("done", self.dones, done, t)
-        self._put("episode_start", self.episode_starts, episode_start, t)
+            self._put(f"obs[{key!r}]", self.obs[key], tensor, t, envs)
+        self._put("action", self.actions, action, t, envs)
+        self._put("answer_target", self.answer_targets, answer_target, t, envs)
+        self._put("logprob", self.logprobs, logprob, t, envs)
+        self._put("value", self.values, value, t, envs)
+        self._put("episode_start", self.episode_starts, episode_start, t, envs)
+
+    def insert_outcome(self, t: int, reward, done, envs: slice = slice(None)) -> None:
+        """The half of step ``t`` the env returns: reward and done."""
+        if not 0 <= t < self.num_steps:
+            raise IndexError(f"t={t} outside [0, {self.num_steps})")
+        self._put("reward", self.rewards, reward, t, envs)
+        self._put("done", self.dones, done, t, envs)
 
     def set_initial_state(self, state: Mapping[str, torch.Tensor]) -> None:
         """Record the recurrent state at t = 0 (detached clones, on the buffer's device)."""

@@ -14,7 +14,6 @@ import os
 import random
 import subprocess
 import time
-from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,14 +22,13 @@ import torch
 from tqdm import tqdm
 
 from emml.config import TrainConfig
-from emml.envs.doom import ANSWER
 from emml.envs.labels import channel_mask
-from emml.envs.vector import make_vector_env
-from emml.evaluate import evaluate, obs_to_torch
+from emml.evaluate import evaluate
 from emml.models import build_model
 from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.rl.ppo import make_optimizer, ppo_update
 from emml.rl.rollout import RolloutBuffer
+from emml.rl.sampler import Sampler
 from emml.tasks.language import Vocabulary, load_dataset
 from emml.tracking import Tracker, project_path, project_root
 
@@ -87,6 +85,10 @@ def _check_same_config(saved: dict, current: dict, path: Path) -> None:
         "log_every",
         "threads",
         "asynchronous",
+        "env_groups",  # how the actors are stepped, not what they do
+        "acting_threads",
+        "max_engine_restarts",
+        "engine_restart_window",
         "device",
         "run_root",
         "results_root",
@@ -192,15 +194,11 @@ class Trainer:
         cfg, device = self.cfg, self.device
         B, T = cfg.num_envs, cfg.num_steps
         mask = torch.as_tensor(channel_mask(self.vocab, tuple(cfg.env.aux_words)), device=device)
-        with make_vector_env(cfg.env, B, asynchronous=cfg.asynchronous) as venv:
-            shapes = {k: (s.shape, _dtype(s)) for k, s in venv.single_observation_space.spaces.items()}
+        with Sampler(cfg, device) as sampler:
+            shapes = {k: (s.shape, _dtype(s)) for k, s in sampler.single_observation_space.spaces.items()}
             buffer = RolloutBuffer(T, B, shapes, device=device)
-            obs, info = venv.reset(seed=[cfg.seed * 1000 + update * B + i for i in range(B)])
-            answers = np.asarray(info["answer"])
-            tasks = np.asarray(info["task"])
-            state = model.initial_state(B, device=device)
-            episode_start = torch.ones(B, dtype=torch.bool, device=device)
-            recent = {0: deque(maxlen=100), 1: deque(maxlen=100)}  # training-episode success per task
+            sampler.reset(model, seed=cfg.seed * 1000 + update * B)
+            recent = sampler.recent
             next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
             bar = tqdm(
                 total=cfg.num_updates * cfg.frames_per_update,
@@ -213,47 +211,9 @@ class Trainer:
             timing = self.timing
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
-                buffer.set_initial_state(state)
-                for t in range(T):
-                    t0 = time.perf_counter()
-                    obs_t = obs_to_torch(obs, device)
-                    with torch.no_grad():
-                        out, state = model(obs_t, state, episode_start.unsqueeze(0))
-                    dist = torch.distributions.Categorical(logits=out.logits[0])
-                    move = dist.sample()
-                    word = out.answer_logits[0].argmax(-1)
-                    t1 = time.perf_counter()
-                    action = torch.stack([move, word], dim=1).cpu().numpy()
-                    obs_next, reward, terminated, truncated, info = venv.step(action)
-                    t2 = time.perf_counter()
-                    timing["infer"] += t1 - t0
-                    timing["simulate"] += t2 - t1
-                    done = np.logical_or(terminated, truncated)
-                    target = np.where(tasks == 1, answers, -1)
-                    if cfg.answer_supervision == "answer_steps":
-                        target = np.where(move.cpu().numpy() == ANSWER, target, -1)
-                    buffer.insert(
-                        t,
-                        {k: v[0] for k, v in obs_t.items()},
-                        move,
-                        torch.as_tensor(target),
-                        dist.log_prob(move),
-                        out.value[0],
-                        torch.as_tensor(reward, dtype=torch.float32),
-                        torch.as_tensor(done),
-                        episode_start,
-                    )
-                    if done.any():
-                        final = info["final_info"]
-                        for i in np.flatnonzero(done):
-                            recent[int(final["task"][i])].append(float(final["success"][i]))
-                    obs = obs_next
-                    answers, tasks = np.asarray(info["answer"]), np.asarray(info["task"])
-                    episode_start = torch.as_tensor(done, device=device)
+                sampler.collect(model, buffer)
                 t_learn = time.perf_counter()
-                with torch.no_grad():
-                    last_value = model(obs_to_torch(obs, device), state, episode_start.unsqueeze(0))[0].value[0]
-                buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
+                buffer.compute_returns(sampler.last_value(model), cfg.ppo.gamma, cfg.ppo.gae_lambda)
 
                 def forward(o, s, e):
                     return vars(model(o, s, e)[0])
@@ -263,12 +223,14 @@ class Trainer:
                 frames += B * T
                 now = time.perf_counter()
                 timing["learn"] += now - t_learn
+                timing["simulate"], timing["infer"] = sampler.timing["simulate"], sampler.timing["infer"]
                 metrics = {f"losses/{k}": v for k, v in stats.items()}
                 metrics["charts/fps"] = B * T / (now - t_start)
                 for task_id, name in ((0, "sgn"), (1, "eqa")):
                     if recent[task_id]:
                         metrics[f"train/success_{name}"] = float(np.mean(recent[task_id]))
                 metrics["charts/update"] = update
+                metrics["charts/dropped_episodes"] = sampler.dropped_episodes
                 self.tracker.log_metrics(metrics, step=frames)
                 bar.update(B * T)
                 bar.set_postfix(
