@@ -227,7 +227,7 @@ def simulator_limit(config: DoomConfig, processes: int, seconds: float = 5.0) ->
         return sum(pool.map(_raw_steps, [config] * processes, [seconds] * processes))
 
 
-def bench_train(cfg, updates: int = 5, runs: int = 0) -> dict:
+def bench_train(cfg, updates: int = 5, runs: int = 0, limit_seconds: float = 5.0) -> dict:
     """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
     split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
     N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
@@ -261,7 +261,7 @@ def bench_train(cfg, updates: int = 5, runs: int = 0) -> dict:
         packed = dataclasses.replace(cfg, threads=max(1, cores // runs))
         with _pool(runs) as pool:
             per_run = [fps for fps, _ in pool.map(_end_to_end, [packed] * runs, [updates] * runs)]
-        limit = simulator_limit(cfg.env, cores)
+        limit = simulator_limit(cfg.env, cores, limit_seconds)
         out["packed"] = {
             "runs": runs,
             "threads_per_run": packed.threads,

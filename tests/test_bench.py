@@ -1,6 +1,7 @@
 """`emml bench`: the figures come out, finite and in one run, for the smoke config (not a speed test)."""
 
 import math
+import os
 
 from emml.bench import bench_train
 from emml.profiles import profile_config
@@ -13,3 +14,15 @@ def test_bench_train_reports_both_throughputs_and_the_split(tmp_path, tracking, 
     assert math.isclose(r["ratio"], r["end_to_end_fps"] / r["model_only_fps"], rel_tol=0.01)
     assert set(r["time_split"]) == {"simulate", "infer", "learn"}
     assert math.isclose(sum(r["time_split"].values()), 1.0, abs_tol=0.01)
+    assert r["env_groups"] == 2 and r["lockstep_fps"] > 0  # double buffering is compared with lockstep
+    assert math.isclose(r["double_buffer_gain"], r["end_to_end_fps"] / r["lockstep_fps"], rel_tol=0.01)
+
+
+def test_bench_train_packs_runs_and_measures_the_simulator_limit(tmp_path, tracking, no_leftovers):
+    cfg = profile_config("smoke", "easy", model="dual_attention", aux=False)
+    r = bench_train(cfg, updates=1, runs=2, limit_seconds=0.5)
+    packed = r["packed"]
+    assert packed["runs"] == 2 and len(packed["per_run_fps"]) == 2 and all(f > 0 for f in packed["per_run_fps"])
+    assert math.isclose(packed["aggregate_fps"], sum(packed["per_run_fps"]), rel_tol=0.01)
+    assert packed["simulator_limit_fps"] > packed["aggregate_fps"]  # raw engines outrun any training
+    assert packed["threads_per_run"] == max(1, (os.cpu_count() or 1) // 2)

@@ -26,6 +26,10 @@ class EngineError(RuntimeError):
     """The ViZDoom engine failed to start, died, or stopped answering."""
 
 
+class WorkerDied(EngineError):
+    """An env worker process died (killed, out of memory): its engine is orphaned and its pipe never closes."""
+
+
 @dataclass
 class Engine:
     game: object
@@ -106,13 +110,15 @@ def signals_held():
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
-def _end(engine: Engine) -> None:
+def _end(engine: Engine, grace: float = 1.0) -> None:
+    """Close the game, give its process `grace` seconds to exit, then SIGKILL it; remove its shm files."""
     try:
-        engine.game.close()
+        if engine.game is not None:
+            engine.game.close()
     except Exception:
         pass
     if engine.pid is not None:
-        deadline = time.monotonic() + 1.0
+        deadline = time.monotonic() + grace
         while _alive(engine.pid) and time.monotonic() < deadline:
             time.sleep(0.01)
         if _alive(engine.pid):
@@ -129,6 +135,35 @@ def _end(engine: Engine) -> None:
                 os.unlink(path)
             except FileNotFoundError:
                 pass
+
+
+def become_subreaper() -> bool:
+    """Make this process adopt its orphaned descendants (Linux PR_SET_CHILD_SUBREAPER). An env worker that is
+    killed leaves its engine running; as our child, `end_orphan_engines` can then end it by pid. False where
+    the call is not available."""
+    import ctypes
+
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0) == 0  # 36 = PR_SET_CHILD_SUBREAPER
+    except (OSError, AttributeError):
+        return False
+
+
+def end_orphan_engines() -> list[int]:
+    """End (SIGKILL, by pid) every engine that is this process's child but not one it started: engines adopted
+    from dead workers (see `become_subreaper`). Their shm files go too. Returns their pids."""
+    with _LOCK:
+        own = set(_LIVE)
+    ended = []
+    for pid, cmd in _children_named("vizdoom").items():
+        if pid in own:
+            continue
+        argv = cmd.split()
+        instance = argv[argv.index("+viz_instance_id") + 1] if "+viz_instance_id" in argv else None
+        with signals_held():
+            _end(Engine(game=None, pid=pid, instance_id=instance), grace=0.0)  # nobody is left to close it
+        ended.append(pid)
+    return ended
 
 
 def live_engines() -> list[int]:

@@ -11,6 +11,7 @@ whose engine dies starts a new one and goes on (`RestartingEnv`).
 from __future__ import annotations
 
 import multiprocessing as mp
+import time
 from dataclasses import asdict
 
 import gymnasium as gym
@@ -19,7 +20,7 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 from gymnasium.vector.async_vector_env import AsyncState
 
 from emml.config import DoomConfig
-from emml.envs.engine import EngineError
+from emml.envs.engine import EngineError, WorkerDied, become_subreaper, end_orphan_engines
 
 
 class RestartingEnv(gym.Wrapper):
@@ -92,6 +93,40 @@ class _Closing:
 
 
 class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
+    """Gymnasium's AsyncVectorEnv, plus: a dead worker is noticed (`WorkerDied`) instead of waited on forever
+    — its orphaned engine keeps the pipe open — and closing ends the engines that dead workers left behind."""
+
+    poll_interval = 0.5
+    """Seconds between liveness checks of the workers while waiting on them."""
+
+    def __init__(self, *args, **kwargs):
+        become_subreaper()  # before the workers start: engines of workers that die are then adopted by us
+        super().__init__(*args, **kwargs)
+
+    def _poll_pipe_envs(self, timeout: float | None = None) -> bool:
+        self._assert_is_running()
+        deadline = None if timeout is None else time.monotonic() + timeout
+        for index, (pipe, process) in enumerate(zip(self.parent_pipes, self.processes)):
+            if pipe is None or pipe.closed:
+                return False
+            while True:
+                left = self.poll_interval if deadline is None else min(self.poll_interval, deadline - time.monotonic())
+                if pipe.poll(max(left, 0)):
+                    break
+                if not process.is_alive():
+                    self._state = AsyncState.DEFAULT
+                    raise WorkerDied(f"env worker {index} (pid {process.pid}) died with exit code {process.exitcode}")
+                if deadline is not None and time.monotonic() >= deadline:
+                    return False
+        return True
+
+    def close_extras(self, timeout: float | None = None, terminate: bool = False) -> None:
+        terminate = terminate or not all(p.is_alive() for p in self.processes)  # a dead one would never answer
+        try:
+            super().close_extras(timeout, terminate)
+        finally:
+            end_orphan_engines()
+
     def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
             self.close()

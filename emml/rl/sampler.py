@@ -10,7 +10,9 @@ the order in which action samples are drawn.
 On a GPU, observations go through pinned host buffers and non-blocking copies.
 
 Bookkeeping per actor: training-episode success per task (last 100), and the episodes dropped because an engine
-died mid-episode (`emml.envs.vector` restarts it; the episode ends there as truncated and is not scored).
+died mid-episode (`emml.envs.vector` restarts it; the episode ends there as truncated and is not scored). When a
+whole worker process dies, its group's vector env is started afresh (every episode of the group is dropped and
+counted); `max_engine_restarts` such deaths in a row, less than `engine_restart_window` steps apart, end the run.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import torch
 
 from emml.config import TrainConfig
 from emml.envs.doom import ANSWER
+from emml.envs.engine import WorkerDied
 from emml.envs.vector import make_vector_env
 
 
@@ -41,28 +44,33 @@ class Sampler:
         self.venvs = []
         try:
             for _ in range(self.groups):
-                self.venvs.append(
-                    make_vector_env(
-                        cfg.env,
-                        size,
-                        asynchronous=cfg.asynchronous,
-                        copy=False,
-                        max_restarts=cfg.max_engine_restarts,
-                        restart_window=cfg.engine_restart_window,
-                    )
-                )
+                self.venvs.append(self._make_group())
         except BaseException:
             self.close(abort=True)
             raise
         self.recent = {0: deque(maxlen=100), 1: deque(maxlen=100)}
         """Training-episode success per task id (0 SGN, 1 EQA), last 100 episodes."""
         self.dropped_episodes = 0
-        """Episodes cut short by an engine death (the engine was restarted; not scored)."""
+        """Episodes cut short by an engine or worker death (the engine or group was restarted; not scored)."""
+        self.worker_restarts = 0
+        """Groups restarted because one of their worker processes died."""
+        self._in_a_row, self._steps_since = 0, 0
         self.timing = {"simulate": 0.0, "infer": 0.0}
         """Seconds the learner waited on the envs / spent acting."""
         self.acting_threads = cfg.acting_threads
         self._pinned = self.device.type == "cuda"
         self._staging: dict[int, dict[str, torch.Tensor]] = {}
+
+    def _make_group(self):
+        cfg = self.cfg
+        return make_vector_env(
+            cfg.env,
+            cfg.num_envs // self.groups,
+            asynchronous=cfg.asynchronous,
+            copy=False,
+            max_restarts=cfg.max_engine_restarts,
+            restart_window=cfg.engine_restart_window,
+        )
 
     # --- lifecycle --------------------------------------------------------------------------------------------
     def __enter__(self):
@@ -86,14 +94,32 @@ class Sampler:
 
     def reset(self, model, seed: int) -> None:
         """Start an episode in every actor (actor i gets seed ``seed + i``) and zero the recurrent state."""
-        self.obs, self.answers, self.tasks = [], [], []
-        for venv, sl in zip(self.venvs, self.slices):
-            obs, info = venv.reset(seed=[seed + i for i in range(sl.start, sl.stop)])
-            self.obs.append(obs)
-            self.answers.append(np.asarray(info["answer"]))
-            self.tasks.append(np.asarray(info["task"]))
+        self._seed = seed
+        self.obs, self.answers, self.tasks = [None] * self.groups, [None] * self.groups, [None] * self.groups
+        for g in range(self.groups):
+            self._reset_group(g, seed)
         self.state = model.initial_state(self.cfg.num_envs, device=self.device)
         self.episode_start = torch.ones(self.cfg.num_envs, dtype=torch.bool, device=self.device)
+
+    def _reset_group(self, g: int, seed: int) -> None:
+        sl = self.slices[g]
+        obs, info = self.venvs[g].reset(seed=[seed + i for i in range(sl.start, sl.stop)])
+        self.obs[g] = obs
+        self.answers[g], self.tasks[g] = np.asarray(info["answer"]), np.asarray(info["task"])
+
+    def _restart_group(self, g: int, error: Exception) -> None:
+        """A worker of group g died: end the group (and the engine the dead worker left), start it afresh."""
+        self._in_a_row = self._in_a_row + 1 if self._steps_since < self.cfg.engine_restart_window else 1
+        self._steps_since = 0
+        if self._in_a_row > self.cfg.max_engine_restarts:
+            raise WorkerDied(
+                f"env workers died {self._in_a_row} times in a row, each within {self.cfg.engine_restart_window} "
+                f"steps of the last restart (max_engine_restarts={self.cfg.max_engine_restarts}); last: {error}"
+            ) from error
+        self.venvs[g].abort()
+        self.venvs[g] = self._make_group()
+        self.worker_restarts += 1
+        self._reset_group(g, self._seed + 1_000_003 * self.worker_restarts)  # fresh episodes, reproducibly
 
     # --- one rollout ------------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -149,14 +175,27 @@ class Sampler:
             self.episode_start[sl],
             envs=sl,
         )
-        self.venvs[g].step_async(action)
+        try:
+            self.venvs[g].step_async(action)
+        except (BrokenPipeError, EOFError, ConnectionResetError):
+            pass  # the worker is gone: step_wait tells which
         self.timing["infer"] += time.perf_counter() - t0
 
     def _receive(self, g: int, t: int, buffer) -> None:
         sl = self.slices[g]
         t0 = time.perf_counter()
-        obs, reward, terminated, truncated, info = self.venvs[g].step_wait()
+        try:
+            obs, reward, terminated, truncated, info = self.venvs[g].step_wait()
+        except (WorkerDied, BrokenPipeError, EOFError, ConnectionResetError) as e:
+            self._restart_group(g, e)  # every episode of the group ends here: truncated, reward 0, not scored
+            n = sl.stop - sl.start
+            buffer.insert_outcome(t, torch.zeros(n), torch.ones(n, dtype=torch.bool), envs=sl)
+            self.dropped_episodes += n
+            self.episode_start[sl] = True
+            self.timing["simulate"] += time.perf_counter() - t0
+            return
         self.timing["simulate"] += time.perf_counter() - t0
+        self._steps_since += 1
         done = np.logical_or(terminated, truncated)
         buffer.insert_outcome(t, torch.as_tensor(reward, dtype=torch.float32), torch.as_tensor(done), envs=sl)
         if done.any():

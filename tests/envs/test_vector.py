@@ -1,3 +1,5 @@
+import os
+import signal
 import subprocess
 import sys
 import textwrap
@@ -91,3 +93,16 @@ def test_worker_parent_ending_leaves_no_engine(how, no_leftovers, tmp_path):
     while engine_pids() - before and time.monotonic() < deadline:
         time.sleep(0.05)
     assert engine_pids() - before == set()
+
+
+def test_a_dead_worker_is_reported_not_waited_on(no_leftovers):
+    from emml.envs.engine import WorkerDied
+
+    with make_vector_env(DoomConfig(**SMOKE), 2) as venv:
+        venv.reset(seed=0)
+        os.kill(venv.processes[0].pid, signal.SIGKILL)  # its engine lives on and holds the pipe open
+        t0 = time.monotonic()
+        with pytest.raises(WorkerDied, match="env worker 0 .* died"):
+            venv.step(np.array([[0, 0], [0, 0]]))
+        assert time.monotonic() - t0 < 5
+        venv.abort()  # ends the orphaned engine too (no_leftovers checks)
