@@ -357,7 +357,7 @@ def run_table(
     table: str = typer.Argument(..., help="table2 | table3 | table4 | table5 (reproduce/<table>.toml)"),
     profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
     backend: str = typer.Option("local", help="local (process pool) | slurm (submitit)"),
-    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores)."),
+    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores; cuda: and what GPU memory holds)."),
     device: str = typer.Option("cpu", help="cpu | cuda"),
     partition: str = typer.Option(None, help="Slurm partition."),
     time_min: int = typer.Option(24 * 60, help="Slurm time limit per run, minutes."),

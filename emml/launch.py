@@ -25,9 +25,21 @@ STATES = ("finished", "unrecorded", "partial", "missing")
 not finished); missing: nothing yet."""
 
 
-def default_jobs() -> int:
-    """Concurrent local runs: half the cores (each run has env worker processes and a learner)."""
-    return max(1, (os.cpu_count() or 1) // 2)
+GPU_MEMORY_PER_RUN = 3 * 2**30
+"""Bytes of GPU memory one run may take (paper protocol at 168×300: the uint8 rollout, ~155 MB, the model and the
+PPO minibatch activations, with room to spare); caps the runs packed on one GPU."""
+
+
+def default_jobs(device: str = "cpu") -> int:
+    """Concurrent local runs: half the cores (each run has env worker processes and a learner); on a GPU also no
+    more than its free memory holds at GPU_MEMORY_PER_RUN each (the runs share it)."""
+    jobs = max(1, (os.cpu_count() or 1) // 2)
+    if device.startswith("cuda"):
+        import torch
+
+        free, _ = torch.cuda.mem_get_info(torch.device(device))
+        jobs = max(1, min(jobs, free // GPU_MEMORY_PER_RUN))
+    return jobs
 
 
 @dataclass
@@ -141,7 +153,7 @@ def run_table(
         report.placeholder = True
         log(f"{name} is a placeholder ({table.path.name}: status = 'placeholder'); no runs are declared yet")
         return report
-    jobs = jobs or default_jobs()
+    jobs = jobs or default_jobs(device)
     if jobs < 1:
         raise ValueError(f"jobs={jobs} must be >= 1")
     states = run_states(name, profile, run_root, results_root)

@@ -78,6 +78,9 @@ def _make_env(config: dict, max_restarts: int, window: int):
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()  # in the worker: SIGTERM → SystemExit → the worker's finally closes the env
+    import cv2
+
+    cv2.setNumThreads(1)  # parallelism comes from one process per env: a resize thread pool per worker only thrashes
     return RestartingEnv(DoomEnv(DoomConfig(**config)), max_restarts, window)
 
 

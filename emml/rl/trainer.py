@@ -337,6 +337,7 @@ def _log_line(update: int, frames: int, m: dict, timing: dict) -> str:
         f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
         f"ans {m['losses/answer']:.3f}"
         + (f" aux {m['losses/aux']:.3f}" if "losses/aux" in m else "")
+        + (f" dropped {m['charts/dropped_episodes']}" if m.get("charts/dropped_episodes") else "")
         + f" | sim/infer/learn % {split}"
     )
 
