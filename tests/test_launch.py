@@ -134,3 +134,14 @@ def test_cli_run_list_report(tmp_path, monkeypatch):
     )
     assert result.exit_code == 0, result.output
     assert (tmp_path / "table4-smoke.md").exists() and "PLACEHOLDER" in json.loads(result.output)["caption"]
+
+
+def test_runs_packed_on_a_gpu_are_capped_by_its_free_memory(monkeypatch):
+    import torch
+
+    from emml import launch
+
+    monkeypatch.setattr(launch.os, "cpu_count", lambda: 16)
+    monkeypatch.setattr(torch.cuda, "mem_get_info", lambda device=None: (7 * 2**30, 80 * 2**30))
+    assert launch.default_jobs("cpu") == 8
+    assert launch.default_jobs("cuda") == 7 * 2**30 // launch.GPU_MEMORY_PER_RUN == 2
