@@ -235,8 +235,10 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_seconds: float = 5.0
     import dataclasses
     import os
 
-    model_fps = _model_only(cfg, updates)
+    before = _model_only(cfg, updates)
     e2e, split = _end_to_end(cfg, updates)
+    after = _model_only(cfg, updates)  # measured on both sides of the end-to-end run: this machine's speed drifts
+    model_fps = (before + after) / 2
     out = {
         "model": cfg.model,
         "aux": cfg.aux,
@@ -248,6 +250,7 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_seconds: float = 5.0
         "device": cfg.device,
         "updates": updates,
         "model_only_fps": round(model_fps, 1),
+        "model_only_before_after": [round(before, 1), round(after, 1)],
         "end_to_end_fps": round(e2e, 1),
         "ratio": round(e2e / model_fps, 3),
         "time_split": split,
