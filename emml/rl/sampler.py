@@ -32,10 +32,10 @@ from emml.envs.vector import make_vector_env
 class Sampler:
     """Owns the actors' envs, their current observations and the policy's recurrent state between rollouts."""
 
-    def __init__(self, cfg: TrainConfig, device: torch.device, groups: int | None = None):
+    def __init__(self, cfg: TrainConfig, device: torch.device):
         self.cfg = cfg
         self.device = device
-        self.groups = groups if groups is not None else cfg.env_groups
+        self.groups = cfg.env_groups
         B = cfg.num_envs
         if self.groups < 1 or B % self.groups:
             raise ValueError(f"env_groups={self.groups} must divide num_envs={B}")
