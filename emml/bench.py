@@ -194,21 +194,11 @@ def _end_to_end(cfg, updates: int) -> tuple[float, dict]:
     return sum(fps) / len(fps), {k: round(v / total, 3) for k, v in trainer.timing.items()}
 
 
-def _raw_steps(config: DoomConfig, seconds: float) -> float:
-    """Raw engine steps/s of one process (the simulator alone: make_action + get_state, nothing else)."""
+def _raw_steps(config: DoomConfig, steps: int) -> float:
+    """Raw engine steps/s of one process (the simulator alone, as in `bench env`)."""
     env = DoomEnv(config)
     try:
-        env.reset(seed=0)
-        game, turn = env._game(), env._turn
-        choices = [[1, 0], [0, -turn], [0, turn]]
-        steps, t0 = 0, time.perf_counter()
-        while time.perf_counter() - t0 < seconds:
-            game.make_action(choices[steps % 3], env.cfg.frame_skip)
-            game.get_state()
-            steps += 1
-            if game.is_episode_finished():
-                game.new_episode()
-        return steps / (time.perf_counter() - t0)
+        return _raw(env, steps, np.random.default_rng(0))[0]
     finally:
         env.close()
 
@@ -220,14 +210,14 @@ def _pool(n: int):
     return ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("forkserver"))
 
 
-def simulator_limit(config: DoomConfig, processes: int, seconds: float = 5.0) -> float:
+def simulator_limit(config: DoomConfig, processes: int, steps: int = 5000) -> float:
     """Aggregate raw engine steps/s of ``processes`` engines stepped at once: what the machine's cores can
     simulate at most, the ceiling of any number of packed runs."""
     with _pool(processes) as pool:
-        return sum(pool.map(_raw_steps, [config] * processes, [seconds] * processes))
+        return sum(pool.map(_raw_steps, [config] * processes, [steps] * processes))
 
 
-def bench_train(cfg, updates: int = 5, runs: int = 0, limit_seconds: float = 5.0) -> dict:
+def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000) -> dict:
     """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
     split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
     N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
@@ -264,7 +254,7 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_seconds: float = 5.0
         packed = dataclasses.replace(cfg, threads=max(1, cores // runs))
         with _pool(runs) as pool:
             per_run = [fps for fps, _ in pool.map(_end_to_end, [packed] * runs, [updates] * runs)]
-        limit = simulator_limit(cfg.env, cores, limit_seconds)
+        limit = simulator_limit(cfg.env, cores, limit_steps)
         out["packed"] = {
             "runs": runs,
             "threads_per_run": packed.threads,

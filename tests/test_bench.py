@@ -21,7 +21,7 @@ def test_bench_train_reports_both_throughputs_and_the_split(tmp_path, tracking, 
 
 def test_bench_train_packs_runs_and_measures_the_simulator_limit(tmp_path, tracking, no_leftovers):
     cfg = profile_config("smoke", "easy", model="dual_attention", aux=False)
-    r = bench_train(cfg, updates=1, runs=2, limit_seconds=0.5)
+    r = bench_train(cfg, updates=1, runs=2, limit_steps=300)
     packed = r["packed"]
     assert packed["runs"] == 2 and len(packed["per_run_fps"]) == 2 and all(f > 0 for f in packed["per_run_fps"])
     assert math.isclose(packed["aggregate_fps"], sum(packed["per_run_fps"]), rel_tol=0.01)

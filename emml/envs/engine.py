@@ -137,6 +137,33 @@ def _end(engine: Engine, grace: float = 1.0) -> None:
                 pass
 
 
+class RestartBudget:
+    """How many deaths in a row a restarting owner tolerates: a death less than ``window`` steps after the last
+    restart continues the streak, a later one starts a new streak; a streak longer than ``max_restarts`` raises
+    ``error`` (an engine or worker that cannot stay up ends the run with a clear message instead of looping)."""
+
+    def __init__(self, max_restarts: int, window: int, what: str, error: type[EngineError] = EngineError):
+        self.max_restarts, self.window, self.what, self.error = max_restarts, window, what, error
+        self.restarts = 0
+        """Restarts granted so far."""
+        self._in_a_row = 0
+        self._steps_since = 0
+
+    def step(self) -> None:
+        self._steps_since += 1
+
+    def death(self, cause: Exception) -> None:
+        """Record a death; raises when the streak is past the budget, else counts a restart."""
+        self._in_a_row = self._in_a_row + 1 if self._steps_since < self.window else 1
+        self._steps_since = 0
+        if self._in_a_row > self.max_restarts:
+            raise self.error(
+                f"the {self.what} died {self._in_a_row} times in a row, each within {self.window} steps of the last "
+                f"restart (max_engine_restarts={self.max_restarts}); last error: {cause}"
+            ) from cause
+        self.restarts += 1
+
+
 def become_subreaper() -> bool:
     """Make this process adopt its orphaned descendants (Linux PR_SET_CHILD_SUBREAPER). An env worker that is
     killed leaves its engine running; as our child, `end_orphan_engines` can then end it by pid. False where

@@ -20,7 +20,7 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 from gymnasium.vector.async_vector_env import AsyncState
 
 from emml.config import DoomConfig
-from emml.envs.engine import EngineError, WorkerDied, become_subreaper, end_orphan_engines
+from emml.envs.engine import EngineError, RestartBudget, WorkerDied, become_subreaper, end_orphan_engines
 
 
 class RestartingEnv(gym.Wrapper):
@@ -34,13 +34,13 @@ class RestartingEnv(gym.Wrapper):
 
     def __init__(self, env, max_restarts: int = 3, window: int = 1000):
         super().__init__(env)
-        self.max_restarts = max_restarts
-        self.window = window
-        self.engine_restarts = 0
-        """Engines this worker restarted (all of the run)."""
-        self._in_a_row = 0
-        self._steps_since = 0
+        self.budget = RestartBudget(max_restarts, window, "engine")
         self._blank = {k: np.zeros(s.shape, s.dtype) for k, s in env.observation_space.spaces.items()}
+
+    @property
+    def engine_restarts(self) -> int:
+        """Engines this worker restarted (all of the run)."""
+        return self.budget.restarts
 
     @property
     def engine_pid(self) -> int | None:
@@ -58,17 +58,11 @@ class RestartingEnv(gym.Wrapper):
             obs, reward, terminated, truncated, info = self.env.step(action)
         except EngineError as e:
             self.env.close()  # ends what is left of the dead engine: its pid, its shm files (idempotent)
-            self._steps_since, self._in_a_row = 0, (self._in_a_row + 1 if self._steps_since < self.window else 1)
-            if self._in_a_row > self.max_restarts:
-                raise EngineError(
-                    f"the engine died {self._in_a_row} times in a row, each within {self.window} steps of the "
-                    f"last restart (max_engine_restarts={self.max_restarts}); last error: {e}"
-                ) from e
-            self.engine_restarts += 1
+            self.budget.death(e)
             episode = self.env.unwrapped
             info = {"task": episode.task_id, "answer": episode.answer_id, "success": False, "engine_restart": True}
             return self._blank, 0.0, False, True, info
-        self._steps_since += 1
+        self.budget.step()
         info["engine_restart"] = False
         return obs, reward, terminated, truncated, info
 

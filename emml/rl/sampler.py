@@ -25,8 +25,9 @@ import torch
 
 from emml.config import TrainConfig
 from emml.envs.doom import ANSWER
-from emml.envs.engine import WorkerDied
+from emml.envs.engine import RestartBudget, WorkerDied
 from emml.envs.vector import make_vector_env
+from emml.evaluate import obs_to_torch
 
 
 class Sampler:
@@ -52,9 +53,8 @@ class Sampler:
         """Training-episode success per task id (0 SGN, 1 EQA), last 100 episodes."""
         self.dropped_episodes = 0
         """Episodes cut short by an engine or worker death (the engine or group was restarted; not scored)."""
-        self.worker_restarts = 0
-        """Groups restarted because one of their worker processes died."""
-        self._in_a_row, self._steps_since = 0, 0
+        self.workers = RestartBudget(cfg.max_engine_restarts, cfg.engine_restart_window, "env worker", WorkerDied)
+        """Groups restarted because one of their worker processes died (``.restarts``)."""
         self.timing = {"simulate": 0.0, "infer": 0.0}
         """Seconds the learner waited on the envs / spent acting."""
         self.acting_threads = cfg.acting_threads
@@ -109,17 +109,10 @@ class Sampler:
 
     def _restart_group(self, g: int, error: Exception) -> None:
         """A worker of group g died: end the group (and the engine the dead worker left), start it afresh."""
-        self._in_a_row = self._in_a_row + 1 if self._steps_since < self.cfg.engine_restart_window else 1
-        self._steps_since = 0
-        if self._in_a_row > self.cfg.max_engine_restarts:
-            raise WorkerDied(
-                f"env workers died {self._in_a_row} times in a row, each within {self.cfg.engine_restart_window} "
-                f"steps of the last restart (max_engine_restarts={self.cfg.max_engine_restarts}); last: {error}"
-            ) from error
+        self.workers.death(error)
         self.venvs[g].abort()
         self.venvs[g] = self._make_group()
-        self.worker_restarts += 1
-        self._reset_group(g, self._seed + 1_000_003 * self.worker_restarts)  # fresh episodes, reproducibly
+        self._reset_group(g, self._seed + 1_000_003 * self.workers.restarts)  # fresh episodes, reproducibly
 
     # --- one rollout ------------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -195,7 +188,7 @@ class Sampler:
             self.timing["simulate"] += time.perf_counter() - t0
             return
         self.timing["simulate"] += time.perf_counter() - t0
-        self._steps_since += 1
+        self.workers.step()
         done = np.logical_or(terminated, truncated)
         buffer.insert_outcome(t, torch.as_tensor(reward, dtype=torch.float32), torch.as_tensor(done), envs=sl)
         if done.any():
@@ -213,7 +206,7 @@ class Sampler:
     def _to_torch(self, g: int, obs: dict) -> dict[str, torch.Tensor]:
         """Numpy batch (B, ...) → tensors (1, B, ...) on the device; on a GPU through per-group pinned buffers."""
         if not self._pinned:
-            return {k: torch.as_tensor(np.asarray(v)).unsqueeze(0) for k, v in obs.items()}
+            return obs_to_torch(obs, self.device)
         out = {}
         staging = self._staging.setdefault(g, {})
         for k, v in obs.items():

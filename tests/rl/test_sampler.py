@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 from types import SimpleNamespace
@@ -99,6 +100,15 @@ def test_rollouts_hold_exactly_what_plain_envs_produce(groups, no_leftovers):
             env.close()
 
 
+@contextlib.contextmanager
+def _started(cfg):
+    """A sampler with every actor reset (seed 0): yields (sampler, policy, buffer); closed on the way out."""
+    with Sampler(cfg, torch.device("cpu")) as sampler:
+        model = CountingPolicy(32)
+        sampler.reset(model, seed=0)
+        yield sampler, model, _buffer(sampler, cfg)
+
+
 def _kill_engine(sampler, group: int = 0) -> int:
     pid = sampler.venvs[group].get_attr("engine_pid")[0]
     os.kill(pid, signal.SIGKILL)
@@ -106,11 +116,7 @@ def _kill_engine(sampler, group: int = 0) -> int:
 
 
 def test_a_dead_engine_is_restarted_and_its_episode_dropped(no_leftovers):
-    cfg = _config(2, num_envs=2)
-    with Sampler(cfg, torch.device("cpu")) as sampler:
-        model = CountingPolicy(32)
-        buffer = _buffer(sampler, cfg)
-        sampler.reset(model, seed=0)
+    with _started(_config(2, num_envs=2)) as (sampler, model, buffer):
         sampler.collect(model, buffer)
         before = sampler.venvs[0].get_attr("engine_pid")[0]
         killed = _kill_engine(sampler)
@@ -125,12 +131,8 @@ def test_a_dead_engine_is_restarted_and_its_episode_dropped(no_leftovers):
 
 
 def test_repeated_engine_deaths_end_the_run_with_a_clear_error(no_leftovers):
-    cfg = _config(2, num_envs=2, max_engine_restarts=1)
-    with pytest.raises(EngineError, match="died 2 times in a row"):
-        with Sampler(cfg, torch.device("cpu")) as sampler:
-            model = CountingPolicy(32)
-            buffer = _buffer(sampler, cfg)
-            sampler.reset(model, seed=0)
+    with pytest.raises(EngineError, match="engine died 2 times in a row"):
+        with _started(_config(2, num_envs=2, max_engine_restarts=1)) as (sampler, model, buffer):
             for _ in range(3):
                 _kill_engine(sampler)
                 sampler.collect(model, buffer)
@@ -142,17 +144,13 @@ def test_env_groups_must_divide_the_actors():
 
 
 def test_a_killed_worker_process_is_replaced_and_its_group_restarted(no_leftovers):
-    cfg = _config(2, num_envs=4)
-    with Sampler(cfg, torch.device("cpu")) as sampler:
-        model = CountingPolicy(32)
-        buffer = _buffer(sampler, cfg)
-        sampler.reset(model, seed=0)
+    with _started(_config(2, num_envs=4)) as (sampler, model, buffer):
         sampler.collect(model, buffer)
         old = [p.pid for p in sampler.venvs[1].processes]
         os.kill(old[0], signal.SIGKILL)  # its engine is orphaned: the sampler must end it
         sampler.collect(model, buffer)
-        assert sampler.worker_restarts == 1 and sampler.dropped_episodes == 2  # the group's 2 episodes
+        assert sampler.workers.restarts == 1 and sampler.dropped_episodes == 2  # the group's 2 episodes
         assert not set(old) & {p.pid for p in sampler.venvs[1].processes}
         assert all(p.is_alive() for p in sampler.venvs[1].processes)
         sampler.collect(model, buffer)
-        assert sampler.worker_restarts == 1
+        assert sampler.workers.restarts == 1
