@@ -123,10 +123,10 @@ def _model_only(cfg, updates: int) -> float:
     from emml.rl.rollout import RolloutBuffer
     from emml.tasks.language import Vocabulary, load_dataset
 
-    env = cfg.env
+    env, device = cfg.env, torch.device(cfg.device)
     vocab = Vocabulary.from_dataset(load_dataset(env.dataset))
     V, (h, w), B, T = len(vocab), conv_output_size(env.height, env.width), cfg.num_envs, cfg.num_steps
-    model = build_model(cfg.model, V, env.height, env.width, env.max_steps)
+    model = build_model(cfg.model, V, env.height, env.width, env.max_steps).to(device)
     optimizer = make_optimizer(model.parameters(), cfg.ppo)
     shapes = {
         "image": ((3, env.height, env.width), torch.uint8),
@@ -136,19 +136,19 @@ def _model_only(cfg, updates: int) -> float:
     }
     if cfg.aux:
         shapes["aux"] = ((V, h, w), torch.uint8)
-    buffer = RolloutBuffer(T, B, shapes)
+    buffer = RolloutBuffer(T, B, shapes, device=device)
     gen = torch.Generator().manual_seed(0)
     for key, tensor in buffer.obs.items():
         high = {"image": 256, "tokens": V + 1, "task": 2, "time": env.max_steps, "aux": 2}[key]
         tensor.copy_(torch.randint(0, high, tensor.shape, generator=gen))
-    buffer.rewards.normal_(generator=gen)
-    mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))))
+    buffer.rewards.copy_(torch.randn(buffer.rewards.shape, generator=gen))
+    mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))), device=device)
 
     def forward(o, s, e):
         return vars(model(o, s, e)[0])
 
     def one_update():
-        state = model.initial_state(B)
+        state = model.initial_state(B, device=device)
         buffer.set_initial_state(state)
         with torch.no_grad():
             for t in range(T):  # acting: one batched step at a time, as in a rollout
@@ -156,13 +156,19 @@ def _model_only(cfg, updates: int) -> float:
                     {k: v[t : t + 1] for k, v in buffer.obs.items()}, state, buffer.episode_starts[t : t + 1]
                 )
                 buffer.values[t] = out.value[0]
-        buffer.compute_returns(torch.zeros(B), cfg.ppo.gamma, cfg.ppo.gae_lambda)
+        buffer.compute_returns(torch.zeros(B, device=device), cfg.ppo.gamma, cfg.ppo.gae_lambda)
         ppo_update(forward, optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux)
 
+    def sync():
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
     one_update()  # warm-up
+    sync()
     t0 = time.perf_counter()
     for _ in range(updates):
         one_update()
+    sync()
     return updates * B * T / (time.perf_counter() - t0)
 
 
