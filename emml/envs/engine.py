@@ -64,6 +64,12 @@ def _children_named(name: str) -> dict[int, str]:
     return out
 
 
+def _instance_id(cmd: str) -> str | None:
+    """The engine's instance id (it names its shm files) from its command line, None if absent."""
+    argv = cmd.split()
+    return argv[argv.index("+viz_instance_id") + 1] if "+viz_instance_id" in argv[:-1] else None
+
+
 def start_engine(game) -> Engine:
     """``game.init()`` and record the engine it forked. Raises EngineError on failure."""
     before = set(_children_named("vizdoom"))
@@ -75,9 +81,7 @@ def start_engine(game) -> Engine:
     pid, instance = None, None
     if len(new) == 1:
         pid, cmd = next(iter(new.items()))
-        argv = cmd.split()
-        if "+viz_instance_id" in argv:
-            instance = argv[argv.index("+viz_instance_id") + 1]
+        instance = _instance_id(cmd)
     engine = Engine(game, pid, instance)
     if pid is not None:
         with _LOCK:
@@ -185,10 +189,8 @@ def end_orphan_engines() -> list[int]:
     for pid, cmd in _children_named("vizdoom").items():
         if pid in own:
             continue
-        argv = cmd.split()
-        instance = argv[argv.index("+viz_instance_id") + 1] if "+viz_instance_id" in argv else None
         with signals_held():
-            _end(Engine(game=None, pid=pid, instance_id=instance), grace=0.0)  # nobody is left to close it
+            _end(Engine(game=None, pid=pid, instance_id=_instance_id(cmd)), grace=0.0)  # nobody is left to close it
         ended.append(pid)
     return ended
 
