@@ -295,6 +295,35 @@ def eval_checkpoint(
 
 
 @app.command()
+def diagnose(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    episodes: int = typer.Option(20, min=1, help="Sampled SGN episodes for the attention and detector figures."),
+    step0_episodes: int = typer.Option(100, min=0, help="Resets for the actor's sensitivity to the target slot."),
+    seed: int = 20_000,
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Why a model does (not) follow instructions: attention on the target, per-word detector AP, and how much
+    the first move depends on where the target stands (emml/diagnose.py)."""
+    from emml.diagnose import diagnose_checkpoint, summary_line
+    from emml.envs.engine import install_signal_handlers
+
+    if not checkpoint.exists():
+        _fail(f"checkpoint {checkpoint} does not exist")
+    install_signal_handlers()
+    result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed)
+    words = ", ".join(f"{w} {ap:.2f}" for w, ap in sorted(result["detector_ap_words"].items(), key=lambda x: -x[1]))
+    slots = "; ".join(f"slot {s}: " + " ".join(f"{p:.2f}" for p in m) for s, m in result["step0_moves"].items())
+    text = "\n".join(
+        [
+            summary_line(result) + f" ({result['frames']} frames)",
+            f"detector AP per word: {words}",
+            f"step-0 move distribution (forward left right answer) by target slot: {slots or 'n/a (Hard)'}",
+        ]
+    )
+    _echo(result, as_json, text)
+
+
+@app.command()
 def demo(
     out: Path = typer.Option(Path("reports"), help="Where the report goes."),
     profile: str = typer.Option("demo", help="Profile of the demo run."),

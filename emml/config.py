@@ -57,8 +57,8 @@ class DoomConfig:
     vocabulary: tuple[str, ...] | None = None
     """The run's vocabulary (channel order); None builds the default: every word of the dataset."""
     aux_words: tuple[str, ...] | None = None
-    """Words that get aux labels; None: every object, colour and size word in the vocabulary (no labels for
-    superlatives — §3.2 — nor for function words). The transfer experiment passes the training words only."""
+    """Words that get aux labels; None: every word but the superlatives (§3.2; function words get all-zero
+    labels). The transfer experiment passes the training words only."""
     instructions: tuple[str, ...] | None = None
     """Restrict episodes to these sentences (must be in the chosen split); None: all of the split."""
     dataset: str = "doom"
@@ -131,6 +131,9 @@ class TrainConfig:
     """Evaluate every this many frames for the curves; 0: only at the end."""
     eval_episodes: int = 100
     """Greedy evaluation episodes per (task, split)."""
+    diagnose_episodes: int = 20
+    """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP, actor
+    sensitivity: emml/diagnose.py); 0: none."""
     checkpoint_every: int = 10
     """Write the checkpoint every this many updates (and at the end)."""
     log_every: int = 10
@@ -190,7 +193,17 @@ class TrainConfig:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
         if self.env_groups < 1 or self.num_envs % self.env_groups:
             raise ValueError(f"env_groups={self.env_groups!r} must be a positive divisor of num_envs={self.num_envs}")
-        for name in ("eval_every", "threads", "acting_threads", "max_engine_restarts", "engine_restart_window"):
+        control = self.model_options.get("control", "none")
+        if control != "none" and not self.aux:
+            raise ValueError(f"model_options.control={control!r} reads the aux labels: it needs aux=True")
+        for name in (
+            "eval_every",
+            "diagnose_episodes",
+            "threads",
+            "acting_threads",
+            "max_engine_restarts",
+            "engine_restart_window",
+        ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
         if self.device.startswith("cuda"):

@@ -50,7 +50,9 @@ def evaluate(
     model.eval()
     results = {}
     for task, split, instructions in eval_settings(env_cfg):
-        cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=False, instructions=instructions)
+        # the diagnostic controls read the privileged labels; every real model plays without them
+        labels = getattr(getattr(model, "cfg", None), "control", "none") != "none"
+        cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
         n_envs = min(batch, episodes)
         envs = [DoomEnv(cfg) for _ in range(n_envs)]
         try:
@@ -95,8 +97,8 @@ def _run(model, envs, episodes: int, seed: int, device) -> float:
     return successes / episodes
 
 
-def evaluate_checkpoint(path, episodes: int, seed: int = 10_000, device: str = "cpu") -> dict[str, float]:
-    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily."""
+def load_model(path, device: str = "cpu"):
+    """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary."""
     from emml.config import TrainConfig
     from emml.models import build_model
     from emml.rl.checkpoint import load_checkpoint
@@ -106,5 +108,11 @@ def evaluate_checkpoint(path, episodes: int, seed: int = 10_000, device: str = "
     env = cfg.env
     model = build_model(cfg.model, len(ckpt["vocabulary"]), env.height, env.width, env.max_steps, **cfg.model_options)
     model.load_state_dict(ckpt["model"])
+    return model.to(device), cfg
+
+
+def evaluate_checkpoint(path, episodes: int, seed: int = 10_000, device: str = "cpu") -> dict[str, float]:
+    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily."""
+    model, cfg = load_model(path, device)
     torch.manual_seed(seed)
-    return evaluate(model.to(device), env, episodes, seed=seed, device=device)
+    return evaluate(model, cfg.env, episodes, seed=seed, device=device)

@@ -34,3 +34,26 @@ def conv_output_size(height: int, width: int) -> tuple[int, int]:
             n = (n - kernel) // stride + 1
         out.append(n)
     return out[0], out[1]
+
+
+def receptive_field() -> tuple[int, int]:
+    """(size, jump) in input pixels of one conv3 cell: its receptive field and the step between two cells."""
+    size, jump = 1, 1
+    for kernel, stride in CONV_LAYERS:
+        size += (kernel - 1) * jump
+        jump *= stride
+    return size, jump
+
+
+def pixel_cells(render: int, observed: int, cells: int) -> list[int]:
+    """For each of ``render`` engine pixels along one axis, the conv3 cell whose receptive field is centred
+    nearest to it once the frame is resized to ``observed`` pixels (paper silent on how labels meet the grid).
+
+    The conv stack has no padding, so its cells are centred at (size-1)/2 + k·jump input pixels, not at an even
+    partition of the frame: at 168×300 the partition's last column lies a whole cell (16 px) right of conv3's."""
+    size, jump = receptive_field()
+    out = []
+    for r in range(render):
+        x = (r + 0.5) * observed / render - 0.5  # pixel centre in observation coordinates
+        out.append(min(max(round((x - (size - 1) / 2) / jump), 0), cells - 1))
+    return out

@@ -94,7 +94,7 @@ class DoomEnv(gym.Env):
             tuple(cfg.aux_words) if cfg.aux_words is not None else default_aux_words(self.vocab, self.dataset)
         )
         self.aux_mask = channel_mask(self.vocab, self.aux_words)
-        """bool (V,): the channels the aux labels supervise (no superlatives, no function words)."""
+        """bool (V,): the channels the aux labels supervise (all but the superlatives, by default)."""
         self.render_wh = cfg.render_size()
 
         V = len(self.vocab)
@@ -106,10 +106,15 @@ class DoomEnv(gym.Env):
         }
         if cfg.aux_labels:
             obs["aux"] = spaces.Box(0, 1, (V, *self.grid_hw), np.uint8)
+            # the cells showing the episode's referent: privileged, read only by the diagnostics and the
+            # 'target_mask' control (emml/diagnose.py), never by a model under the paper's protocol
+            obs["target"] = spaces.Box(0, 1, self.grid_hw, np.uint8)
         self.observation_space = spaces.Dict(obs)
         self.action_space = spaces.MultiDiscrete([len(MOVES), V])
         self._labels = (
-            LabelGrid(self.vocab, self.dataset, self.aux_words, self.render_wh[::-1], self.grid_hw)
+            LabelGrid(
+                self.vocab, self.dataset, self.aux_words, self.render_wh[::-1], self.grid_hw, (cfg.height, cfg.width)
+            )
             if cfg.aux_labels
             else None
         )
@@ -146,7 +151,7 @@ class DoomEnv(gym.Env):
             g.set_window_visible(False)
             g.set_sound_enabled(False)
             g.set_mode(vzd.Mode.PLAYER)
-            g.add_game_args("+sv_cheats 1 +vid_aspect 3")
+            g.add_game_args("+sv_cheats 1")
             self._engine = eng.start_engine(g)
         return self._engine.game
 
@@ -244,6 +249,9 @@ class DoomEnv(gym.Env):
             frame = out
         self.frame = frame
         self.aux = self._labels(state.labels_buffer, state.labels) if self._labels else None
+        if self._labels:
+            target = self.episode.scene[self.episode.target]
+            self.target_grid = self._labels.object_grid(state.labels_buffer, state.labels, target)
 
     def _distances(self) -> np.ndarray:
         x, y = self.pose[0], self.pose[1]
@@ -258,6 +266,7 @@ class DoomEnv(gym.Env):
         }
         if self.aux is not None:
             obs["aux"] = self.aux
+            obs["target"] = self.target_grid
         return obs
 
     def _info(self, success: bool) -> dict:

@@ -20,6 +20,9 @@ ARCHITECTURES: tuple[str, ...] = (
 )
 """Fusion architectures a `ModelConfig.name` may name (ablations are switches)."""
 
+CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask")
+"""Values of `ModelConfig.control`: the model itself, and the two diagnostic controls."""
+
 
 @dataclass
 class ModelConfig:
@@ -45,6 +48,17 @@ class ModelConfig:
     """Dual-Attention: use the sentence Gated-Attention (Eq. 4); False = 'w/o GA2' ablation."""
     task_indicator: bool = True
     """Feed the SGN/EQA task one-hot to the policy; False = 'w/o task indicator' ablation."""
+    state_scale: bool = True
+    """Dual-Attention: hand the policy x_S = h·w · vec(x_spat) (mean 1 per cell) instead of vec(x_spat) (entries
+    ~1/(h·w)). Paper silent on input scaling; measured in docs/fidelity.md."""
+    x_image: str = "sigmoid"
+    """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
+    (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
+    either way. The paper contradicts itself; measured in docs/fidelity.md."""
+    control: str = "none"
+    """Diagnostic controls, not the paper's model (they read privileged labels, so they need aux labels):
+    'none'; 'detectors': x_I := the aux labels (perfect detectors, unlabelled channels 0); 'target_mask':
+    x_S := the cells showing the episode's referent (perfect x_S, values 0/1)."""
 
     def validate(self) -> ModelConfig:
         """Raise `ValueError` naming the offending field; return self when valid."""
@@ -54,7 +68,11 @@ class ModelConfig:
             value = getattr(self, field)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"ModelConfig.{field}={value!r} must be a positive integer (>= 1)")
-        for field in ("spatial_attention", "ga1", "ga2", "task_indicator"):
+        if self.x_image not in ("sigmoid", "relu"):
+            raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
+        if self.control not in CONTROLS:
+            raise ValueError(f"ModelConfig.control={self.control!r} is unknown; allowed: " + ", ".join(CONTROLS))
+        for field in ("spatial_attention", "ga1", "ga2", "task_indicator", "state_scale"):
             value = getattr(self, field)
             if not isinstance(value, bool):
                 raise ValueError(f"ModelConfig.{field}={value!r} must be True or False")

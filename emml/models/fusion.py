@@ -75,9 +75,11 @@ class DualAttention(nn.Module):
         ga1: bool = True,
         ga2: bool = True,
         spatial: bool = True,
+        state_scale: bool = False,
     ) -> None:
         super().__init__()
         self.ga1, self.ga2, self.spatial = ga1, ga2, spatial
+        self.state_scale = float(height * width) if state_scale and spatial else 1.0
         self.uses_bow = ga1
         self.uses_sent = ga2
         self.state_dim = height * width if spatial else vocab_size * height * width
@@ -90,7 +92,7 @@ class DualAttention(nn.Module):
             scores = x_ga1.sum(dim=1).reshape(n, h * w)  # Eq. 2: sum over channels
             x_spat = torch.softmax(scores, dim=1).reshape(n, h, w)  # Eq. 2: softmax over HxW
             x_sa = spatial_attention(x_image, x_spat)  # Eq. 3
-            state = x_spat.reshape(n, h * w)  # x_S = vec(x_spat)
+            state = x_spat.reshape(n, h * w) * self.state_scale  # x_S = vec(x_spat) (× h·w: mean 1 per cell)
         else:
             x_spat = None
             x_sa = x_image  # w/o SA: Eq. 2-3 removed
@@ -249,7 +251,15 @@ BASELINES: dict[str, type[nn.Module]] = {
 def build_fusion(cfg, vocab_size: int, height: int, width: int) -> nn.Module:
     """Fusion unit named by `cfg.name` for a conv3 grid of (height, width) = (h, w)."""
     if cfg.name == "dual_attention":
-        return DualAttention(vocab_size, height, width, ga1=cfg.ga1, ga2=cfg.ga2, spatial=cfg.spatial_attention)
+        return DualAttention(
+            vocab_size,
+            height,
+            width,
+            ga1=cfg.ga1,
+            ga2=cfg.ga2,
+            spatial=cfg.spatial_attention,
+            state_scale=cfg.state_scale,
+        )
     if cfg.name in BASELINES:
         return BASELINES[cfg.name](vocab_size, height, width)
     known = ", ".join(["dual_attention", *BASELINES])

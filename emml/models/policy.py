@@ -205,7 +205,12 @@ class EmmlModel(nn.Module):
             fused, aux, new_state["frames"] = self._fuse_pacman(obs, state, episode_start, x_sent)
         else:
             aux = self.image_encoder(image.flatten(0, 1))  # (N, V, h, w)
-            fused = self.fusion(torch.sigmoid(aux), x_bow, x_sent)  # x_I = sigmoid(conv3)
+            x_image = torch.sigmoid(aux) if self.cfg.x_image == "sigmoid" else torch.relu(aux)  # x_I from conv3
+            if self.cfg.control == "detectors":  # diagnostic: perfect detectors
+                x_image = obs["aux"].flatten(0, 1).to(x_image.dtype)
+            fused = self.fusion(x_image, x_bow, x_sent)
+            if self.cfg.control == "target_mask":  # diagnostic: perfect x_S, the referent's cells
+                fused.state = obs["target"].flatten(0, 1).flatten(1).to(fused.state.dtype)
         fused: FusionOutput
         answer_probs = torch.softmax(fused.answer_logits, dim=-1)  # x_Ans
         logits, value, new_state["h"] = self.policy(

@@ -22,6 +22,7 @@ import torch
 from tqdm import tqdm
 
 from emml.config import TrainConfig
+from emml.diagnose import SCALARS, diagnose, summary_line
 from emml.envs.labels import channel_mask
 from emml.evaluate import evaluate
 from emml.models import build_model
@@ -81,6 +82,7 @@ def _check_same_config(saved: dict, current: dict, path: Path) -> None:
     ignore = {
         "frames",  # asking for more frames continues a run (finished or not) to the new target
         "eval_every",
+        "diagnose_episodes",
         "checkpoint_every",
         "log_every",
         "threads",
@@ -254,7 +256,14 @@ class Trainer:
     # --- pieces -----------------------------------------------------------------------------------------------
     def _eval(self, model, frames: int) -> dict:
         acc = evaluate(model, self.cfg.env, self.cfg.eval_episodes, seed=10_000, device=self.device)
-        self.tracker.log_metrics({f"eval/{k}": v for k, v in acc.items()}, step=frames)
+        metrics = {f"eval/{k}": v for k, v in acc.items()}
+        if self.cfg.diagnose_episodes and self.cfg.env.tasks != "eqa":
+            diag = diagnose(model, self.cfg.env, self.cfg.diagnose_episodes, device=self.device)
+            metrics.update({f"diag/{k}": diag[k] for k in SCALARS if diag[k] is not None})
+            if not self.quiet:
+                tqdm.write(f"frames {frames:,} eval " + ", ".join(f"{k} {v:.2f}" for k, v in acc.items()))
+                tqdm.write(summary_line(diag))
+        self.tracker.log_metrics(metrics, step=frames)
         return acc
 
     def _checkpoint(self, model, optimizer, update: int, frames: int, finished: bool) -> None:

@@ -9,6 +9,7 @@ from gymnasium.utils.env_checker import check_env
 import emml  # noqa: F401  (registers the env ids)
 from emml.envs.doom import ANSWER, EASY_SLOTS, EASY_START, FORWARD, DoomEnv
 from emml.envs.engine import EngineError, live_engines
+from emml.geometry import pixel_cells, receptive_field
 from tests.conftest import SMOKE
 
 
@@ -33,6 +34,7 @@ def test_registered_id_and_check_env(make, no_leftovers):
         obs, _ = env.reset(seed=0)
         assert obs["image"].dtype == np.uint8 and obs["image"].shape == (3, 60, 108)
         assert obs["aux"].dtype == np.uint8 and obs["aux"].shape == (22, 2, 5)
+        assert obs["target"].dtype == np.uint8 and obs["target"].shape == (2, 5)
         assert env.action_space.nvec.tolist() == [4, 22]
     finally:
         env.close()
@@ -141,23 +143,55 @@ def test_aux_labels_line_up_with_bounding_boxes(make):
     env = make(difficulty="easy", aux_labels=True, height=168, width=300)
     obs, _ = env.reset(seed=4)
     vocab, state = env.vocab, env.state
-    rh, rw = state.labels_buffer.shape
     gh, gw = obs["aux"].shape[1:]
     assert (gh, gw) == (9, 17)
+    rows = np.array(pixel_cells(state.labels_buffer.shape[0], 168, gh))
+    cols = np.array(pixel_cells(state.labels_buffer.shape[1], 300, gw))
     expected = np.zeros_like(obs["aux"])
+    target = np.zeros((gh, gw), dtype=np.uint8)
     from emml.envs.objects import CLASS_TO_ACTOR
 
     for label in state.labels:
-        actor = env.dataset.actors[CLASS_TO_ACTOR[label.object_name]]
+        name = CLASS_TO_ACTOR[label.object_name]
         ys, xs = np.nonzero(state.labels_buffer == label.value)
-        for w in actor.words():
-            expected[vocab.index(w), ys * gh // rh, xs * gw // rw] = 1
+        for w in env.dataset.actors[name].words():
+            expected[vocab.index(w), rows[ys], cols[xs]] = 1
+        if name == env.episode.scene[env.episode.target]:
+            target[rows[ys], cols[xs]] = 1
     assert np.array_equal(obs["aux"], expected)
+    assert np.array_equal(obs["target"], target) and target.sum() > 0
     assert obs["aux"].sum() > 0
-    for w in ("smallest", "largest", "go", "the", "object"):
-        assert obs["aux"][vocab.index(w)].sum() == 0
+    for w in ("smallest", "largest"):
         assert not env.aux_mask[vocab.index(w)]
-    assert env.aux_mask.sum() == 11  # 5 object classes, 4 colours, 2 sizes
+    for w in ("go", "the", "object", "what"):  # function words: supervised, never on
+        assert obs["aux"][vocab.index(w)].sum() == 0
+        assert env.aux_mask[vocab.index(w)]
+    assert env.aux_mask.sum() == len(vocab) - 2  # all but the two superlatives
+
+
+def test_labels_follow_the_conv_grid_not_an_even_partition():
+    """conv3 has no padding: at 300 px its 17 cells are centred at 17.5 + 16k, so the last one looks at
+    pixels 256..291, not at the last 17th of the frame (282..299)."""
+    assert receptive_field() == (36, 16)
+    cols = pixel_cells(300, 300, 17)
+    assert cols[17] == 0 and cols[26] == 1 and cols[275] == 16 and cols[-1] == 16
+    assert [cols.index(k) for k in (1, 16)] == [26, 266]
+    assert pixel_cells(320, 300, 17)[-1] == 16  # render pixels are mapped through the resize
+
+
+@pytest.mark.parametrize("height, width", [(60, 108), (84, 150), (168, 300)])
+def test_all_five_easy_objects_are_fully_in_view(make, height, width):
+    """The natural 16:9 projection: every Easy object lies wholly inside the frame at the start (with the old
+    `+vid_aspect 3` the outer two were cut by the frame's edges)."""
+    env = make(difficulty="easy", aux_labels=True, height=height, width=width)
+    for seed in range(3):
+        env.reset(seed=seed)
+        buffer = env.state.labels_buffer
+        boxes = sorted((lb.x, lb.x + lb.width) for lb in env.state.labels)
+        assert len(boxes) == 5
+        assert all(x0 > 0 and x1 < buffer.shape[1] for x0, x1 in boxes), boxes
+        for lb in env.state.labels:  # no object pixel in the first or last column
+            assert not (buffer[:, [0, -1]] == lb.value).any()
 
 
 @pytest.mark.parametrize(

@@ -165,3 +165,15 @@ def test_pacman_attends_to_matching_frame():
     frames = torch.tensor([[[1.0, 0.0], [0.0, 1.0], [1.0, 0.0]]]).reshape(1, 3, 2, 1, 1)
     weights, _ = fusion.frame_attention(frames, torch.tensor([[0.0, 1.0]]))
     assert weights.argmax().item() == 1
+
+
+def test_state_scale_gives_the_policy_a_mean_one_map():
+    """x_S = h·w · vec(x_spat): entries average 1 whatever the grid (a plain softmax averages 1/(h·w))."""
+    x_i = torch.rand(3, 4, 2, 5)
+    bow, sent = torch.ones(3, 4), torch.ones(3, 4)
+    plain = DualAttention(4, 2, 5)(x_i, bow, sent)
+    scaled = DualAttention(4, 2, 5, state_scale=True)(x_i, bow, sent)
+    torch.testing.assert_close(scaled.state, plain.state * 10)
+    torch.testing.assert_close(scaled.state.mean(1), torch.ones(3))
+    torch.testing.assert_close(scaled.attention, plain.attention)  # Eq. 2-5 unchanged
+    torch.testing.assert_close(scaled.answer_logits, plain.answer_logits)

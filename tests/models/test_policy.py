@@ -231,6 +231,9 @@ def test_unknown_model_name_lists_known_names():
         ({"pacman_frames": -1}, "pacman_frames"),
         ({"name": "concat", "ga1": False}, "ga1"),
         ({"task_indicator": "yes"}, "task_indicator"),
+        ({"control": "oracle"}, "control"),
+        ({"x_image": "tanh"}, "x_image"),
+        ({"state_scale": 1}, "state_scale"),
     ],
 )
 def test_config_validate_names_field(kwargs, field):
@@ -255,3 +258,54 @@ def test_model_table():
     for r in rows:
         assert isinstance(r["parameters"], int) and r["parameters"] > 0
         assert r["description"]
+
+
+def _labelled_obs(t=1, b=2, seed=0):
+    obs = make_obs(t, b, seed=seed)
+    g = torch.Generator().manual_seed(seed + 1)
+    obs["aux"] = torch.randint(0, 2, (t, b, V, 2, 5), dtype=torch.uint8, generator=g)
+    obs["target"] = torch.zeros(t, b, 2, 5, dtype=torch.uint8)
+    obs["target"][..., 1, 3] = 1
+    return obs
+
+
+def test_perfect_detectors_control_reads_the_labels():
+    """control='detectors': x_I := aux labels, so the attention is Eq. 2 on the labels, whatever the image."""
+    model = build_model("dual_attention", V, H, W, MAX_STEPS, control="detectors")
+    obs = _labelled_obs()
+    out, _ = model(obs, model.initial_state(2), starts(1, 2))
+    bow = model.text_encoder.bag_of_words(obs["tokens"].flatten(0, 1))
+    scores = (obs["aux"].flatten(0, 1).float() * bow[:, :, None, None]).sum(1).flatten(1)
+    torch.testing.assert_close(out.attention.flatten(0, 1).flatten(1), torch.softmax(scores, 1))
+    obs["image"] = 255 - obs["image"]
+    out2, _ = model(obs, model.initial_state(2), starts(1, 2))
+    torch.testing.assert_close(out2.attention, out.attention)
+
+
+def test_perfect_state_control_feeds_the_target_cells():
+    """control='target_mask': the policy's x_S is the referent's cells (0/1); the rest of the model is unchanged."""
+    model = build_model("dual_attention", V, H, W, MAX_STEPS, control="target_mask")
+    seen = {}
+
+    def grab(module, args):
+        seen["state"] = args[0]
+
+    model.policy.register_forward_pre_hook(grab)
+    obs = _labelled_obs()
+    model(obs, model.initial_state(2), starts(1, 2))
+    torch.testing.assert_close(seen["state"], obs["target"].flatten(2).float())
+
+
+def test_relu_reading_of_conv3():
+    """x_image='relu': the fusion reads relu(conv3) (zero where a detector is off) instead of sigmoid(conv3)."""
+    torch.manual_seed(0)
+    relu = build_model("dual_attention", V, H, W, MAX_STEPS, x_image="relu", state_scale=False)
+    sigm = build_model("dual_attention", V, H, W, MAX_STEPS, state_scale=False)
+    sigm.load_state_dict(relu.state_dict())
+    obs = make_obs(1, 2)
+    a, _ = relu(obs, relu.initial_state(2), starts(1, 2))
+    b, _ = sigm(obs, sigm.initial_state(2), starts(1, 2))
+    torch.testing.assert_close(a.aux_logits, b.aux_logits)
+    bow = relu.text_encoder.bag_of_words(obs["tokens"].flatten(0, 1))
+    scores = (torch.relu(a.aux_logits.flatten(0, 1)) * bow[:, :, None, None]).sum(1).flatten(1)
+    torch.testing.assert_close(a.attention.flatten(0, 1).flatten(1), torch.softmax(scores, 1))

@@ -1,0 +1,163 @@
+"""What a researcher looks at when a variant does not learn SGN (issue 12): three numbers, at every evaluation and
+for any checkpoint (`emml diagnose CHECKPOINT`).
+
+* ``attention_on_target`` — on SGN frames that show the referent, how often the argmax of the spatial attention
+  x_spat (Eq. 2) falls on one of its cells; ``attention_mass_on_target`` — the mass x_spat puts there. Dual-Attention
+  only (None for models without a spatial map).
+* ``detector_ap`` — per supervised word, the average precision of the conv3 channel sigmoid(conv3)[w] against the
+  aux labels (§3.2) over every cell of those frames; the mean over words that occur, and each word's.
+* ``actor_sensitivity`` — in Easy, how much the first move distribution pi(a_0 | I_0, T) depends on where the
+  referent stands: the largest total-variation distance between the mean step-0 move distributions of two target
+  slots. An actor that ignores x_S scores ~0 (the noise floor of `step0_episodes` episodes); one that turns toward
+  the target scores up to 1.
+
+Frames come from the model's own sampled actions (a seeded generator), so that the views are the ones it meets
+in training; the referent's cells come from the env's privileged label buffer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from itertools import combinations
+
+import numpy as np
+import torch
+
+from emml.config import DoomConfig
+from emml.envs.doom import DoomEnv
+from emml.evaluate import obs_to_torch
+
+
+def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
+    """AP of ranking ``scores`` against binary ``labels``: the mean precision at each positive (nan if none)."""
+    labels = labels.astype(bool).ravel()
+    positives = int(labels.sum())
+    if positives == 0:
+        return float("nan")
+    order = np.argsort(-scores.ravel(), kind="stable")
+    hits = labels[order]
+    precision_at = np.cumsum(hits) / np.arange(1, hits.size + 1)
+    return float(precision_at[hits].sum() / positives)
+
+
+def _step0(model, env_cfg: DoomConfig, episodes: int, seed: int, device) -> dict:
+    """Mean step-0 move distribution per target slot (Easy), from ``episodes`` resets."""
+    env = DoomEnv(env_cfg)
+    per_slot: dict[int, list[np.ndarray]] = {}
+    try:
+        for i in range(episodes):
+            obs, _ = env.reset(seed=seed + i)
+            batch = {k: np.asarray(v)[None] for k, v in obs.items()}
+            out, _ = model(obs_to_torch(batch, device), model.initial_state(1, device), _starts(1, device))
+            probs = torch.softmax(out.logits[0, 0], -1).cpu().numpy()
+            per_slot.setdefault(env.episode.target, []).append(probs)
+    finally:
+        env.close()
+    means = {slot: np.mean(p, axis=0) for slot, p in sorted(per_slot.items())}
+    tv = [0.5 * float(np.abs(means[a] - means[b]).sum()) for a, b in combinations(means, 2)]
+    return {
+        "actor_sensitivity": max(tv) if tv else float("nan"),
+        "step0_moves": {int(s): [round(float(x), 3) for x in m] for s, m in means.items()},
+    }
+
+
+def _starts(n: int, device) -> torch.Tensor:
+    return torch.ones(1, n, dtype=torch.bool, device=device)
+
+
+@torch.no_grad()
+def diagnose(
+    model,
+    env_cfg: DoomConfig,
+    episodes: int = 20,
+    step0_episodes: int = 100,
+    seed: int = 20_000,
+    device="cpu",
+    max_frames: int = 2000,
+) -> dict:
+    """The three diagnostics on SGN train episodes of ``env_cfg``'s difficulty (see the module docstring).
+
+    ``episodes`` sampled episodes (at most ``max_frames`` frames) give the attention and detector figures;
+    ``step0_episodes`` resets give the actor's sensitivity (Easy only; None in Hard)."""
+    was_training = model.training
+    model.eval()
+    cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=None)
+    if env_cfg.instructions:  # a run restricted to some instructions is diagnosed on its SGN ones
+        sgn = _sgn_only(env_cfg)
+        cfg = dataclasses.replace(cfg, instructions=sgn or None)
+    gen = torch.Generator().manual_seed(seed)
+    env = DoomEnv(cfg)
+    probs, labels, attn, target = [], [], [], []
+    try:
+        for i in range(episodes):
+            obs, _ = env.reset(seed=seed + i)
+            state, start = model.initial_state(1, device), _starts(1, device)
+            done = False
+            while not done and len(labels) < max_frames:
+                batch = {k: np.asarray(v)[None] for k, v in obs.items()}
+                out, state = model(obs_to_torch(batch, device), state, start)
+                start = torch.zeros_like(start)
+                probs.append(torch.sigmoid(out.aux_logits[0, 0]).cpu().numpy())
+                labels.append(obs["aux"])
+                target.append(obs["target"])
+                if out.attention is not None:
+                    attn.append(out.attention[0, 0].cpu().numpy())
+                move = int(torch.multinomial(torch.softmax(out.logits[0, 0].cpu(), -1), 1, generator=gen))
+                obs, _, terminated, truncated, _ = env.step(np.array([move, 0]))
+                done = terminated or truncated
+        aux_mask = env.aux_mask
+        words = env.vocab.words
+    finally:
+        env.close()
+    result: dict = {"frames": len(labels)}
+    target_a = np.stack(target).astype(bool)
+    seen = target_a.reshape(len(target_a), -1).any(1)
+    if attn and seen.any():
+        a = np.stack(attn)[seen].reshape(int(seen.sum()), -1)
+        t = target_a[seen].reshape(len(a), -1)
+        result["attention_on_target"] = float(t[np.arange(len(a)), a.argmax(1)].mean())
+        result["attention_mass_on_target"] = float((a * t).sum(1).mean())
+    else:
+        result["attention_on_target"] = result["attention_mass_on_target"] = None
+    p, y = np.stack(probs), np.stack(labels)
+    per_word = {}
+    for w in np.flatnonzero(aux_mask):
+        ap = average_precision(p[:, w], y[:, w])
+        if not np.isnan(ap):
+            per_word[words[w]] = round(ap, 3)
+    result["detector_ap"] = float(np.mean(list(per_word.values()))) if per_word else None
+    result["detector_ap_words"] = per_word
+    if env_cfg.difficulty == "easy" and step0_episodes:
+        result.update(_step0(model, cfg, step0_episodes, seed + episodes, device))
+    else:
+        result.update(actor_sensitivity=None, step0_moves={})
+    model.train(was_training)
+    return result
+
+
+def _sgn_only(env_cfg: DoomConfig) -> tuple[str, ...]:
+    from emml.tasks.language import load_dataset
+
+    ds = load_dataset(env_cfg.dataset)
+    return tuple(t for t in env_cfg.instructions if ds.find(t).kind == "sgn" and ds.find(t).split == "train")
+
+
+SCALARS = ("attention_on_target", "attention_mass_on_target", "detector_ap", "actor_sensitivity")
+"""The figures logged to MLflow (as diag/<name>) and printed at each evaluation."""
+
+
+def summary_line(result: dict) -> str:
+    """One line of the scalar figures, for logs."""
+    parts = []
+    for k in SCALARS:
+        v = result.get(k)
+        parts.append(f"{k} {'n/a' if v is None else f'{v:.2f}'}")
+    return "diagnose: " + ", ".join(parts)
+
+
+def diagnose_checkpoint(path, episodes: int = 20, step0_episodes: int = 100, seed: int = 20_000) -> dict:
+    """Rebuild a checkpoint's model (its own config and vocabulary) and diagnose it."""
+    from emml.evaluate import load_model
+
+    model, cfg = load_model(path)
+    return diagnose(model, cfg.env, episodes, step0_episodes, seed)

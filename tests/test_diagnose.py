@@ -1,0 +1,89 @@
+"""The diagnostics of emml/diagnose.py measure what they claim: detector AP, attention on the referent, and the
+actor's sensitivity to where the referent stands."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+
+from emml.config import DoomConfig
+from emml.diagnose import average_precision, diagnose, summary_line
+from emml.models import build_model
+from emml.tasks.language import Vocabulary, load_dataset
+from tests.conftest import SMOKE
+
+SGN = ("go to the blue torch", "go to the green armor", "go to the yellow keycard")
+
+
+def test_average_precision_known_values():
+    assert average_precision(np.array([0.9, 0.8, 0.1]), np.array([1, 1, 0])) == 1.0
+    assert average_precision(np.array([0.9, 0.8, 0.1]), np.array([0, 0, 1])) == pytest.approx(1 / 3)
+    assert average_precision(np.array([0.9, 0.5, 0.1]), np.array([1, 0, 1])) == pytest.approx((1 + 2 / 3) / 2)
+    assert np.isnan(average_precision(np.array([0.2, 0.1]), np.array([0, 0])))
+
+
+@given(st.lists(st.tuples(st.floats(0, 1), st.booleans()), min_size=1, max_size=40))
+def test_average_precision_is_in_unit_interval_and_one_for_a_perfect_ranking(pairs):
+    scores = np.array([s for s, _ in pairs])
+    labels = np.array([y for _, y in pairs])
+    ap = average_precision(scores, labels)
+    if not labels.any():
+        assert np.isnan(ap)
+        return
+    assert 0.0 < ap <= 1.0
+    assert average_precision(labels.astype(float), labels) == 1.0  # positives ranked first
+
+
+def _env_cfg():
+    ds = load_dataset("doom")
+    return DoomConfig(**SMOKE, instructions=SGN, vocabulary=Vocabulary.from_dataset(ds).words)
+
+
+def test_perfect_detectors_attend_to_the_referent(no_leftovers):
+    """With x_I := the aux labels, Eq. 2's argmax lies on the referent whenever it is in view (its words are on
+    only there: the distractors do not match the instruction)."""
+    cfg = _env_cfg()
+    model = build_model(
+        "dual_attention", len(cfg.vocabulary), cfg.height, cfg.width, cfg.max_steps, control="detectors"
+    )
+    result = diagnose(model, cfg, episodes=3, step0_episodes=0, max_frames=150)
+    assert result["attention_on_target"] == 1.0
+    assert result["attention_mass_on_target"] > 0.3
+    assert result["actor_sensitivity"] is None and result["frames"] > 0
+    words = set(result["detector_ap_words"])
+    assert words and not words & {"go", "the", "object"}  # function words: no positives, no AP
+    assert "attention_on_target 1.00" in summary_line(result)
+
+
+class _Scripted(torch.nn.Module):
+    """Moves by the column of the referent's cells (privileged), or ignores them: two ends of the sensitivity."""
+
+    def __init__(self, vocab_size, reacts: bool):
+        super().__init__()
+        self.vocab_size, self.reacts = vocab_size, reacts
+
+    def initial_state(self, n, device=None):
+        return {"h": torch.zeros(n, 1)}
+
+    def forward(self, obs, state, episode_start):
+        t, b = obs["time"].shape
+        logits = torch.zeros(t, b, 4)
+        if self.reacts:
+            column = obs["target"].float().sum(-2).argmax(-1)  # (t, b) in 0..4
+            logits[..., 0] = 5.0 * (column == 2)
+            logits[..., 1] = 5.0 * (column < 2)
+            logits[..., 2] = 5.0 * (column > 2)
+        out = SimpleNamespace(logits=logits, aux_logits=torch.zeros(t, b, self.vocab_size, 2, 5), attention=None)
+        return out, state
+
+
+@pytest.mark.parametrize("reacts, low, high", [(True, 0.9, 1.0), (False, 0.0, 0.0)])
+def test_actor_sensitivity_separates_a_reacting_actor(reacts, low, high, no_leftovers):
+    cfg = _env_cfg()
+    result = diagnose(_Scripted(len(cfg.vocabulary), reacts), cfg, episodes=1, step0_episodes=30, max_frames=5)
+    assert low <= result["actor_sensitivity"] <= high
+    assert result["attention_on_target"] is None
+    assert len(result["step0_moves"]) >= 3
