@@ -52,6 +52,10 @@ class DoomConfig:
     interpolation: str = "linear"
     """Resize filter from render to observation size: 'linear' (our choice: 5× faster than 'area', the reference
     env's cv2.INTER_AREA, and alike at the 0.94 scale of 320×180 → 300×168), 'area' or 'nearest'."""
+    label_grid: str = "receptive_field"
+    """How label pixels meet the conv3 grid (paper silent): 'receptive_field', the cell whose receptive field is
+    centred nearest (emml/geometry.py), or 'even', an even partition of the frame (off by up to one cell at
+    the right and bottom edges, since conv3 has no padding)."""
     max_words: int = 10
     """Token sequence length (padded with 0)."""
     vocabulary: tuple[str, ...] | None = None
@@ -69,6 +73,7 @@ class DoomConfig:
         check_choice("split", self.split, ("train", "test"))
         check_choice("tasks", self.tasks, ("both", "sgn", "eqa"))
         check_choice("interpolation", self.interpolation, ("area", "linear", "nearest"))
+        check_choice("label_grid", self.label_grid, ("receptive_field", "even"))
         from emml.geometry import conv_output_size
 
         conv_output_size(self.height, self.width)  # raises naming height/width when too small

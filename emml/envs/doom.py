@@ -113,7 +113,12 @@ class DoomEnv(gym.Env):
         self.action_space = spaces.MultiDiscrete([len(MOVES), V])
         self._labels = (
             LabelGrid(
-                self.vocab, self.dataset, self.aux_words, self.render_wh[::-1], self.grid_hw, (cfg.height, cfg.width)
+                self.vocab,
+                self.dataset,
+                self.aux_words,
+                self.render_wh[::-1],
+                self.grid_hw,
+                (cfg.height, cfg.width) if cfg.label_grid == "receptive_field" else None,
             )
             if cfg.aux_labels
             else None
