@@ -40,8 +40,10 @@ class DoomConfig:
     """Reaching the right object (SGN) or answering correctly (EQA) (§5.1)."""
     step_reward: float = -0.001
     """Every step (§5.1)."""
-    wrong_reward: float = -0.2
-    """Reaching a wrong object or answering wrongly (paper silent; the SGN environment it adapts uses -0.2)."""
+    wrong_reward: float = 0.0
+    """Reaching a wrong object or answering wrongly. §5.1 names only +1 and -0.001 per step, so 0; the SGN
+    environment the paper adapts used -0.2, under which a PPO agent can settle on never touching an object
+    (measured in docs/fidelity.md)."""
     shaping: bool = True
     """Distance-based reward shaping in SGN (§5.1; off for the 'w/o reward shaping' ablation, Table 3)."""
     shaping_coef: float = 0.001

@@ -44,3 +44,21 @@ def test_bad_input_is_named_before_compute(no_leftovers):
     assert "difficulty='medium'" in result.output and "'easy', 'hard'" in result.output
     result = runner.invoke(app, ["tasks", "show", "house3d"])
     assert result.exit_code == 2 and "dataset='house3d'" in result.output
+
+
+def test_diagnose_a_checkpoint(tracking, no_leftovers):
+    from emml.profiles import profile_config
+    from emml.rl.trainer import CHECKPOINT, train
+
+    over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test"}
+    cfg = profile_config("smoke", "easy", {**over, "frames": 64, "eval_episodes": 1, "diagnose_episodes": 0}, aux=True)
+    path = train(cfg, quiet=True).run_dir / CHECKPOINT
+    result = runner.invoke(app, ["diagnose", str(path), "--episodes", "2", "--step0-episodes", "10", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert 0.0 <= data["attention_on_target"] <= 1.0 and 0.0 <= data["actor_sensitivity"] <= 1.0
+    assert all(0.0 <= ap <= 1.0 for ap in data["detector_ap_words"].values())
+    text = runner.invoke(app, ["diagnose", str(path), "--episodes", "1", "--step0-episodes", "5"])
+    assert text.exit_code == 0 and "detector AP per word" in text.output and "slot" in text.output
+    missing = runner.invoke(app, ["diagnose", str(path.parent / "nope.pt")])
+    assert missing.exit_code == 2 and "does not exist" in missing.output

@@ -7,6 +7,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import emml  # noqa: F401  (registers the env ids)
+from emml.config import DoomConfig
 from emml.envs.doom import ANSWER, EASY_SLOTS, EASY_START, FORWARD, DoomEnv
 from emml.envs.engine import EngineError, live_engines
 from emml.geometry import pixel_cells, receptive_field
@@ -83,7 +84,8 @@ def test_determinism_under_seed(make):
 
 
 def test_sgn_rewards_success_and_wrong_object(make):
-    env = make(difficulty="easy", tasks="sgn", shaping=False)
+    assert DoomConfig().wrong_reward == 0.0  # §5.1 names +1 and -0.001 only
+    env = make(difficulty="easy", tasks="sgn", shaping=False, wrong_reward=-0.5)
     for seed in range(30):
         env.reset(seed=seed)
         if env.episode.target == 2:  # straight ahead: walking forward reaches it
@@ -103,7 +105,7 @@ def test_sgn_rewards_success_and_wrong_object(make):
         _, r, term, trunc, info = env.step(np.array([FORWARD, 0]))
         if term or trunc:
             break
-    assert term and not info["success"] and r == pytest.approx(-0.2 - 0.001)
+    assert term and not info["success"] and r == pytest.approx(-0.5 - 0.001)
 
 
 def test_shaping_rewards_approach(make):
@@ -123,7 +125,7 @@ def test_eqa_answer_and_time_limit(make):
     _, info = env.reset(seed=1)
     wrong = (info["answer"] + 1) % 22
     _, r, term, _, info2 = env.step(np.array([ANSWER, wrong]))
-    assert term and not info2["success"] and r == pytest.approx(-0.201)
+    assert term and not info2["success"] and r == pytest.approx(-0.001)  # wrong_reward 0 (§5.1)
     env.reset(seed=2)
     for _ in range(5):
         obs, _, term, trunc, _ = env.step(np.array([FORWARD, 0]))  # touching objects does not end EQA
