@@ -139,8 +139,8 @@ class TrainConfig:
     eval_episodes: int = 100
     """Greedy evaluation episodes per (task, split)."""
     diagnose_episodes: int = 20
-    """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP, actor
-    sensitivity: emml/diagnose.py); 0: none."""
+    """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP; the actor's
+    sensitivity reads 5× as many first steps: emml/diagnose.py); 0: none."""
     checkpoint_every: int = 10
     """Write the checkpoint every this many updates (and at the end)."""
     log_every: int = 10

@@ -258,7 +258,8 @@ class Trainer:
         acc = evaluate(model, self.cfg.env, self.cfg.eval_episodes, seed=10_000, device=self.device)
         metrics = {f"eval/{k}": v for k, v in acc.items()}
         if self.cfg.diagnose_episodes and self.cfg.env.tasks != "eqa":
-            diag = diagnose(model, self.cfg.env, self.cfg.diagnose_episodes, device=self.device)
+            n = self.cfg.diagnose_episodes
+            diag = diagnose(model, self.cfg.env, n, step0_episodes=5 * n, device=self.device)
             metrics.update({f"diag/{k}": diag[k] for k in SCALARS if diag[k] is not None})
             if not self.quiet:
                 tqdm.write(f"frames {frames:,} eval " + ", ".join(f"{k} {v:.2f}" for k, v in acc.items()))

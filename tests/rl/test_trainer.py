@@ -207,7 +207,7 @@ def test_sgn_learning_beats_chance(tracking, no_leftovers):
             "frames": SGN_FRAMES,
             "eval_every": 0,
             "eval_episodes": 40,
-            "diagnose_episodes": 5,
+            "diagnose_episodes": 20,
             "checkpoint_every": 1000,
             "env.tasks": "sgn",
         },
