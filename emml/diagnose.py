@@ -25,7 +25,7 @@ import torch
 
 from emml.config import DoomConfig
 from emml.envs.doom import DoomEnv
-from emml.evaluate import obs_to_torch
+from emml.evaluate import eval_settings, obs_to_torch
 
 
 def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
@@ -40,19 +40,19 @@ def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
     return float(precision_at[hits].sum() / positives)
 
 
-def _step0(model, env_cfg: DoomConfig, episodes: int, seed: int, device) -> dict:
-    """Mean step-0 move distribution per target slot (Easy), from ``episodes`` resets."""
-    env = DoomEnv(env_cfg)
+def _single(obs: dict, device) -> dict[str, torch.Tensor]:
+    """One env's observation as a (1, 1, ...) model input."""
+    return obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, device)
+
+
+def _step0(model, env: DoomEnv, episodes: int, seed: int, device) -> dict:
+    """Mean step-0 move distribution per target slot (Easy), from ``episodes`` resets of ``env``."""
     per_slot: dict[int, list[np.ndarray]] = {}
-    try:
-        for i in range(episodes):
-            obs, _ = env.reset(seed=seed + i)
-            batch = {k: np.asarray(v)[None] for k, v in obs.items()}
-            out, _ = model(obs_to_torch(batch, device), model.initial_state(1, device), _starts(1, device))
-            probs = torch.softmax(out.logits[0, 0], -1).cpu().numpy()
-            per_slot.setdefault(env.episode.target, []).append(probs)
-    finally:
-        env.close()
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed + i)
+        out, _ = model(_single(obs, device), model.initial_state(1, device), _starts(1, device))
+        probs = torch.softmax(out.logits[0, 0], -1).cpu().numpy()
+        per_slot.setdefault(env.episode.target, []).append(probs)
     means = {slot: np.mean(p, axis=0) for slot, p in sorted(per_slot.items())}
     tv = [0.5 * float(np.abs(means[a] - means[b]).sum()) for a, b in combinations(means, 2)]
     return {
@@ -81,10 +81,9 @@ def diagnose(
     ``step0_episodes`` resets give the actor's sensitivity (Easy only; None in Hard)."""
     was_training = model.training
     model.eval()
-    cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=None)
-    if env_cfg.instructions:  # a run restricted to some instructions is diagnosed on its SGN ones
-        sgn = _sgn_only(env_cfg)
-        cfg = dataclasses.replace(cfg, instructions=sgn or None)
+    # a run restricted to some instructions is diagnosed on its SGN training ones (all of them if it has none)
+    chosen = {(task, split): sents for task, split, sents in eval_settings(env_cfg)}.get(("sgn", "train"))
+    cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=chosen)
     gen = torch.Generator().manual_seed(seed)
     env = DoomEnv(cfg)
     probs, labels, attn, target = [], [], [], []
@@ -94,8 +93,7 @@ def diagnose(
             state, start = model.initial_state(1, device), _starts(1, device)
             done = False
             while not done and len(labels) < max_frames:
-                batch = {k: np.asarray(v)[None] for k, v in obs.items()}
-                out, state = model(obs_to_torch(batch, device), state, start)
+                out, state = model(_single(obs, device), state, start)
                 start = torch.zeros_like(start)
                 probs.append(torch.sigmoid(out.aux_logits[0, 0]).cpu().numpy())
                 labels.append(obs["aux"])
@@ -107,6 +105,8 @@ def diagnose(
                 done = terminated or truncated
         aux_mask = env.aux_mask
         words = env.vocab.words
+        easy = env_cfg.difficulty == "easy" and step0_episodes
+        step0 = _step0(model, env, step0_episodes, seed + episodes, device) if easy else None
     finally:
         env.close()
     result: dict = {"frames": len(labels)}
@@ -127,19 +127,9 @@ def diagnose(
             per_word[words[w]] = round(ap, 3)
     result["detector_ap"] = float(np.mean(list(per_word.values()))) if per_word else None
     result["detector_ap_words"] = per_word
-    if env_cfg.difficulty == "easy" and step0_episodes:
-        result.update(_step0(model, cfg, step0_episodes, seed + episodes, device))
-    else:
-        result.update(actor_sensitivity=None, step0_moves={})
+    result.update(step0 or {"actor_sensitivity": None, "step0_moves": {}})
     model.train(was_training)
     return result
-
-
-def _sgn_only(env_cfg: DoomConfig) -> tuple[str, ...]:
-    from emml.tasks.language import load_dataset
-
-    ds = load_dataset(env_cfg.dataset)
-    return tuple(t for t in env_cfg.instructions if ds.find(t).kind == "sgn" and ds.find(t).split == "train")
 
 
 SCALARS = ("attention_on_target", "attention_mass_on_target", "detector_ap", "actor_sensitivity")

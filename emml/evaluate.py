@@ -49,9 +49,9 @@ def evaluate(
     was_training = model.training
     model.eval()
     results = {}
+    # the diagnostic controls read the privileged labels; every real model plays without them
+    labels = getattr(getattr(model, "cfg", None), "control", "none") != "none"
     for task, split, instructions in eval_settings(env_cfg):
-        # the diagnostic controls read the privileged labels; every real model plays without them
-        labels = getattr(getattr(model, "cfg", None), "control", "none") != "none"
         cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
         n_envs = min(batch, episodes)
         envs = [DoomEnv(cfg) for _ in range(n_envs)]

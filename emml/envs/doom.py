@@ -253,8 +253,9 @@ class DoomEnv(gym.Env):
                 cv2.resize(frame[c], (self.cfg.width, self.cfg.height), dst=out[c], interpolation=self._interp)
             frame = out
         self.frame = frame
-        self.aux = self._labels(state.labels_buffer, state.labels) if self._labels else None
+        self.aux = None
         if self._labels:
+            self.aux = self._labels(state.labels_buffer, state.labels)
             target = self.episode.scene[self.episode.target]
             self.target_grid = self._labels.object_grid(state.labels_buffer, state.labels, target)
 
