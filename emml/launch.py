@@ -66,9 +66,9 @@ class LaunchReport:
 
 def run_states(name: str, profile: str, run_root: str | None = None, results_root: str | None = None) -> dict:
     """Run name → (RunSpec, state) for every run of table `name` under `profile` (see STATES)."""
-    import pandas as pd
 
     from emml.profiles import profile_seeds
+    from emml.results import read_results
     from emml.rl.trainer import CHECKPOINT, RESULTS, results_csv, run_dir
 
     table = load_table(name)
@@ -79,7 +79,7 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
         cfg = spec.to_config(profile, **fields)
         if recorded is None:
             path = results_csv(cfg)
-            recorded = set(pd.read_csv(path)["run_name"]) if path.exists() else set()
+            recorded = set(read_results(path)["run_name"])
         rname, rdir = cfg.run_name(), run_dir(cfg)
         if rname in recorded:
             state = "finished"

@@ -73,6 +73,8 @@ def _instance_id(cmd: str) -> str | None:
 def start_engine(game) -> Engine:
     """``game.init()`` and record the engine it forked. Raises EngineError on failure."""
     before = set(_children_named("vizdoom"))
+    # the engine makes ./_vizdoom/ if absent; engines starting together race on that check-then-create
+    os.makedirs("_vizdoom", exist_ok=True)
     try:
         game.init()
     except Exception as e:  # vizdoom raises its own exception types

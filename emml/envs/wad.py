@@ -12,6 +12,7 @@ episode start facing any of the four directions: ``set_doom_map`` switches maps 
 from __future__ import annotations
 
 import hashlib
+import os
 import struct
 import tempfile
 from dataclasses import dataclass
@@ -102,7 +103,13 @@ def wad_path(room: Room = ROOM, start: tuple[int, int] = (128, 512)) -> Path:
     blob = build_wad(room, start)
     path = Path(tempfile.gettempdir()) / f"emml-doom-{hashlib.sha1(blob).hexdigest()[:12]}.wad"
     if not path.exists():
-        tmp = path.with_suffix(f".{id(blob)}.tmp")
-        tmp.write_bytes(blob)
-        tmp.replace(path)  # atomic: a reader never sees half a file
+        # a private temp name per writer (forked workers share id(blob), so a name built from it collides)
+        fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(blob)
+            os.replace(tmp, path)  # atomic: a reader never sees half a file
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
     return path

@@ -81,11 +81,11 @@ def plot_table(
     """Training accuracy vs frames for every row of table `name` under `profile`: a panel per (task, difficulty,
     aux), one line per row (mean over seeds, CI band). Runs come from results/<name>/<profile>.csv (their run_id),
     curves from MLflow; a run without history is skipped with a note. Returns (paths written, notes)."""
-    import pandas as pd
 
     from emml.profiles import profile_seeds
     from emml.registry import load_table
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, results_path
+    from emml.results import read_results
     from emml.tracking import project_root
 
     table = load_table(name)
@@ -93,7 +93,7 @@ def plot_table(
     if table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
     path = results_path(name, profile, results_root)
-    results = pd.read_csv(path) if path.exists() else pd.DataFrame(columns=["run_name", "run_id"])
+    results = read_results(path)
     run_ids = dict(zip(results["run_name"], results["run_id"]))
     panels = [(d, a) for d in table.difficulties for a in table.aux]
     fig, axes = plt.subplots(

@@ -16,6 +16,7 @@ import pandas as pd
 from scipy import stats
 
 from emml.registry import REPRODUCE_DIR, Table, load_table
+from emml.results import read_results
 from emml.tracking import project_path, project_root
 
 CONFIDENCE = 0.95
@@ -245,7 +246,7 @@ def report_table(
     """Write reports/<name>-<profile>.md and .tex; returns the cells, caption and paths (the --json output)."""
     table = load_table(name)
     path = results_path(name, profile, results_root)
-    results = pd.read_csv(path) if path.exists() else pd.DataFrame()
+    results = read_results(path)
     cells = build_cells(table, profile, results, paper_numbers(name))
     md_df, constant = layout(table, cells)
     text = caption(table, profile, cells, results, constant)

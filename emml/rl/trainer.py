@@ -26,6 +26,7 @@ from emml.diagnose import SCALARS, diagnose, summary_line
 from emml.envs.labels import channel_mask
 from emml.evaluate import evaluate
 from emml.models import build_model
+from emml.results import upsert_result
 from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.rl.ppo import make_optimizer, ppo_update
 from emml.rl.rollout import RolloutBuffer
@@ -310,28 +311,10 @@ def results_csv(cfg: TrainConfig) -> Path:
 
 
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
-    """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv, written atomically.
-
-    Runs of one table finish in parallel processes: an exclusive lock on a side file serialises the
-    read-modify-write, so that no row is lost."""
-    import fcntl
-
-    import pandas as pd
-
+    """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv (emml.results)."""
     row = {k: v for k, v in payload.items() if k != "metrics"}
     row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, **payload["metrics"])
-    path = results_csv(cfg)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path.with_suffix(".csv.lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        table = pd.read_csv(path) if path.exists() else pd.DataFrame()
-        if not table.empty:
-            table = table[table["run_name"] != row["run_name"]]
-        table = pd.concat([table, pd.DataFrame([row])], ignore_index=True).sort_values("run_name")
-        tmp = path.with_suffix(f".csv.{os.getpid()}.tmp")
-        table.to_csv(tmp, index=False)
-        os.replace(tmp, path)
-    return path
+    return upsert_result(results_csv(cfg), row)
 
 
 def _dtype(space) -> torch.dtype:
