@@ -23,6 +23,16 @@ def _fail(message: str) -> None:
     raise typer.Exit(2)
 
 
+def _check_checkpoint(path: Path) -> None:
+    """Fail with one line naming the path unless it holds an emml checkpoint (before any engine starts)."""
+    from emml.rl.checkpoint import CheckpointError, load_checkpoint
+
+    try:
+        load_checkpoint(path)
+    except CheckpointError as e:
+        _fail(str(e))
+
+
 def _echo(data, as_json: bool, text: str) -> None:
     typer.echo(json.dumps(data, indent=2) if as_json else text)
 
@@ -255,9 +265,14 @@ def train(
         _fail(str(e))
     _use_tcmalloc()
     install_signal_handlers()
+    from emml.rl.checkpoint import CheckpointError
+    from emml.rl.trainer import ConfigMismatch
     from emml.rl.trainer import train as run
 
-    result = run(cfg, quiet=quiet or as_json)
+    try:  # both are raised before any engine starts or anything is written
+        result = run(cfg, quiet=quiet or as_json)
+    except (CheckpointError, ConfigMismatch) as e:
+        _fail(str(e))
     data = {
         "run_dir": str(result.run_dir),
         "run_id": result.run_id,
@@ -287,8 +302,7 @@ def eval_checkpoint(
     from emml.envs.engine import install_signal_handlers
     from emml.evaluate import evaluate_checkpoint
 
-    if not checkpoint.exists():
-        _fail(f"checkpoint {checkpoint} does not exist")
+    _check_checkpoint(checkpoint)
     install_signal_handlers()
     result = evaluate_checkpoint(checkpoint, episodes, seed)
     _echo(result, as_json, ", ".join(f"{k} {v:.3f}" for k, v in result.items()))
@@ -307,8 +321,7 @@ def diagnose(
     from emml.diagnose import diagnose_checkpoint, summary_line
     from emml.envs.engine import install_signal_handlers
 
-    if not checkpoint.exists():
-        _fail(f"checkpoint {checkpoint} does not exist")
+    _check_checkpoint(checkpoint)
     install_signal_handlers()
     result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed)
     words = ", ".join(f"{w} {ap:.2f}" for w, ap in sorted(result["detector_ap_words"].items(), key=lambda x: -x[1]))

@@ -61,4 +61,56 @@ def test_diagnose_a_checkpoint(tracking, no_leftovers):
     text = runner.invoke(app, ["diagnose", str(path), "--episodes", "1", "--step0-episodes", "5"])
     assert text.exit_code == 0 and "detector AP per word" in text.output and "slot" in text.output
     missing = runner.invoke(app, ["diagnose", str(path.parent / "nope.pt")])
-    assert missing.exit_code == 2 and "does not exist" in missing.output
+    assert missing.exit_code == 2 and "no such file" in missing.output
+
+
+def _bad_checkpoints(tmp_path):
+    import torch
+
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "checkpoint.pt").write_bytes(b"")
+    (tmp_path / "empty.pt").write_bytes(b"")
+    (tmp_path / "garbage.pt").write_bytes(b"not a checkpoint\x00\x01" * 10)
+    torch.save({"weights": 1}, tmp_path / "foreign.pt")
+    return {
+        "run": "is a directory, not a checkpoint file (did you mean its checkpoint.pt?)",
+        "empty.pt": "is empty (0 bytes)",
+        "garbage.pt": "not a PyTorch checkpoint",
+        "foreign.pt": "not an emml checkpoint (missing model, config, frames)",
+        "nope.pt": "no such file",
+    }
+
+
+def test_a_bad_checkpoint_gets_one_line_naming_it(tmp_path, no_leftovers):
+    for name, why in _bad_checkpoints(tmp_path).items():
+        path = tmp_path / name
+        for command in (["eval", str(path), "--episodes", "1"], ["diagnose", str(path)]):
+            result = runner.invoke(app, command)
+            assert result.exit_code == 2, (command, result.output)
+            assert result.output.strip() == f"error: checkpoint {path}: {why}" or (
+                result.output.startswith(f"error: checkpoint {path}: {why}") and result.output.count("\n") == 1
+            ), result.output
+
+
+def test_train_over_a_bad_or_foreign_checkpoint_fails_by_name_and_keeps_it(tracking, no_leftovers):
+    import torch
+
+    from emml.profiles import profile_config
+    from emml.rl.trainer import CHECKPOINT, run_dir
+
+    sets = ["--set", f"run_root={tracking['run_root']}", "--set", f"results_root={tracking['results_root']}"]
+    args = ["train", "--profile", "smoke", "--aux", "--table", "test", *sets]
+    cfg = profile_config("smoke", "easy", {"run_root": tracking["run_root"], "table": "test"}, aux=True)
+    path = run_dir(cfg) / CHECKPOINT
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"\x80garbage")
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and result.output.startswith(f"error: checkpoint {path}: not a PyTorch checkpoint")
+    assert "Traceback" not in result.output and path.read_bytes() == b"\x80garbage"
+    torch.save({"model": {}, "config": {**cfg.to_dict(), "seed": 7}, "frames": 64}, path)
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and result.output.count("\n") <= 2, result.output
+    assert "holds a run with a different config (" in result.output and "seed)" in result.output
+    import mlflow
+
+    assert mlflow.search_runs(search_all_experiments=True).empty  # nothing started, nothing recorded

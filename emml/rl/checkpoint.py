@@ -60,13 +60,39 @@ def _fsync_dir(directory: Path) -> None:
         os.close(dir_fd)
 
 
-def load_checkpoint(path: str | os.PathLike, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """Load a checkpoint written by :func:`save_checkpoint`.
+class CheckpointError(ValueError):
+    """A path that does not hold a readable emml checkpoint (the message names the path and what is wrong)."""
+
+
+REQUIRED_KEYS = ("model", "config", "frames")
+
+
+def load_checkpoint(
+    path: str | os.PathLike, map_location: str | torch.device = "cpu", require: tuple[str, ...] = REQUIRED_KEYS
+) -> dict[str, Any]:
+    """Load a checkpoint written by :func:`save_checkpoint`; CheckpointError if ``path`` is not one (a missing
+    file, a directory, an empty or unreadable file, or a payload without the ``require``-d keys).
 
     Uses ``weights_only=False`` because payloads carry RNG states (numpy
     tuples, python ``random`` state) -- only load checkpoints you wrote.
     """
-    return torch.load(Path(path), map_location=map_location, weights_only=False)
+    path = Path(path)
+    if not path.exists():
+        raise CheckpointError(f"checkpoint {path}: no such file")
+    if path.is_dir():
+        hint = " (did you mean its checkpoint.pt?)" if (path / "checkpoint.pt").exists() else ""
+        raise CheckpointError(f"checkpoint {path}: is a directory, not a checkpoint file{hint}")
+    if path.stat().st_size == 0:
+        raise CheckpointError(f"checkpoint {path}: is empty (0 bytes); emml writes checkpoints atomically, so "
+                              "this file is not one of its checkpoints")
+    try:
+        payload = torch.load(path, map_location=map_location, weights_only=False)
+    except Exception as e:  # torch.load raises pickle, zip and EOF errors of many types
+        raise CheckpointError(f"checkpoint {path}: not a PyTorch checkpoint ({type(e).__name__}: {e})") from None
+    missing = [k for k in require if not isinstance(payload, dict) or k not in payload]
+    if missing:
+        raise CheckpointError(f"checkpoint {path}: not an emml checkpoint (missing {', '.join(missing)})")
+    return payload
 
 
 def rng_state() -> dict[str, Any]:

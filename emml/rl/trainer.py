@@ -78,6 +78,10 @@ def _seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
+class ConfigMismatch(ValueError):
+    """A rerun whose config differs from the checkpoint's run (the message names the fields)."""
+
+
 def _check_same_config(saved: dict, current: dict, path: Path) -> None:
     """A rerun resumes only the same experiment: differing fields fail by name before anything is touched."""
     ignore = {
@@ -106,7 +110,7 @@ def _check_same_config(saved: dict, current: dict, path: Path) -> None:
         elif _norm(a) != _norm(b):
             diffs.append(key)
     if diffs:
-        raise ValueError(
+        raise ConfigMismatch(
             f"{path} holds a run with a different config ({', '.join(diffs)}); use another seed/table/run_root, "
             "or delete that run directory"
         )

@@ -21,7 +21,7 @@ def test_roundtrip_and_creates_parent(tmp_path):
     path = tmp_path / "deep" / "dir" / "ckpt.pt"
     payload = {"model": {"w": torch.arange(6.0).view(2, 3)}, "step": 7, "rng": rng_state()}
     save_checkpoint(path, payload)
-    out = load_checkpoint(path)
+    out = load_checkpoint(path, require=())
     assert out["step"] == 7 and torch.equal(out["model"]["w"], payload["model"]["w"])
     assert [p.name for p in path.parent.iterdir()] == ["ckpt.pt"]  # no temp files left
 
@@ -43,10 +43,10 @@ def test_hard_crash_before_replace_keeps_original(tmp_path):
     assert proc.returncode == 9, proc.stderr.decode()
     leftovers = [p for p in tmp_path.iterdir() if p.name != "ckpt.pt"]
     assert len(leftovers) == 1 and leftovers[0].name.endswith(".tmp")  # temp file left behind
-    assert load_checkpoint(path)["step"] == 1  # original intact
+    assert load_checkpoint(path, require=())["step"] == 1  # original intact
     assert torch.load(leftovers[0], weights_only=False)["step"] == 2  # (it was fully written)
     save_checkpoint(path, {"step": 3})  # a later save still works
-    assert load_checkpoint(path)["step"] == 3
+    assert load_checkpoint(path, require=())["step"] == 3
 
 
 def test_exception_during_write_cleans_up(tmp_path, monkeypatch):
@@ -61,7 +61,7 @@ def test_exception_during_write_cleans_up(tmp_path, monkeypatch):
         save_checkpoint(path, {"step": 2})
     monkeypatch.undo()
     assert [p.name for p in tmp_path.iterdir()] == ["ckpt.pt"]
-    assert load_checkpoint(path)["step"] == 1
+    assert load_checkpoint(path, require=())["step"] == 1
 
 
 def test_rng_state_roundtrip(tmp_path):
@@ -69,5 +69,5 @@ def test_rng_state_roundtrip(tmp_path):
     save_checkpoint(tmp_path / "r.pt", {"rng": rng_state()})
     a = (random.random(), np.random.rand(), torch.rand(1).item())
     random.seed(99), np.random.seed(99), torch.manual_seed(99)
-    set_rng_state(load_checkpoint(tmp_path / "r.pt")["rng"])
+    set_rng_state(load_checkpoint(tmp_path / "r.pt", require=())["rng"])
     assert (random.random(), np.random.rand(), torch.rand(1).item()) == a
