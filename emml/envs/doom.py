@@ -210,9 +210,19 @@ class DoomEnv(gym.Env):
         return self._obs(), self._info(False)
 
     def step(self, action):
+        if self._engine is None and self.episode is not None:
+            raise RuntimeError("step() after close(): this env is closed; make a new one")
         if self.episode is None:
             raise RuntimeError("call reset() before step()")
-        move, word = int(action[0]), int(action[1])
+        if self.ended:  # Gymnasium's convention: a finished episode pays nothing more
+            raise RuntimeError("step() after the episode ended (terminated or truncated): call reset() first")
+        arr = np.asarray(action)
+        if not self.action_space.contains(arr):
+            raise ValueError(
+                f"action {action!r}: expected two integers [move, word], move in 0..{len(MOVES) - 1} "
+                f"({', '.join(MOVES)}) and word in 0..{len(self.vocab) - 1} (a vocabulary index, read on 'answer')"
+            )
+        move, word = int(arr[0]), int(arr[1])
         cfg, game = self.cfg, self._engine.game
         reward, terminated, success = cfg.step_reward, False, False
         if move == ANSWER and self.task_id == 1:  # EQA: any answer ends the episode

@@ -235,3 +235,30 @@ def test_close_after_exception_leaves_nothing(no_leftovers):
             raise RuntimeError("mid-episode failure")
         finally:
             env.close()
+
+
+def test_invalid_actions_are_refused_by_name(make):
+    env = make(tasks="eqa")
+    env.reset(seed=0)
+    V = len(env.vocab)
+    for bad in ([5, 0], [0], [0, 1, 2], [0.5, 1], [3, V], [-1, 0], "go"):
+        with pytest.raises(ValueError, match=r"expected two integers \[move, word\], move in 0\.\.3"):
+            env.step(bad)
+    assert env.t == 0 and not env.ended  # nothing was stepped
+    for good in ([0, 0], np.array([1, V - 1]), (2, 3), np.array([0, 0], dtype=np.int32)):
+        env.step(good)
+    assert env.t == 4
+
+
+def test_no_step_after_the_episode_ended_or_after_close(make):
+    env = make(tasks="eqa")
+    env.reset(seed=0)
+    _, reward, terminated, _, _ = env.step([ANSWER, (env.answer_id + 1) % len(env.vocab)])  # a wrong answer
+    assert terminated
+    with pytest.raises(RuntimeError, match=r"after the episode ended .* call reset\(\) first"):
+        env.step([ANSWER, env.answer_id])  # once paid +0.999 after the episode had ended
+    env.reset(seed=1)
+    env.step([FORWARD, 0])  # reset makes it steppable again
+    env.close()
+    with pytest.raises(RuntimeError, match=r"after close\(\)"):
+        env.step([FORWARD, 0])
