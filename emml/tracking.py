@@ -127,6 +127,22 @@ class Tracker:
         self._uri = uri
         self._client_obj = None
         self._run_id: str | None = None
+        self._resume_step: int | None = None
+        self._logged: dict[str, set[int]] = {}
+        """Per metric key, the steps after ``_resume_step`` that a killed process already logged."""
+
+    def resume_after(self, step: int) -> None:
+        """The run resumes from a checkpoint at ``step``: points a killed process logged after it are kept and
+        the resumed run does not log those (key, step) again, so that every curve has one value per step."""
+        self._resume_step, self._logged = step, {}
+
+    def _already_logged(self, key: str, step: int) -> bool:
+        if self._resume_step is None or step <= self._resume_step:
+            return False
+        if key not in self._logged:  # once per key after a resume
+            hist = _retry(lambda: self._client.get_metric_history(self.run_id, key))
+            self._logged[key] = {m.step for m in hist if m.step > self._resume_step}
+        return step in self._logged[key]
 
     @property
     def _client(self):
@@ -205,7 +221,7 @@ class Tracker:
         from mlflow.entities import Metric
 
         now = int(time.time() * 1000)
-        items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items()]
+        items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items() if not self._already_logged(k, step)]
         for i in range(0, len(items), _BATCH_METRICS):
             chunk = items[i : i + _BATCH_METRICS]
             _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, metrics=chunk))

@@ -17,6 +17,7 @@ counted); `max_engine_restarts` such deaths in a row, less than `engine_restart_
 
 from __future__ import annotations
 
+import logging
 import time
 from collections import deque
 
@@ -28,6 +29,8 @@ from emml.envs.doom import ANSWER
 from emml.envs.engine import RestartBudget, WorkerDied
 from emml.envs.vector import make_vector_env
 from emml.evaluate import obs_to_torch
+
+log = logging.getLogger(__name__)
 
 
 class Sampler:
@@ -182,6 +185,7 @@ class Sampler:
         except (WorkerDied, BrokenPipeError, EOFError, ConnectionResetError) as e:
             self._restart_group(g, e)  # every episode of the group ends here: truncated, reward 0, not scored
             n = sl.stop - sl.start
+            log.warning("env worker of group %d died (%s): group restarted, %d episodes dropped", g, e, n)
             buffer.insert_outcome(t, torch.zeros(n), torch.ones(n, dtype=torch.bool), envs=sl)
             self.dropped_episodes += n
             self.episode_start[sl] = True
@@ -197,6 +201,8 @@ class Sampler:
             for i in np.flatnonzero(done):
                 if dropped[i]:
                     self.dropped_episodes += 1
+                    log.warning("ViZDoom engine of actor %d died: restarted, its episode dropped (%d dropped in this "
+                                "run)", sl.start + i, self.dropped_episodes)
                 else:
                     self.recent[int(final["task"][i])].append(float(final["success"][i]))
         self.obs[g] = obs

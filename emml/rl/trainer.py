@@ -188,10 +188,19 @@ class Trainer:
             run_id=saved["run_id"] if saved else None,
             parent_run_id=self.parent_run_id,
         )
+        if saved is not None:
+            self.tracker.resume_after(frames)
+            if not self.quiet:
+                tqdm.write(f"resuming {cfg.run_name()} from frame {frames:,} (update {update}), MLflow run {run_id}")
+        else:  # at once, so that a run killed before its first update resumes this MLflow run, not a second one
+            self._checkpoint(model, optimizer, update, frames, finished=False)
         try:
             metrics = self._loop(model, optimizer, update, frames)
-        except BaseException:
+        except (KeyboardInterrupt, SystemExit):  # Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers)
             self.tracker.finish("KILLED")
+            raise
+        except BaseException:
+            self.tracker.finish("FAILED")
             raise
         self.tracker.finish("FINISHED")
         return RunResult(self.dir, run_id, metrics.pop("_frames"), metrics, resumed=saved is not None)

@@ -115,13 +115,14 @@ def _kill_engine(sampler, group: int = 0) -> int:
     return pid
 
 
-def test_a_dead_engine_is_restarted_and_its_episode_dropped(no_leftovers):
+def test_a_dead_engine_is_restarted_and_its_episode_dropped(no_leftovers, caplog):
     with _started(_config(2, num_envs=2)) as (sampler, model, buffer):
         sampler.collect(model, buffer)
         before = sampler.venvs[0].get_attr("engine_pid")[0]
         killed = _kill_engine(sampler)
         sampler.collect(model, buffer)  # goes on: the worker started a new engine
         assert sampler.dropped_episodes == 1
+        assert "ViZDoom engine of actor 0 died: restarted, its episode dropped (1 dropped" in caplog.text  # at once
         assert sampler.venvs[0].get_attr("engine_restarts") == (1,)
         after = sampler.venvs[0].get_attr("engine_pid")[0]
         assert killed == before and after not in (None, before)
@@ -143,13 +144,14 @@ def test_env_groups_must_divide_the_actors():
         TrainConfig(env_groups=3).validate()
 
 
-def test_a_killed_worker_process_is_replaced_and_its_group_restarted(no_leftovers):
+def test_a_killed_worker_process_is_replaced_and_its_group_restarted(no_leftovers, caplog):
     with _started(_config(2, num_envs=4)) as (sampler, model, buffer):
         sampler.collect(model, buffer)
         old = [p.pid for p in sampler.venvs[1].processes]
         os.kill(old[0], signal.SIGKILL)  # its engine is orphaned: the sampler must end it
         sampler.collect(model, buffer)
         assert sampler.workers.restarts == 1 and sampler.dropped_episodes == 2  # the group's 2 episodes
+        assert "env worker of group 1 died" in caplog.text and "2 episodes dropped" in caplog.text
         assert not set(old) & {p.pid for p in sampler.venvs[1].processes}
         assert all(p.is_alive() for p in sampler.venvs[1].processes)
         sampler.collect(model, buffer)

@@ -53,26 +53,12 @@ def test_finished_run_is_not_retrained_but_can_be_extended(tracking, no_leftover
     assert [s for s, _ in metric_history(first.run_id, "charts/update")] == [64, 128, 192]
 
 
-def test_resume_after_sigkill_continues_the_same_run(tracking, tmp_path, no_leftovers):
-    args = [
-        sys.executable,
-        "-m",
-        "emml.cli",
-        "train",
-        "--profile",
-        "smoke",
-        "--table",
-        "test",
-        "--frames",
-        "2048",
-        "--set",
-        f'run_root="{tracking["run_root"]}"',
-        "--set",
-        "checkpoint_every=2",
-        "--set",
-        "eval_episodes=1",
-        "--quiet",
-    ]
+def _train_and_sigkill(tracking, ready) -> tuple[TrainConfig, dict]:
+    """`emml train` (smoke, 2,048 frames, a checkpoint every 2 updates) in a subprocess, SIGKILLed as soon as
+    ``ready(checkpoint, logged_steps)`` holds; returns the config and the checkpoint it left."""
+    args = [sys.executable, "-m", "emml.cli", "train", "--profile", "smoke", "--table", "test", "--frames", "2048",
+            "--set", f'run_root="{tracking["run_root"]}"', "--set", "checkpoint_every=2", "--set", "eval_episodes=1",
+            "--quiet"]
     env = {**os.environ, "EMML_NO_TCMALLOC": "1"}
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     cfg = smoke(tracking, frames=2048, checkpoint_every=2, eval_episodes=1)
@@ -80,25 +66,62 @@ def test_resume_after_sigkill_continues_the_same_run(tracking, tmp_path, no_left
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
-            if path.exists() and load_checkpoint(path)["update"] >= 4:
-                break
-            time.sleep(0.2)
+            if path.exists():
+                ckpt = load_checkpoint(path)
+                if ready(ckpt, [s for s, _ in metric_history(ckpt["run_id"], "charts/update")]):
+                    break
+            time.sleep(0.05)
         else:
-            pytest.fail("no checkpoint written")
+            pytest.fail("the run never reached the state to kill it in")
         os.kill(proc.pid, signal.SIGKILL)  # no cleanup in the parent: its workers must end their engines alone
         proc.wait(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
-    killed = load_checkpoint(path)
-    assert not killed["finished"] and killed["update"] < 32
+    return cfg, load_checkpoint(path)
+
+
+def _one_run_one_value_per_step(cfg, killed) -> None:
+    import mlflow
+
     result = train(cfg, quiet=True)
     assert result.resumed and result.run_id == killed["run_id"] and result.frames == 2048
-    done = load_checkpoint(path)
+    done = load_checkpoint(run_dir(cfg) / CHECKPOINT)
     assert done["finished"] and done["update"] == 32 and done["frames"] == 2048
-    steps = [s for s, _ in metric_history(result.run_id, "charts/update")]
-    assert steps[0] == 64 and steps[-1] == 2048
-    assert all(b - a <= 64 for a, b in zip(steps, steps[1:]))  # the curve has no gap: at most redone steps
+    for key in ("charts/update", "losses/policy", "train/success_sgn"):
+        steps = [s for s, _ in metric_history(result.run_id, key)]
+        assert len(steps) == len(set(steps)), (key, steps)  # one value per step, even for the redone updates
+    assert [s for s, _ in metric_history(result.run_id, "charts/update")] == list(range(64, 2049, 64))
+    runs = mlflow.search_runs(experiment_names=["test"], output_format="list")
+    assert [(r.info.run_id, r.info.status) for r in runs] == [(result.run_id, "FINISHED")]  # none left RUNNING
+
+
+def test_resume_after_sigkill_between_checkpoints_logs_each_step_once(tracking, no_leftovers):
+    # killed after it logged an update that its last checkpoint does not hold: the resumed run redoes that update
+    cfg, killed = _train_and_sigkill(tracking, lambda c, steps: c["update"] >= 4 and max(steps) > c["frames"])
+    assert not killed["finished"] and 4 <= killed["update"] < 32
+    _one_run_one_value_per_step(cfg, killed)
+
+
+def test_a_run_killed_before_its_first_update_is_resumed_not_duplicated(tracking, no_leftovers):
+    cfg, killed = _train_and_sigkill(tracking, lambda c, steps: True)  # the first checkpoint there is
+    assert killed["update"] == 0  # the checkpoint written at start: before it, a rerun made a second MLflow run
+    _one_run_one_value_per_step(cfg, killed)
+
+
+def test_a_failing_run_is_marked_failed(tracking, monkeypatch, no_leftovers):
+    import mlflow
+
+    from emml.rl import trainer
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(trainer, "ppo_update", broken)
+    with pytest.raises(RuntimeError, match="boom"):
+        train(smoke(tracking, frames=64), quiet=True)
+    (run,) = mlflow.search_runs(experiment_names=["test"], output_format="list")
+    assert run.info.status == "FAILED"
 
 
 def test_eval_of_a_checkpoint_reproduces_its_numbers(tracking, no_leftovers):
