@@ -23,6 +23,17 @@ def _fail(message: str) -> None:
     raise typer.Exit(2)
 
 
+@app.callback()
+def _check_project_files() -> None:
+    """Every command reads reproduce/profiles.toml: a broken one is named in one line before anything runs."""
+    from emml.profiles import ProfileError, load_profiles
+
+    try:
+        load_profiles()
+    except ProfileError as e:
+        _fail(str(e))
+
+
 def _check_checkpoint(path: Path) -> None:
     """Fail with one line naming the path unless it holds an emml checkpoint (before any engine starts)."""
     from emml.rl.checkpoint import CheckpointError, load_checkpoint

@@ -258,18 +258,39 @@ class TrainConfig:
         return cfg
 
 
-def apply_overrides(cfg: TrainConfig, overrides: dict) -> TrainConfig:
-    """Set fields by dotted name ('frames', 'env.height', 'ppo.lr'); unknown names fail listing the known ones."""
+def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") -> TrainConfig:
+    """Set fields by dotted name ('frames', 'env.height', 'ppo.lr'); an unknown name or a value of the wrong type
+    fails naming ``source`` (the --set option, or the profile it came from), the field and what it accepts."""
     for key, value in overrides.items():
         target, name = cfg, key
         if "." in key:
             section, name = key.split(".", 1)
             if section not in ("env", "ppo"):
-                raise ValueError(f"override {key!r}: section {section!r} is not one of 'env', 'ppo'")
+                raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo'")
             target = getattr(cfg, section)
         known = [f.name for f in fields(target)]
         if name not in known:
-            raise ValueError(f"override {key!r}: unknown field; known: {', '.join(known)}")
-        setattr(target, name, value)
+            raise ValueError(f"{source} {key!r}: unknown field; known: {', '.join(known)}")
+        setattr(target, name, _typed(value, getattr(target, name), f"{source} {key!r}"))
     cfg.env.aux_labels = cfg.aux
     return cfg
+
+
+def _typed(value, current, where: str):
+    """``value`` checked against the type of the field's current value (an int is accepted for a float)."""
+    if current is None or isinstance(current, (tuple, list, dict)):
+        return value
+    if isinstance(current, bool):
+        ok, what = type(value) is bool, "true or false"
+    elif isinstance(current, int):
+        ok, what = type(value) is int, "an integer"
+    elif isinstance(current, float):
+        ok, what = type(value) in (int, float), "a number"
+        value = float(value) if ok else value
+    elif isinstance(current, str):
+        ok, what = isinstance(value, str), "a string"
+    else:
+        return value
+    if not ok:
+        raise ValueError(f"{where}: expected {what}, got {value!r}")
+    return value

@@ -258,7 +258,7 @@ def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, 
             (f"{where}.metric_overrides.{m}", {**overrides, **e}) for m, e in per_metric.items()
         ]:
             try:
-                apply_overrides(TrainConfig(model=r["model"]), ov).validate()
+                apply_overrides(TrainConfig(model=r["model"]), ov, source="override").validate()
             except ValueError as e:
                 raise _err(path, key, str(e)) from e
         rows.append(Row(r["label"], r["model"], dict(overrides), dict(per_metric)))

@@ -1,0 +1,63 @@
+"""reproduce/profiles.toml: the committed profiles load, and a broken file is named in one line."""
+
+import pytest
+from typer.testing import CliRunner
+
+import emml.profiles
+from emml.cli import app
+from emml.profiles import PROFILES_FILE, ProfileError, load_profiles, profile_config
+
+
+def test_the_committed_profiles_load_and_keep_their_types():
+    profiles = load_profiles()
+    assert {"smoke", "demo", "quick", "paper"} <= set(profiles)
+    cfg = profile_config("quick", "hard")
+    assert cfg.frames == profiles["quick"]["frames_hard"] and cfg.env.height == 84 and cfg.num_envs == 8
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("[smoke\nframes = 1", "not valid TOML"),
+        ("[smoke]\nframes = \"lots\"", "[smoke] 'frames': expected an integer, got 'lots'"),
+        ("[smoke]\nfraems = 512", "[smoke] 'fraems': unknown field; known: model, aux"),
+        ("[smoke]\n\"env.heigth\" = 60", "[smoke] 'env.heigth': unknown field; known: difficulty"),
+        ("[smoke]\n\"ppo.lr\" = \"fast\"", "[smoke] 'ppo.lr': expected a number, got 'fast'"),
+        ("[smoke]\n\"env.shaping\" = 1", "[smoke] 'env.shaping': expected true or false, got 1"),
+        ("[smoke]\nseeds = [0, \"1\"]", "[smoke]: 'seeds' must be a non-empty list of integers"),
+        ("[smoke]\nframes_hard = 1.5", "[smoke]: 'frames_hard' must be an integer"),
+        ("smoke = 3", "[smoke]: a profile is a table of TrainConfig fields"),
+    ],
+)
+def test_a_broken_profiles_file_is_named_with_the_profile_and_field(tmp_path, monkeypatch, text, message):
+    path = tmp_path / "profiles.toml"
+    path.write_text(text)
+    with pytest.raises(ProfileError) as e:
+        load_profiles(path)
+    assert str(e.value).startswith(str(path)) and message in str(e.value)
+    monkeypatch.setattr(emml.profiles, "PROFILES_FILE", path)
+    for command in (["list"], ["train", "--profile", "smoke"], ["tasks", "show"]):
+        result = CliRunner().invoke(app, command)
+        assert result.exit_code == 2 and result.output.startswith(f"error: {path}"), result.output
+        assert "Traceback" not in result.output and message in result.output
+
+
+def test_a_missing_profiles_file_is_named(tmp_path):
+    with pytest.raises(ProfileError, match="cannot be read"):
+        load_profiles(tmp_path / "nope.toml")
+
+
+@pytest.mark.parametrize(
+    "option, message",
+    [
+        ("frames=\"lots\"", "--set 'frames': expected an integer, got 'lots'"),
+        ("env.shaping=1", "--set 'env.shaping': expected true or false, got 1"),
+        ("fraems=5", "--set 'fraems': unknown field"),
+    ],
+)
+def test_a_wrong_set_override_is_named_as_such(option, message, tmp_path):
+    result = CliRunner().invoke(app, ["train", "--profile", "smoke", "--set", option,
+                                      "--set", f"run_root=\"{tmp_path}\""])
+    assert result.exit_code == 2 and message in result.output, result.output
+    assert list(tmp_path.iterdir()) == []
+    assert str(PROFILES_FILE) not in result.output  # the option is blamed, not the profile
