@@ -315,6 +315,8 @@ def eval_checkpoint(
 
     _check_checkpoint(checkpoint)
     install_signal_handlers()
+    if not as_json:
+        typer.echo(f"evaluating {checkpoint}: {episodes} greedy episodes per task and split…", err=True)
     result = evaluate_checkpoint(checkpoint, episodes, seed)
     _echo(result, as_json, ", ".join(f"{k} {v:.3f}" for k, v in result.items()))
 

@@ -10,6 +10,7 @@ the same config resumes from it in the same MLflow run; a finished run is not re
 from __future__ import annotations
 
 import json
+import logging
 import os
 import random
 import subprocess
@@ -28,12 +29,14 @@ from emml.evaluate import evaluate
 from emml.models import build_model
 from emml.results import upsert_result
 from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml.rl.contention import share_cores
 from emml.rl.ppo import make_optimizer, ppo_update
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.tasks.language import Vocabulary, load_dataset
 from emml.tracking import Tracker, project_path, project_root
 
+log = logging.getLogger(__name__)
 CHECKPOINT = "checkpoint.pt"
 RESULTS = "results.json"
 
@@ -153,8 +156,11 @@ class Trainer:
                 results = json.loads((self.dir / RESULTS).read_text())
                 record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
                 return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
-        if cfg.threads:
-            torch.set_num_threads(cfg.threads)
+        threads, warning = share_cores(cfg.threads)
+        if warning:
+            log.warning(warning)
+        if threads:
+            torch.set_num_threads(threads)
         _seed_everything(cfg.seed)
         env_cfg = cfg.env
         model = build_model(
@@ -225,6 +231,7 @@ class Trainer:
                 smoothing=0.1,
             )
             timing = self.timing
+            log_mark = (time.perf_counter(), frames)
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
                 sampler.collect(model, buffer)
@@ -253,7 +260,10 @@ class Trainer:
                     sgn=f"{metrics.get('train/success_sgn', 0):.2f}", eqa=f"{metrics.get('train/success_eqa', 0):.2f}"
                 )
                 if update % cfg.log_every == 0 and not self.quiet:
-                    bar.write(_log_line(update, frames, metrics, timing))
+                    now, since = time.perf_counter(), log_mark
+                    log_mark = (now, frames)
+                    fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
+                    bar.write(_log_line(update, frames, fps, metrics, timing))
                 if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
                     self._eval(model, frames)
                     next_eval += cfg.eval_every
@@ -334,11 +344,11 @@ def _dtype(space) -> torch.dtype:
     return {np.uint8: torch.uint8}.get(space.dtype.type, torch.int64)
 
 
-def _log_line(update: int, frames: int, m: dict, timing: dict) -> str:
+def _log_line(update: int, frames: int, fps: float, m: dict, timing: dict) -> str:
     total = sum(timing.values()) or 1.0
     split = "/".join(f"{100 * v / total:.0f}" for v in timing.values())
     return (
-        f"update {update:>5} frames {frames:>9,} fps {m['charts/fps']:6.0f} "
+        f"update {update:>5} frames {frames:>9,} fps {fps:6.0f} "
         f"sgn {m.get('train/success_sgn', float('nan')):.2f} eqa {m.get('train/success_eqa', float('nan')):.2f} "
         f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
         f"ans {m['losses/answer']:.3f}"
