@@ -130,11 +130,21 @@ class Tracker:
         self._resume_step: int | None = None
         self._logged: dict[str, set[int]] = {}
         """Per metric key, the steps after ``_resume_step`` that a killed process already logged."""
+        self._mirror: Path | None = None
+        self._mirrored: set[tuple[str, int]] = set()
+        """(key, step) pairs after ``_resume_step`` already in the mirror file."""
+
+    def mirror_to(self, path: str | os.PathLike) -> None:
+        """Also append every metric point to ``path`` (CSV: step,key,value), beside the run's checkpoint: the run
+        directory then holds its whole curve, so that it can resume in another MLflow store (another machine,
+        a fresh clone), which gets the curve replayed (:meth:`start`)."""
+        self._mirror = Path(path)
 
     def resume_after(self, step: int) -> None:
         """The run resumes from a checkpoint at ``step``: points a killed process logged after it are kept and
         the resumed run does not log those (key, step) again, so that every curve has one value per step."""
         self._resume_step, self._logged = step, {}
+        self._mirrored = {(k, st) for st, k, _ in read_mirror(self._mirror) if st > step} if self._mirror else set()
 
     def _already_logged(self, key: str, step: int) -> bool:
         if self._resume_step is None or step <= self._resume_step:
@@ -199,6 +209,18 @@ class Tracker:
             tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
             run = _retry(lambda: self._client.create_run(exp_id, tags=tag_strs, run_name=run_name))
             self._run_id = run.info.run_id
+        elif not self._exists(run_id):  # the run dir came from another store: a new run, its curve replayed
+            exp_id = self._experiment_id(experiment)
+            tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
+            tag_strs["emml.resumed_from_run_id"] = run_id
+            run = _retry(lambda: self._client.create_run(exp_id, tags=tag_strs, run_name=run_name))
+            self._run_id = run.info.run_id
+            replayed = self._replay()
+            warnings.warn(
+                f"MLflow run {run_id} is not in this store ({self._uri or tracking_uri()}): continuing as run "
+                f"{self._run_id}, {replayed} metric points replayed from {self._mirror}",
+                stacklevel=2,
+            )
         else:
             run = _retry(lambda: self._client.get_run(run_id))
             self._run_id = run.info.run_id
@@ -216,11 +238,42 @@ class Tracker:
             _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, params=chunk))
         return self.run_id
 
+    def _exists(self, run_id: str) -> bool:
+        from mlflow.exceptions import MlflowException
+
+        try:
+            _retry(lambda: self._client.get_run(run_id))
+            return True
+        except MlflowException as e:
+            if e.error_code == "RESOURCE_DOES_NOT_EXIST":
+                return False
+            raise
+
+    def _replay(self) -> int:
+        """Log the mirror file's points into the current run (one value per key and step: the last)."""
+        from mlflow.entities import Metric
+
+        if self._mirror is None:
+            return 0
+        now = int(time.time() * 1000)
+        points = {(k, st): v for st, k, v in read_mirror(self._mirror)}
+        items = [Metric(k, v, now, st) for (k, st), v in sorted(points.items(), key=lambda x: (x[0][1], x[0][0]))]
+        for i in range(0, len(items), _BATCH_METRICS):
+            chunk = items[i : i + _BATCH_METRICS]
+            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, metrics=chunk))
+        return len(items)
+
     def log_metrics(self, metrics: Mapping[str, float], step: int) -> None:
         """Log all ``metrics`` at ``step`` in one batched call (chunked at MLflow's 1000 limit)."""
         from mlflow.entities import Metric
 
         now = int(time.time() * 1000)
+        if self._mirror is not None:
+            fresh = [(k, v) for k, v in metrics.items() if (k, int(step)) not in self._mirrored]
+            new_file = not self._mirror.exists()
+            with open(self._mirror, "a") as f:
+                f.write("step,key,value\n" if new_file else "")
+                f.writelines(f"{int(step)},{k},{float(v)!r}\n" for k, v in fresh)
         items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items() if not self._already_logged(k, step)]
         for i in range(0, len(items), _BATCH_METRICS):
             chunk = items[i : i + _BATCH_METRICS]
@@ -276,6 +329,24 @@ def set_run_status(run_id: str, status: str, uri: str | None = None) -> None:
         _retry(lambda: client.update_run(run_id, status="RUNNING"))
     else:
         _retry(lambda: client.set_terminated(run_id, status=status))
+
+
+def read_mirror(path: str | os.PathLike | None) -> list[tuple[int, str, float]]:
+    """The points of a run's metrics mirror (:meth:`Tracker.mirror_to`) as (step, key, value); [] if absent.
+    A last line cut short by a kill is skipped."""
+    if path is None or not Path(path).exists():
+        return []
+    out = []
+    with open(path) as f:
+        next(f, None)  # header
+        for line in f:
+            parts = line.rstrip("\n").split(",")
+            if len(parts) == 3 and line.endswith("\n"):
+                try:
+                    out.append((int(parts[0]), parts[1], float(parts[2])))
+                except ValueError:
+                    continue
+    return out
 
 
 def metric_history(run_id: str, key: str, uri: str | None = None) -> list[tuple[int, float]]:

@@ -38,6 +38,8 @@ from emml.tracking import Tracker, project_path, project_root
 
 log = logging.getLogger(__name__)
 CHECKPOINT = "checkpoint.pt"
+METRICS = "metrics.csv"
+"""Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.tracking.Tracker.mirror_to)."""
 RESULTS = "results.json"
 
 
@@ -186,6 +188,9 @@ class Trainer:
             "shaping": env_cfg.shaping,
             "checkpoint": str(self.dir / CHECKPOINT),
         }
+        self.tracker.mirror_to(self.dir / METRICS)
+        if saved is not None:
+            self.tracker.resume_after(frames)  # before start: a replay into a new store reads the mirror
         run_id = self.tracker.start(
             cfg.table,
             cfg.run_name(),
@@ -195,7 +200,6 @@ class Trainer:
             parent_run_id=self.parent_run_id,
         )
         if saved is not None:
-            self.tracker.resume_after(frames)
             if not self.quiet:
                 tqdm.write(f"resuming {cfg.run_name()} from frame {frames:,} (update {update}), MLflow run {run_id}")
         else:  # at once, so that a run killed before its first update resumes this MLflow run, not a second one

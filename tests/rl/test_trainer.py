@@ -15,8 +15,8 @@ from emml.evaluate import evaluate_checkpoint
 from emml.models import MODELS
 from emml.profiles import profile_config
 from emml.rl.checkpoint import load_checkpoint
-from emml.rl.trainer import CHECKPOINT, RESULTS, run_dir, train
-from emml.tracking import metric_history
+from emml.rl.trainer import CHECKPOINT, METRICS, RESULTS, run_dir, train
+from emml.tracking import metric_history, read_mirror
 
 
 def smoke(tracking, **over) -> TrainConfig:
@@ -41,6 +41,17 @@ def test_every_model_trains_a_few_hundred_frames(model, tracking, no_leftovers):
     assert rows.loc[0, "frames"] == 128 and rows.loc[0, "seed"] == 0 and rows.loc[0, "model"] == model
     losses = metric_history(result.run_id, "losses/answer")
     assert len(losses) == 2  # one point per update (2 updates of 2 x 32 frames)
+
+
+def test_a_run_dir_moved_to_another_store_resumes_with_its_whole_curve(tracking, tmp_path, monkeypatch, no_leftovers):
+    first = train(smoke(tracking, frames=128, eval_episodes=1), quiet=True)
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/other.db")  # a fresh clone, another machine
+    with pytest.warns(UserWarning, match=f"MLflow run {first.run_id} is not in this store"):
+        longer = train(smoke(tracking, frames=256, eval_episodes=1), quiet=True)
+    assert longer.resumed and longer.run_id != first.run_id and longer.frames == 256
+    assert [s for s, _ in metric_history(longer.run_id, "charts/update")] == [64, 128, 192, 256]
+    assert [s for s, _ in metric_history(longer.run_id, "eval/sgn_train")] == [128, 256]
+    assert load_checkpoint(longer.run_dir / CHECKPOINT)["run_id"] == longer.run_id
 
 
 def test_finished_run_is_not_retrained_but_can_be_extended(tracking, no_leftovers):
@@ -92,6 +103,9 @@ def _one_run_one_value_per_step(cfg, killed) -> None:
         steps = [s for s, _ in metric_history(result.run_id, key)]
         assert len(steps) == len(set(steps)), (key, steps)  # one value per step, even for the redone updates
     assert [s for s, _ in metric_history(result.run_id, "charts/update")] == list(range(64, 2049, 64))
+    mirror = read_mirror(run_dir(cfg) / METRICS)  # the run dir's own copy of the curves: the same points
+    assert len({(k, st) for st, k, _ in mirror}) == len(mirror)
+    assert [st for st, k, _ in mirror if k == "charts/update"] == list(range(64, 2049, 64))
     runs = mlflow.search_runs(experiment_names=["test"], output_format="list")
     assert [(r.info.run_id, r.info.status) for r in runs] == [(result.run_id, "FINISHED")]  # none left RUNNING
 
