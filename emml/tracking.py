@@ -209,7 +209,7 @@ class Tracker:
             tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
             run = _retry(lambda: self._client.create_run(exp_id, tags=tag_strs, run_name=run_name))
             self._run_id = run.info.run_id
-        elif not self._exists(run_id):  # the run dir came from another store: a new run, its curve replayed
+        elif not self.has_run(run_id):  # the run dir came from another store: a new run, its curve replayed
             exp_id = self._experiment_id(experiment)
             tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
             tag_strs["emml.resumed_from_run_id"] = run_id
@@ -238,7 +238,7 @@ class Tracker:
             _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, params=chunk))
         return self.run_id
 
-    def _exists(self, run_id: str) -> bool:
+    def has_run(self, run_id: str) -> bool:
         from mlflow.exceptions import MlflowException
 
         try:
@@ -248,6 +248,10 @@ class Tracker:
             if e.error_code == "RESOURCE_DOES_NOT_EXIST":
                 return False
             raise
+
+    def export_to_mirror(self, run_id: str) -> int:
+        """Fill the mirror file from the store's copy of ``run_id`` (a run dir from before mirrors existed)."""
+        return export_mirror(run_id, self._mirror, self._uri)
 
     def _replay(self) -> int:
         """Log the mirror file's points into the current run (one value per key and step: the last)."""
@@ -347,6 +351,20 @@ def read_mirror(path: str | os.PathLike | None) -> list[tuple[int, str, float]]:
                 except ValueError:
                     continue
     return out
+
+
+def export_mirror(run_id: str, path: str | os.PathLike, uri: str | None = None) -> int:
+    """Write a run's whole curve from the store to a mirror file (for run dirs from before the mirror existed);
+    returns the number of points."""
+    client = _client(uri)
+    keys = sorted(_retry(lambda: client.get_run(run_id)).data.metrics)
+    points = sorted((st, k, v) for k in keys for st, v in metric_history(run_id, k, uri))
+    tmp = Path(f"{path}.tmp")
+    with open(tmp, "w") as f:
+        f.write("step,key,value\n")
+        f.writelines(f"{st},{k},{v!r}\n" for st, k, v in points)
+    os.replace(tmp, path)
+    return len(points)
 
 
 def metric_history(run_id: str, key: str, uri: str | None = None) -> list[tuple[int, float]]:

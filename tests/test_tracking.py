@@ -85,3 +85,19 @@ def test_retry_on_database_locked(monkeypatch):
     assert tracking._retry(flaky) == "ok" and len(calls) == 3
     with pytest.raises(ValueError):
         tracking._retry(lambda: (_ for _ in ()).throw(ValueError("other")))
+
+
+def test_a_run_exports_its_whole_curve_to_a_mirror_file(tmp_path):
+    from emml.tracking import Tracker, read_mirror
+
+    t = Tracker(f"sqlite:///{tmp_path}/m.db")
+    run_id = t.start("exp", "r")
+    for step in (64, 128):
+        t.log_metrics({"a": step / 2, "b": 1.0}, step=step)
+    t.finish()
+    t.mirror_to(tmp_path / "metrics.csv")
+    assert t.export_to_mirror(run_id) == 4
+    assert read_mirror(tmp_path / "metrics.csv") == [(64, "a", 32.0), (64, "b", 1.0), (128, "a", 64.0), (128, "b", 1.0)]
+    with open(tmp_path / "metrics.csv", "a") as f:
+        f.write("192,a,9")  # a line cut short by a kill: skipped
+    assert len(read_mirror(tmp_path / "metrics.csv")) == 4

@@ -189,6 +189,8 @@ class Trainer:
             "checkpoint": str(self.dir / CHECKPOINT),
         }
         self.tracker.mirror_to(self.dir / METRICS)
+        if saved is not None and not (self.dir / METRICS).exists() and self.tracker.has_run(saved["run_id"]):
+            self.tracker.export_to_mirror(saved["run_id"])  # a run dir from before the mirror existed
         if saved is not None:
             self.tracker.resume_after(frames)  # before start: a replay into a new store reads the mirror
         run_id = self.tracker.start(
