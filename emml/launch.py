@@ -20,9 +20,10 @@ from emml.registry import RunSpec, load_table
 from emml.tracking import project_path
 
 BACKENDS = ("local", "slurm")
-STATES = ("finished", "unrecorded", "partial", "missing")
-"""finished: row in results CSV; unrecorded: run dir finished but no CSV row; partial: interrupted (a checkpoint,
-not finished); missing: nothing yet."""
+STATES = ("finished", "unrecorded", "reference", "partial", "missing")
+"""finished: a finished run dir here and its row in the results CSV; unrecorded: run dir finished but no CSV row;
+reference: a CSV row with no run dir here (results committed to the repository, or made on another machine):
+trained here, its row then replaced; partial: interrupted (a checkpoint, not finished); missing: nothing yet."""
 
 
 GPU_MEMORY_PER_RUN = 3 * 2**30
@@ -81,10 +82,11 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
             path = results_csv(cfg)
             recorded = set(read_results(path)["run_name"])
         rname, rdir = cfg.run_name(), run_dir(cfg)
+        done = (rdir / CHECKPOINT).exists() and (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT)
         if rname in recorded:
-            state = "finished"
+            state = "finished" if done else "partial" if (rdir / CHECKPOINT).exists() else "reference"
         elif (rdir / CHECKPOINT).exists():
-            state = "unrecorded" if (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT) else "partial"
+            state = "unrecorded" if done else "partial"
         else:
             state = "missing"
         out[rname] = (spec, state)
@@ -95,7 +97,7 @@ def _finished(path: Path) -> bool:
     from emml.rl.checkpoint import load_checkpoint
 
     try:
-        return bool(load_checkpoint(path).get("finished"))
+        return bool(load_checkpoint(path, require=()).get("finished"))
     except Exception:  # a checkpoint we cannot read is not finished; the trainer will say why
         return False
 

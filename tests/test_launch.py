@@ -30,6 +30,8 @@ def fake_train(cfg, quiet=False, parent_run_id=None):
         "run_id": "fake",
         "metrics": {"sgn_test": 0.5, "eqa_test": 0.25},
     }
+    save_checkpoint(run_dir(cfg) / CHECKPOINT, {"finished": True})
+    (run_dir(cfg) / RESULTS).write_text("{}")
     record_result(payload, cfg)
 
 
@@ -145,3 +147,15 @@ def test_runs_packed_on_a_gpu_are_capped_by_its_free_memory(monkeypatch):
     monkeypatch.setattr(torch.cuda, "mem_get_info", lambda device=None: (7 * 2**30, 80 * 2**30))
     assert launch.default_jobs("cpu") == 8
     assert launch.default_jobs("cuda") == 7 * 2**30 // launch.GPU_MEMORY_PER_RUN == 2
+
+
+def test_rows_without_a_run_dir_here_are_reference_results_and_are_trained(tracking):
+    # a fresh clone: the committed CSV has rows, but the runs were trained elsewhere
+    launch(tracking, jobs=1)
+    import shutil
+
+    shutil.rmtree(Path(tracking["run_root"]) / "table3")
+    states = run_states("table3", PROFILE, tracking["run_root"], tracking["results_root"])
+    assert sorted(state for _, state in states.values()) == ["missing"] + ["reference"] * 15  # 1 failed: no row
+    again = launch(tracking, jobs=1)
+    assert again.skipped == [] and len(again.done) == 15  # trained here (the failing fake run fails again)
