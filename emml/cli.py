@@ -16,6 +16,8 @@ tasks_app = typer.Typer(no_args_is_help=True, help="The datasets: instructions a
 bench_app = typer.Typer(no_args_is_help=True, help="Throughput benchmarks (ratios measured in one run).")
 app.add_typer(tasks_app, name="tasks")
 app.add_typer(bench_app, name="bench")
+visualize_app = typer.Typer(no_args_is_help=True, help="The paper's figures on a checkpoint (emml/report/visualize.py)")
+app.add_typer(visualize_app, name="visualize")
 
 
 def _fail(message: str) -> None:
@@ -347,6 +349,85 @@ def diagnose(
         ]
     )
     _echo(result, as_json, text)
+
+
+def _models(*paths: Path) -> list[tuple[str, object, object]]:
+    """(label, model, config) per checkpoint, each checked first; the label says aux or no aux and the run."""
+    from emml.evaluate import load_model
+
+    out = []
+    for path in paths:
+        _check_checkpoint(path)
+        model, cfg = load_model(path)
+        out.append((f"{cfg.model} {'aux' if cfg.aux else 'no aux'} ({path.parent.name})", model, cfg))
+    return out
+
+
+@visualize_app.command("channels")
+def visualize_channels(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    compare: Path | None = typer.Option(None, help="A second checkpoint (e.g. the No-Aux run) for another column."),
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+):
+    """The channel figure: per word, its aux label, each model's conv3 channel, and the frame."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.visualize import channels_figure
+
+    models = _models(checkpoint, *([compare] if compare else []))
+    install_signal_handlers()
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"channels-{checkpoint.parent.name}.png"
+    channels_figure([(label, m) for label, m, _ in models], models[0][2].env, path, seed=seed)
+    typer.echo(f"wrote {path}")
+
+
+@visualize_app.command("attention")
+def visualize_attention(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    task: str = typer.Option("sgn", help="sgn | eqa"),
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+    rows: int = typer.Option(6, min=1, help="Steps shown, spread over the episode."),
+):
+    """The attention figure: one greedy episode, rows over time (frame, x_spat, x_Ans, action), x_sent on top."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.visualize import attention_figure, record_episode
+    from emml.tasks.language import check_choice
+
+    try:
+        check_choice("task", task, ("sgn", "eqa"))
+    except ValueError as e:
+        _fail(str(e))
+    ((_, model, cfg),) = _models(checkpoint)
+    install_signal_handlers()
+    out.mkdir(parents=True, exist_ok=True)
+    ep = record_episode(model, cfg.env, task, seed)
+    path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
+    attention_figure(ep, path, rows)
+    typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'} in {len(ep.frames)} steps)")
+
+
+@app.command()
+def video(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    episodes: int = typer.Option(3, min=1, help="Episodes per task (SGN, then EQA unless the run is SGN only)."),
+    out: Path = typer.Option(Path("reports"), help="Folder for the GIFs."),
+    seed: int = 0,
+):
+    """A captioned GIF per greedy episode: the sentence, each action, the outcome."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.visualize import episode_gif, record_episode
+
+    ((_, model, cfg),) = _models(checkpoint)
+    install_signal_handlers()
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
+    for task in tasks:
+        for i in range(episodes):
+            ep = record_episode(model, cfg.env, task, seed + i)
+            path = episode_gif(ep, out / f"{checkpoint.parent.name}-{task}-s{seed + i}.gif")
+            typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'})")
 
 
 @app.command()

@@ -1,0 +1,95 @@
+"""The paper's figures from a smoke checkpoint: the right panels, and the plotted arrays are the model's own."""
+
+import numpy as np
+import pytest
+import torch
+from PIL import Image
+from typer.testing import CliRunner
+
+from emml.cli import app
+from emml.evaluate import load_model, obs_to_torch
+from emml.profiles import profile_config
+from emml.report.visualize import CHANNEL_WORDS, attention_figure, channels_figure, episode_gif, record_episode
+from emml.rl.trainer import CHECKPOINT, train
+
+
+@pytest.fixture(scope="module")
+def checkpoints(tmp_path_factory):
+    """A smoke Dual-Attention checkpoint with aux and one without (64 frames each)."""
+    import os
+
+    root = tmp_path_factory.mktemp("vis")
+    os.environ["MLFLOW_TRACKING_URI"] = f"sqlite:///{root}/mlflow.db"
+    out = {}
+    for aux in (True, False):
+        over = {"run_root": str(root / "runs"), "results_root": str(root / "results"), "table": "vis", "frames": 64,
+                "eval_episodes": 1, "diagnose_episodes": 0, "env.max_steps": 12}
+        out[aux] = train(profile_config("smoke", "easy", over, aux=aux), quiet=True).run_dir / CHECKPOINT
+    del os.environ["MLFLOW_TRACKING_URI"]
+    return out
+
+
+def test_the_recorded_episode_is_the_models_own_output(checkpoints, no_leftovers):
+    model, cfg = load_model(checkpoints[True])
+    ep = record_episode(model, cfg.env, "sgn", seed=3)
+    assert 1 <= len(ep.frames) <= 12 and len(ep.attention) == len(ep.answers) == len(ep.channels) == len(ep.frames)
+    # replay the recorded frames through the model: the same x_spat, x_Ans and conv3 channels, step by step
+    state = model.initial_state(1)
+    for t, frame in enumerate(ep.frames):
+        obs = {"image": frame.transpose(2, 0, 1), "tokens": ep.tokens, "task": 0, "time": t}
+        out, state = model(obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, "cpu"), state,
+                           torch.tensor([[t == 0]]))
+        np.testing.assert_allclose(ep.attention[t], out.attention[0, 0].detach().numpy(), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(ep.answers[t], torch.softmax(out.answer_logits[0, 0], -1).detach().numpy(),
+                                   rtol=1e-5, atol=1e-6)
+        assert int(out.logits[0, 0].argmax()) == ep.moves[t]
+    words = ep.sentence.split()
+    assert set(w for w in words if w in ep.words) <= set(ep.words)
+
+
+def test_the_attention_figure_has_a_row_per_step_with_the_models_arrays(checkpoints, tmp_path, no_leftovers):
+    model, cfg = load_model(checkpoints[True])
+    ep = record_episode(model, cfg.env, "eqa", seed=1)
+    fig = attention_figure(ep, tmp_path / "a.png", rows=3)
+    steps = min(3, len(ep.frames))
+    assert len(fig.axes) == 1 + 3 * steps and (tmp_path / "a.png").stat().st_size > 0
+    overlay = fig.axes[2].get_images()[1].get_array()  # first step row: frame, then frame + x_spat
+    np.testing.assert_array_equal(np.asarray(overlay), ep.attention[0])
+    assert "EQA" in fig.axes[0].get_title()
+
+
+def test_the_channel_figure_compares_aux_and_no_aux_channels(checkpoints, tmp_path, no_leftovers):
+    models = [("aux", load_model(checkpoints[True])[0]), ("no aux", load_model(checkpoints[False])[0])]
+    cfg = load_model(checkpoints[True])[1]
+    fig, labels, channels = channels_figure(models, cfg.env, tmp_path / "c.png")
+    axes = np.array(fig.axes).reshape(len(CHANNEL_WORDS), 4)
+    assert [ax.get_title() for ax in axes[0]] == ["aux label", "aux", "no aux", "frame"]
+    assert [ax.get_ylabel() for ax in axes[:, 0]] == list(CHANNEL_WORDS)
+    v = list(cfg.env.vocabulary).index("red")  # the plotted channel is the model's sigmoid(conv3) for the word
+    np.testing.assert_array_equal(np.asarray(axes[0, 1].get_images()[0].get_array()), channels["aux"][v])
+    np.testing.assert_array_equal(np.asarray(axes[0, 0].get_images()[0].get_array()), labels[v])
+    assert not np.array_equal(channels["aux"], channels["no aux"])  # two models, two columns
+
+
+def test_cli_figures_and_videos(checkpoints, tmp_path, no_leftovers):
+    runner = CliRunner()
+    ck = str(checkpoints[True])
+    r = runner.invoke(app, ["visualize", "channels", ck, "--compare", str(checkpoints[False]), "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["visualize", "attention", ck, "--task", "sgn", "--out", str(tmp_path), "--rows", "2"])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["video", ck, "--episodes", "1", "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    gifs = sorted(tmp_path.glob("*.gif"))
+    assert [g.name.split("-")[-2] for g in gifs] == ["eqa", "sgn"]
+    assert Image.open(gifs[0]).n_frames >= 6
+    assert len(list(tmp_path.glob("channels-*.png"))) == 1 and len(list(tmp_path.glob("attention-sgn-*.png"))) == 1
+    bad = runner.invoke(app, ["visualize", "attention", ck, "--task", "nav"])
+    assert bad.exit_code == 2 and "task='nav'" in bad.output
+
+
+def test_a_gif_per_episode(checkpoints, tmp_path, no_leftovers):
+    model, cfg = load_model(checkpoints[True])
+    ep = record_episode(model, cfg.env, "sgn", seed=0)
+    path = episode_gif(ep, tmp_path / "e.gif")
+    assert Image.open(path).n_frames >= 2  # identical consecutive frames may be merged by the encoder
