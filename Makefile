@@ -57,9 +57,10 @@ transfer: setup
 house3d: setup
 	$(EMML) run table5 $(RUN_OPTS)
 
-# ours beside the paper for every table: reports/tableN-PROFILE.{md,tex} and -curves.{png,pdf}
+# every profile with results: reports/tableN-PROFILE.{md,tex}, -curves.{png,pdf}, the best Dual-Attention run's
+# figures (when its run dir is here) and reports/index.md linking them all
 reports: setup
-	@for t in $(TABLES); do $(EMML) report $$t --profile $(PROFILE) || exit 1; done
+	$(EMML) reports
 
 list: setup
 	$(EMML) list --profile $(PROFILE)

@@ -572,5 +572,15 @@ def report(
     _echo(data, as_json, text)
 
 
+@app.command("reports")
+def reports(out: Path = typer.Option(None, help="Output folder (default: reports/).")):
+    """Every table, curve and figure for the profiles that have results, and reports/index.md linking them."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.index import write_reports
+
+    install_signal_handlers()
+    typer.echo(f"wrote {write_reports(out, log=typer.echo)}")
+
+
 if __name__ == "__main__":
     app()

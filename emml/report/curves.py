@@ -76,17 +76,19 @@ def _mean_band(curves: list[tuple[np.ndarray, np.ndarray]]):
 
 
 def plot_table(
-    name: str, profile: str, results_root: str | Path | None = None, out: str | Path | None = None
+    name: str, profile: str, results_root: str | Path | None = None, out: str | Path | None = None,
+    run_root: str | Path = "runs",
 ) -> tuple[list[Path], list[str]]:
     """Training accuracy vs frames for every row of table `name` under `profile`: a panel per (task, difficulty,
     aux), one line per row (mean over seeds, CI band). Runs come from results/<name>/<profile>.csv (their run_id),
-    curves from MLflow; a run without history is skipped with a note. Returns (paths written, notes)."""
-
+    curves from MLflow, else from the run dir's metrics.csv; a run with neither is skipped with a note. When no run
+    has a curve here, existing figures are kept rather than replaced by empty ones. Returns (paths, notes)."""
     from emml.profiles import profile_seeds
     from emml.registry import load_table
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, results_path
     from emml.results import read_results
-    from emml.tracking import project_root
+    from emml.rl.trainer import METRICS
+    from emml.tracking import project_path, project_root, read_mirror
 
     table = load_table(name)
     notes: list[str] = []
@@ -101,6 +103,7 @@ def plot_table(
     )
     specs = table.runs(profile_seeds(profile))
     cache: dict[str, dict] = {}
+    plotted = False
     for j, (difficulty, aux) in enumerate(panels):
         for i, (key, task) in enumerate(TRAIN_KEYS):
             ax = axes[i][j]
@@ -114,14 +117,19 @@ def plot_table(
                         continue
                     if rname not in cache:
                         cache[rname] = {k: _history(run_ids[rname], k) for k, _ in TRAIN_KEYS}
+                        if not any(cache[rname].values()):  # another store's run: its run dir may be here
+                            mirror = read_mirror(project_path(run_root) / name / rname / METRICS)
+                            cache[rname] = {k: [(st, v) for st, kk, v in mirror if kk == k] for k, _ in TRAIN_KEYS}
                         if not any(cache[rname].values()):
-                            notes.append(f"{rname}: no MLflow history (run {run_ids[rname]}); skipped")
+                            notes.append(f"{rname}: no curve (MLflow run {run_ids[rname]} not here, no run dir); "
+                                         "skipped")
                     hist = cache[rname][key]
                     if hist:
                         steps, values = zip(*hist)
                         curves.append((np.asarray(steps, float), np.asarray(values, float)))
                 if not curves:
                     continue
+                plotted = True
                 grid, mean, band = _mean_band(curves)
                 color = f"C{k % 10}"
                 ax.plot(
@@ -152,6 +160,9 @@ def plot_table(
     out = Path(out) if out is not None else project_root() / "reports"
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}-{profile}-curves.png", out / f"{name}-{profile}-curves.pdf"]
+    if not plotted and any(p.exists() for p in paths):
+        plt.close(fig)
+        return paths, notes + [f"no run of {name} [{profile}] has a curve here: kept the existing figures"]
     for p in paths:
         fig.savefig(p, dpi=120)
     plt.close(fig)

@@ -36,9 +36,28 @@ def test_plot_table_skips_runs_without_history(tracking, tmp_path):
     paths, notes = plot_table("table3", "quick", results_root=tmp_path / "results", out=tmp_path / "reports")
     assert [p.name for p in paths] == ["table3-quick-curves.png", "table3-quick-curves.pdf"]
     assert all(p.stat().st_size > 1000 for p in paths)
-    assert any("da_no_sa-easy-aux-s0-quick" in n and "no MLflow history" in n for n in notes)
+    assert any("da_no_sa-easy-aux-s0-quick" in n and "no curve (MLflow run" in n for n in notes)
 
 
 def test_plot_table_placeholder(tracking, tmp_path):
     paths, notes = plot_table("table5", "quick", results_root=tmp_path, out=tmp_path)
     assert paths == [] and "placeholder" in notes[0]
+
+
+def test_curves_come_from_the_run_dir_when_mlflow_lacks_the_run_and_are_never_blanked(tracking, tmp_path):
+    csv = tmp_path / "results" / "table3" / "quick.csv"
+    csv.parent.mkdir(parents=True)
+    name = "dual_attention-easy-aux-s0-quick"
+    pd.DataFrame([{"run_name": name, "run_id": "from-another-machine", "seed": 0, "frames": 2048}]).to_csv(csv)
+    out = tmp_path / "reports"
+    kw = dict(results_root=tmp_path / "results", out=out, run_root=tmp_path / "runs")
+    out.mkdir()
+    (out / "table3-quick-curves.png").write_bytes(b"the committed figure")
+    paths, notes = plot_table("table3", "quick", **kw)  # no history anywhere: the committed figure stays
+    assert (out / "table3-quick-curves.png").read_bytes() == b"the committed figure"
+    assert any("kept the existing figures" in n for n in notes)
+    run = tmp_path / "runs" / "table3" / name
+    run.mkdir(parents=True)
+    (run / "metrics.csv").write_text("step,key,value\n1024,train/success_sgn,0.25\n2048,train/success_sgn,0.5\n")
+    paths, notes = plot_table("table3", "quick", **kw)  # the run dir's mirror gives the curve
+    assert not any(name in n for n in notes) and (out / "table3-quick-curves.png").stat().st_size > 1000

@@ -93,3 +93,32 @@ def test_a_gif_per_episode(checkpoints, tmp_path, no_leftovers):
     ep = record_episode(model, cfg.env, "sgn", seed=0)
     path = episode_gif(ep, tmp_path / "e.gif")
     assert Image.open(path).n_frames >= 2  # identical consecutive frames may be merged by the encoder
+
+
+def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints, tmp_path, monkeypatch,
+                                                                     no_leftovers):
+    import shutil
+
+    from emml.report.index import write_reports
+    from emml.rl.trainer import record_result
+
+    # the two smoke runs recorded as table2 rows, their run dirs where table2 keeps them
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
+    for aux, ckpt in checkpoints.items():
+        model, cfg = load_model(ckpt)
+        cfg.table, cfg.run_root, cfg.results_root = "table2", str(tmp_path / "runs"), str(tmp_path / "results")
+        name = f"dual_attention-easy-{'aux' if aux else 'noaux'}-s0-smoke"
+        shutil.copytree(ckpt.parent, tmp_path / "runs" / "table2" / name)
+        payload = {"run_name": name, "table": "table2", "model": "dual_attention", "difficulty": "easy", "aux": aux,
+                   "seed": 0, "profile": "smoke", "frames": 64, "git_sha": "12e0077", "run_id": "x",
+                   "eval_episodes": 1, "metrics": {"sgn_train": 0.5, "sgn_test": 0.5, "eqa_train": 0.5,
+                                                   "eqa_test": 0.5}}
+        record_result(payload, cfg)
+    index = write_reports(tmp_path / "reports", tmp_path / "results", tmp_path / "runs", log=lambda m: None)
+    text = index.read_text()
+    assert "## Profile `smoke`" in text and "**table2** (2 runs, frames 64)" in text
+    assert "[table2-smoke.md](table2-smoke.md)" in text
+    assert "figures of the best Dual-Attention run `dual_attention-easy-aux-s0-smoke`" in text
+    run = "dual_attention-easy-aux-s0-smoke"
+    for link in (f"channels-{run}.png", f"attention-sgn-{run}-s0.png", f"attention-eqa-{run}-s1.png"):
+        assert f"({link})" in text and (tmp_path / "reports" / link).exists()
