@@ -46,6 +46,15 @@ def _check_checkpoint(path: Path) -> None:
         _fail(str(e))
 
 
+def _out(path: Path) -> Path:
+    """An output folder, made; relative paths resolve under the checkout like runs/ and results/ (README)."""
+    from emml.tracking import project_path
+
+    path = project_path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
 def _echo(data, as_json: bool, text: str) -> None:
     typer.echo(json.dumps(data, indent=2) if as_json else text)
 
@@ -109,7 +118,7 @@ def oracle(
     if video is not None:
         from emml.report.oracle_video import oracle_demo
 
-        result["video"] = [str(p) for p in oracle_demo(video, episodes=min(episodes, 3), seed=seed)]
+        result["video"] = [str(p) for p in oracle_demo(_out(video), episodes=min(episodes, 3), seed=seed)]
     _echo(
         result,
         as_json,
@@ -376,7 +385,7 @@ def visualize_channels(
 
     models = _models(checkpoint, *([compare] if compare else []))
     install_signal_handlers()
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out(out)
     path = out / f"channels-{checkpoint.parent.name}.png"
     channels_figure([(label, m) for label, m, _ in models], models[0][2].env, path, seed=seed)
     typer.echo(f"wrote {path}")
@@ -401,7 +410,7 @@ def visualize_attention(
         _fail(str(e))
     ((_, model, cfg),) = _models(checkpoint)
     install_signal_handlers()
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out(out)
     ep = record_episode(model, cfg.env, task, seed)
     path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
     attention_figure(ep, path, rows)
@@ -421,7 +430,7 @@ def video(
 
     ((_, model, cfg),) = _models(checkpoint)
     install_signal_handlers()
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out(out)
     tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
     for task in tasks:
         for i in range(episodes):
@@ -449,7 +458,7 @@ def demo(
     from emml.rl.trainer import train as run
 
     result = run(cfg)
-    for path in write_demo_report(cfg, result, out):
+    for path in write_demo_report(cfg, result, _out(out)):
         typer.echo(f"wrote {path}")
 
 
@@ -558,14 +567,14 @@ def report(
     if profile not in load_profiles():
         _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
     try:
-        data = report_table(table, profile, out=out)
+        data = report_table(table, profile, out=_out(out) if out else None)
     except ValueError as e:
         _fail(str(e))
     data["notes"] = []
     if curves:
         from emml.report.curves import plot_table
 
-        paths, notes = plot_table(table, profile, out=out)
+        paths, notes = plot_table(table, profile, out=_out(out) if out else None)
         data["paths"] += [str(p) for p in paths]
         data["notes"] = notes
     text = "\n".join([data["caption"], *[f"note: {n}" for n in data["notes"]], *[f"wrote {p}" for p in data["paths"]]])
@@ -579,7 +588,7 @@ def reports(out: Path = typer.Option(None, help="Output folder (default: reports
     from emml.report.index import write_reports
 
     install_signal_handlers()
-    typer.echo(f"wrote {write_reports(out, log=typer.echo)}")
+    typer.echo(f"wrote {write_reports(_out(out) if out else None, log=typer.echo)}")
 
 
 if __name__ == "__main__":

@@ -178,6 +178,9 @@ def run_table(
         for a in args:
             _collect(report, a[0], a[1], lambda a=a: _train_one(*a), log)
     else:
+        from emml.envs.engine import private_mp_tempdir
+
+        private_mp_tempdir()
         ctx = multiprocessing.get_context("forkserver")
         with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
             futures = {pool.submit(_train_one, *a): a for a in args}

@@ -12,12 +12,17 @@ from __future__ import annotations
 import atexit
 import contextlib
 import glob
+import hashlib
+import multiprocessing
 import multiprocessing.util
 import os
+import shutil
 import signal
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 SHM_DIR = "/dev/shm"
 
@@ -70,11 +75,41 @@ def _instance_id(cmd: str) -> str | None:
     return argv[argv.index("+viz_instance_id") + 1] if "+viz_instance_id" in argv[:-1] else None
 
 
+def engine_home() -> Path:
+    """Where engines run: ViZDoom writes ``_vizdoom/`` and ``_vizdoom.ini`` into its working directory, which is
+    this one (in the temp dir, per user) rather than the user's. ``_vizdoom/`` is made here first: engines that
+    start together race on the engine's own check-then-create."""
+    home = Path(tempfile.gettempdir()) / f"emml-vizdoom-{os.getuid()}"
+    (home / "_vizdoom").mkdir(parents=True, exist_ok=True)
+    return home
+
+
+def engine_launcher(binary: str) -> Path:
+    """A launcher that starts the engine ``binary`` in :func:`engine_home` (``exec``: the engine keeps the pid
+    and name the library and :func:`start_engine` expect). Written once per content, atomically."""
+    home = engine_home()
+    script = f'#!/bin/sh\ncd "{home}" || exit 1\nexec "{binary}" "$@"\n'
+    path = home / f"vizdoom-{hashlib.sha1(script.encode()).hexdigest()[:12]}.sh"
+    if not path.exists():
+        fd, tmp = tempfile.mkstemp(dir=home, suffix=".tmp")
+        with os.fdopen(fd, "w") as f:
+            f.write(script)
+        os.chmod(tmp, 0o755)
+        os.replace(tmp, path)
+    return path
+
+
 def start_engine(game) -> Engine:
-    """``game.init()`` and record the engine it forked. Raises EngineError on failure."""
+    """``game.init()`` (the engine running in :func:`engine_home`) and record the engine it forked. Raises
+    EngineError on failure."""
     before = set(_children_named("vizdoom"))
-    # the engine makes ./_vizdoom/ if absent; engines starting together race on that check-then-create
-    os.makedirs("_vizdoom", exist_ok=True)
+    binary = game.get_vizdoom_path()
+    if not binary.endswith(".sh"):
+        if not binary:  # the library's default: the engine shipped in its package
+            import vizdoom
+
+            binary = os.path.join(os.path.dirname(vizdoom.__file__), "vizdoom")
+        game.set_vizdoom_path(str(engine_launcher(binary)))
     try:
         game.init()
     except Exception as e:  # vizdoom raises its own exception types
@@ -214,6 +249,26 @@ def _end_all() -> None:
 # Worker processes of multiprocessing leave through os._exit, which skips atexit; multiprocessing's own exit
 # finalizers do run there, so the same net is hung on them too (it ends what an interrupted close left).
 multiprocessing.util.Finalize(None, _end_all, exitpriority=100)
+
+
+def private_mp_tempdir() -> Path:
+    """Put this process's multiprocessing temp dir (the forkserver's socket) under a folder of its own,
+    ``<tmp>/emml-mp-<uid>/<pid>/``, and remove the folders of processes that are gone. multiprocessing removes its
+    ``pymp-*`` dir at a normal exit but a SIGKILLed learner leaves it: here, the next start sweeps it away, without
+    ever touching another program's ``/tmp/pymp-*``. Call before the first worker process starts."""
+    base = Path(tempfile.gettempdir()) / f"emml-mp-{os.getuid()}"
+    mine = base / str(os.getpid())
+    mine.mkdir(parents=True, exist_ok=True)
+    for other in base.iterdir():
+        if other.name.isdigit() and other != mine and not Path(f"/proc/{other.name}").exists():
+            shutil.rmtree(other, ignore_errors=True)
+    if multiprocessing.current_process()._config.get("tempdir") is None:  # not created yet: create it in ours
+        saved, tempfile.tempdir = tempfile.tempdir, str(mine)
+        try:
+            multiprocessing.util.get_temp_dir()
+        finally:
+            tempfile.tempdir = saved
+    return mine
 
 
 def _raise_exit(signum, frame):

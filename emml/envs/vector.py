@@ -20,7 +20,14 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 from gymnasium.vector.async_vector_env import AsyncState
 
 from emml.config import DoomConfig
-from emml.envs.engine import EngineError, RestartBudget, WorkerDied, become_subreaper, end_orphan_engines
+from emml.envs.engine import (
+    EngineError,
+    RestartBudget,
+    WorkerDied,
+    become_subreaper,
+    end_orphan_engines,
+    private_mp_tempdir,
+)
 
 
 class RestartingEnv(gym.Wrapper):
@@ -173,6 +180,7 @@ def make_vector_env(
     fns = [_EnvFactory(config, max_restarts, restart_window) for _ in range(num_envs)]
     if not asynchronous:
         return SyncDoomVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP, copy=copy)
+    private_mp_tempdir()
     return AsyncDoomVectorEnv(
         fns,
         copy=copy,

@@ -1,3 +1,5 @@
+import os
+
 import pytest
 
 from emml.envs.engine import EngineError, RestartBudget, WorkerDied
@@ -20,3 +22,54 @@ def test_restart_budget_raises_the_error_type_it_was_given():
     budget = RestartBudget(max_restarts=0, window=10, what="env worker", error=WorkerDied)
     with pytest.raises(WorkerDied, match="env worker died 1 times"):
         budget.death(RuntimeError("killed"))
+
+
+def test_engines_run_in_their_own_dir_not_the_users(tmp_path, monkeypatch, no_leftovers):
+    from emml.envs.doom import DoomEnv
+    from emml.envs.engine import engine_home
+
+    monkeypatch.chdir(tmp_path)
+    env = DoomEnv(height=60, width=108)
+    try:
+        env.reset(seed=0)
+        env.step([0, 0])
+        assert os.readlink(f"/proc/{env._engine.pid}/cwd") == str(engine_home())
+    finally:
+        env.close()
+    assert list(tmp_path.iterdir()) == []  # no _vizdoom/, no _vizdoom.ini in the user's directory
+
+
+def _start_one(directory: str, barrier, out) -> None:
+    import tempfile
+
+    from emml.envs.doom import DoomEnv
+
+    tempfile.tempdir = directory  # a fresh temp dir: the map, the launcher and the engine dir are all first made here
+    env = DoomEnv(height=60, width=108)
+    try:
+        barrier.wait()
+        env.reset(seed=0)
+        env.step([0, 0])
+        out.put("ok")
+    except Exception as e:  # reported to the parent
+        out.put(repr(e))
+    finally:
+        env.close()
+
+
+def test_engines_starting_together_in_a_fresh_temp_dir_all_start(tmp_path, monkeypatch, no_leftovers):
+    import multiprocessing
+
+    monkeypatch.chdir(tmp_path)
+    ctx = multiprocessing.get_context("fork")
+    n = 6
+    barrier, out = ctx.Barrier(n), ctx.Queue()
+    procs = [ctx.Process(target=_start_one, args=(str(tmp_path / "tmp"), barrier, out)) for _ in range(n)]
+    (tmp_path / "tmp").mkdir()
+    for p in procs:
+        p.start()
+    results = [out.get(timeout=120) for _ in procs]
+    for p in procs:
+        p.join(timeout=60)
+    assert results == ["ok"] * n
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tmp"]

@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -64,7 +65,7 @@ def test_finished_run_is_not_retrained_but_can_be_extended(tracking, no_leftover
     assert [s for s, _ in metric_history(first.run_id, "charts/update")] == [64, 128, 192]
 
 
-def _train_and_sigkill(tracking, ready) -> tuple[TrainConfig, dict]:
+def _train_and_sigkill(tracking, ready) -> tuple[TrainConfig, dict, int]:
     """`emml train` (smoke, 2,048 frames, a checkpoint every 2 updates) in a subprocess, SIGKILLed as soon as
     ``ready(checkpoint, logged_steps)`` holds; returns the config and the checkpoint it left."""
     args = [sys.executable, "-m", "emml.cli", "train", "--profile", "smoke", "--table", "test", "--frames", "2048",
@@ -89,13 +90,18 @@ def _train_and_sigkill(tracking, ready) -> tuple[TrainConfig, dict]:
     finally:
         if proc.poll() is None:
             proc.kill()
-    return cfg, load_checkpoint(path)
+    return cfg, load_checkpoint(path), proc.pid
 
 
-def _one_run_one_value_per_step(cfg, killed) -> None:
+def _one_run_one_value_per_step(cfg, killed, pid, sampler_started: bool = True) -> None:
+    import tempfile
+
     import mlflow
 
+    leftover = Path(tempfile.gettempdir()) / f"emml-mp-{os.getuid()}" / str(pid)
+    assert any(leftover.glob("pymp-*")) or not sampler_started, "the killed learner's multiprocessing dir"
     result = train(cfg, quiet=True)
+    assert not leftover.exists()  # swept by the next learner
     assert result.resumed and result.run_id == killed["run_id"] and result.frames == 2048
     done = load_checkpoint(run_dir(cfg) / CHECKPOINT)
     assert done["finished"] and done["update"] == 32 and done["frames"] == 2048
@@ -112,15 +118,15 @@ def _one_run_one_value_per_step(cfg, killed) -> None:
 
 def test_resume_after_sigkill_between_checkpoints_logs_each_step_once(tracking, no_leftovers):
     # killed after it logged an update that its last checkpoint does not hold: the resumed run redoes that update
-    cfg, killed = _train_and_sigkill(tracking, lambda c, steps: c["update"] >= 4 and max(steps) > c["frames"])
+    cfg, killed, pid = _train_and_sigkill(tracking, lambda c, steps: c["update"] >= 4 and max(steps) > c["frames"])
     assert not killed["finished"] and 4 <= killed["update"] < 32
-    _one_run_one_value_per_step(cfg, killed)
+    _one_run_one_value_per_step(cfg, killed, pid)
 
 
 def test_a_run_killed_before_its_first_update_is_resumed_not_duplicated(tracking, no_leftovers):
-    cfg, killed = _train_and_sigkill(tracking, lambda c, steps: True)  # the first checkpoint there is
+    cfg, killed, pid = _train_and_sigkill(tracking, lambda c, steps: True)  # the first checkpoint there is
     assert killed["update"] == 0  # the checkpoint written at start: before it, a rerun made a second MLflow run
-    _one_run_one_value_per_step(cfg, killed)
+    _one_run_one_value_per_step(cfg, killed, pid, sampler_started=False)
 
 
 def test_a_failing_run_is_marked_failed(tracking, monkeypatch, no_leftovers):
