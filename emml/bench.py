@@ -111,6 +111,18 @@ class MemoryTracker:
     def finish(self, status: str = "FINISHED") -> None:
         pass
 
+    def mirror_to(self, path) -> None:  # the run dir's metrics.csv: a benchmark keeps nothing
+        pass
+
+    def resume_after(self, step: int) -> None:
+        pass
+
+    def has_run(self, run_id: str) -> bool:
+        return True
+
+    def export_to_mirror(self, run_id: str) -> int:
+        return 0
+
 
 def _model_only(cfg, updates: int) -> float:
     """Frames/s of acting (T batched forward steps) + one PPO update on synthetic observations of the real shapes."""

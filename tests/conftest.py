@@ -15,8 +15,25 @@ SMOKE = {"height": 60, "width": 108}
 """The smoke profile's input size: every code path, cheaply (conv3 grid 2×5)."""
 
 
+def _ancestors(pid: int) -> set[int]:
+    out = set()
+    while pid > 1 and pid not in out:
+        out.add(pid)
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                pid = int(f.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            break
+    return out
+
+
 def engine_pids() -> set[int]:
-    """Every running ViZDoom engine on the machine (tests run one at a time, so all of them are ours)."""
+    """Every running ViZDoom engine on the machine (tests run one at a time, so all of them are ours), except
+    those of an emml learner running beside the tests (a training in the background: its evaluations start
+    engines at any time). An orphaned engine (its owner gone) is always counted."""
+    from emml.rl.contention import other_learners
+
+    others = set(other_learners())
     pids = set()
     for comm in glob.glob("/proc/[0-9]*/comm"):
         try:
@@ -24,7 +41,7 @@ def engine_pids() -> set[int]:
                 if f.read().strip() == "vizdoom":
                     pid = int(comm.split("/")[2])
                     with open(f"/proc/{pid}/stat") as f:
-                        if f.read().rsplit(")", 1)[1].split()[0] != "Z":
+                        if f.read().rsplit(")", 1)[1].split()[0] != "Z" and not (others & _ancestors(pid)):
                             pids.add(pid)
         except (OSError, ValueError):
             continue
@@ -32,7 +49,24 @@ def engine_pids() -> set[int]:
 
 
 def shm_files() -> list[str]:
-    return glob.glob("/dev/shm/ViZDoom*")
+    """Every engine's shared-memory file, except those of a learner's engines beside the tests (engine_pids)."""
+    from emml.rl.contention import other_learners
+
+    others, foreign = set(other_learners()), set()
+    for comm in glob.glob("/proc/[0-9]*/comm"):
+        try:
+            with open(comm) as f:
+                if f.read().strip() != "vizdoom":
+                    continue
+            pid = int(comm.split("/")[2])
+            if others & _ancestors(pid):
+                with open(f"/proc/{pid}/cmdline", "rb") as f:
+                    argv = f.read().decode(errors="replace").split("\0")
+                if "+viz_instance_id" in argv[:-1]:
+                    foreign.add(argv[argv.index("+viz_instance_id") + 1])
+        except (OSError, ValueError):
+            continue
+    return [p for p in glob.glob("/dev/shm/ViZDoom*") if not any(i in p for i in foreign)]
 
 
 @pytest.fixture

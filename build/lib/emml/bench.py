@@ -1,0 +1,273 @@
+"""`emml bench env`: throughput of our env against the raw engine it wraps, measured in one run.
+
+Raw: the same DoomGame (same map and objects, resolution, buffers, tics per step) stepped with `make_action` +
+`get_state`.
+Ours: `DoomEnv.step` (action mapping, resize, labels, rewards, observation dict). Both with random moves; reset
+time is measured apart (ours: sampling a scene, placing 5 objects; raw: `new_episode`). Then the vector env with
+1 and 2 worker processes, resets included.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from emml.config import DoomConfig
+from emml.envs.doom import DoomEnv
+from emml.envs.vector import make_vector_env
+
+
+def _raw(env: DoomEnv, steps: int, rng) -> tuple[float, float]:
+    env.reset(seed=0)  # the same room with the same 5 objects; raw steps never end the episode
+    game = env._game()
+    turn = env._turn
+    choices = [[1, 0], [0, -turn], [0, turn], [0, 0]]
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        game.make_action(choices[rng.integers(4)], env.cfg.frame_skip)
+        game.get_state()
+    step_time = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for _ in range(20):
+        game.new_episode()
+        game.get_state()
+    return steps / step_time, (time.perf_counter() - t0) / 20
+
+
+def _ours(env: DoomEnv, steps: int, rng) -> tuple[float, float]:
+    env.reset(seed=0)
+    step_time, reset_time, resets, done = 0.0, 0.0, 0, 0
+    while done < steps:
+        action = np.array([rng.integers(3), 0])  # moves only: answers would end EQA episodes at once
+        t0 = time.perf_counter()
+        _, _, terminated, truncated, _ = env.step(action)
+        step_time += time.perf_counter() - t0
+        done += 1
+        if terminated or truncated:
+            t0 = time.perf_counter()
+            env.reset()
+            reset_time += time.perf_counter() - t0
+            resets += 1
+    for _ in range(20):  # enough resets for a stable figure
+        t0 = time.perf_counter()
+        env.reset()
+        reset_time += time.perf_counter() - t0
+        resets += 1
+    return steps / step_time, reset_time / resets
+
+
+def _vector(config: DoomConfig, workers: int, steps: int) -> float:
+    with make_vector_env(config, workers) as venv:
+        venv.reset(seed=0)
+        rng = np.random.default_rng(0)
+        t0 = time.perf_counter()
+        for _ in range(steps // workers):
+            venv.step(np.stack([rng.integers(3, size=workers), np.zeros(workers, dtype=np.int64)], axis=1))
+        return (steps // workers) * workers / (time.perf_counter() - t0)
+
+
+def bench_env(config: DoomConfig, steps: int = 2000, vector_steps: int = 2000) -> dict:
+    """Steps/s of raw engine vs our env (labels off and on), and of the vector env with 1 and 2 workers."""
+    rng = np.random.default_rng(0)
+    out: dict = {"height": config.height, "width": config.width, "render": "x".join(map(str, config.render_size()))}
+    for aux in (False, True):
+        cfg = DoomConfig(**{**config.to_dict(), "aux_labels": aux})
+        env = DoomEnv(cfg)
+        try:
+            raw_sps, raw_reset = _raw(env, steps, rng)
+            ours_sps, ours_reset = _ours(env, steps, rng)
+        finally:
+            env.close()
+        key = "labels_on" if aux else "labels_off"
+        out[key] = {
+            "raw_steps_per_s": round(raw_sps, 1),
+            "env_steps_per_s": round(ours_sps, 1),
+            "ratio": round(ours_sps / raw_sps, 3),
+            "raw_new_episode_ms": round(raw_reset * 1000, 2),
+            "env_reset_ms": round(ours_reset * 1000, 2),
+        }
+    for workers in (1, 2):
+        out[f"vector_{workers}_workers_steps_per_s"] = round(_vector(config, workers, vector_steps), 1)
+    return out
+
+
+# --- `emml bench train` ---------------------------------------------------------------------------------------
+
+
+class MemoryTracker:
+    """Stands in for tracking.Tracker in benchmarks: keeps metrics in memory, writes nothing."""
+
+    def __init__(self):
+        self.run_id = "bench"
+        self.history: list[tuple[int, dict]] = []
+
+    def start(self, *args, **kwargs) -> str:
+        return self.run_id
+
+    def log_metrics(self, metrics: dict, step: int) -> None:
+        self.history.append((step, dict(metrics)))
+
+    def finish(self, status: str = "FINISHED") -> None:
+        pass
+
+
+def _model_only(cfg, updates: int) -> float:
+    """Frames/s of acting (T batched forward steps) + one PPO update on synthetic observations of the real shapes."""
+    import torch
+
+    from emml.envs.labels import channel_mask, default_aux_words
+    from emml.geometry import conv_output_size
+    from emml.models import build_model
+    from emml.rl.ppo import make_optimizer, ppo_update
+    from emml.rl.rollout import RolloutBuffer
+    from emml.tasks.language import Vocabulary, load_dataset
+
+    env, device = cfg.env, torch.device(cfg.device)
+    vocab = Vocabulary.from_dataset(load_dataset(env.dataset))
+    V, (h, w), B, T = len(vocab), conv_output_size(env.height, env.width), cfg.num_envs, cfg.num_steps
+    model = build_model(cfg.model, V, env.height, env.width, env.max_steps).to(device)
+    optimizer = make_optimizer(model.parameters(), cfg.ppo)
+    shapes = {
+        "image": ((3, env.height, env.width), torch.uint8),
+        "tokens": ((env.max_words,), torch.int64),
+        "task": ((), torch.int64),
+        "time": ((), torch.int64),
+    }
+    if cfg.aux:
+        shapes["aux"] = ((V, h, w), torch.uint8)
+    buffer = RolloutBuffer(T, B, shapes, device=device)
+    gen = torch.Generator().manual_seed(0)
+    for key, tensor in buffer.obs.items():
+        high = {"image": 256, "tokens": V + 1, "task": 2, "time": env.max_steps, "aux": 2}[key]
+        tensor.copy_(torch.randint(0, high, tensor.shape, generator=gen))
+    buffer.rewards.copy_(torch.randn(buffer.rewards.shape, generator=gen))
+    mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))), device=device)
+
+    def forward(o, s, e):
+        return vars(model(o, s, e)[0])
+
+    def one_update():
+        state = model.initial_state(B, device=device)
+        buffer.set_initial_state(state)
+        with torch.no_grad():
+            for t in range(T):  # acting: one batched step at a time, as in a rollout
+                out, state = model(
+                    {k: v[t : t + 1] for k, v in buffer.obs.items()}, state, buffer.episode_starts[t : t + 1]
+                )
+                buffer.values[t] = out.value[0]
+        buffer.compute_returns(torch.zeros(B, device=device), cfg.ppo.gamma, cfg.ppo.gae_lambda)
+        ppo_update(forward, optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux)
+
+    def sync():
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    one_update()  # warm-up
+    sync()
+    t0 = time.perf_counter()
+    for _ in range(updates):
+        one_update()
+    sync()
+    return updates * B * T / (time.perf_counter() - t0)
+
+
+def _end_to_end(cfg, updates: int) -> tuple[float, dict]:
+    """Frames/s of the trainer's own loop (real envs) over ``updates`` updates after a warm-up one, and its time
+    split. Writes nothing outside a temporary directory."""
+    import dataclasses
+    import tempfile
+
+    from emml.rl.trainer import Trainer
+
+    with tempfile.TemporaryDirectory() as tmp:
+        run = dataclasses.replace(
+            cfg,
+            frames=(updates + 1) * cfg.frames_per_update,
+            eval_episodes=1,
+            checkpoint_every=10**6,
+            log_every=10**6,
+            run_root=tmp,
+            results_root=tmp,
+            table="bench",
+        )
+        run.env = dataclasses.replace(cfg.env)
+        tracker = MemoryTracker()
+        trainer = Trainer(run, tracker=tracker, quiet=True)
+        trainer.train()
+    fps = [m["charts/fps"] for _, m in tracker.history if "charts/fps" in m][1:]  # the first pays for warm-up
+    total = sum(trainer.timing.values()) or 1.0
+    return sum(fps) / len(fps), {k: round(v / total, 3) for k, v in trainer.timing.items()}
+
+
+def _raw_steps(config: DoomConfig, steps: int) -> float:
+    """Raw engine steps/s of one process (the simulator alone, as in `bench env`)."""
+    env = DoomEnv(config)
+    try:
+        return _raw(env, steps, np.random.default_rng(0))[0]
+    finally:
+        env.close()
+
+
+def _pool(n: int):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("forkserver"))
+
+
+def simulator_limit(config: DoomConfig, processes: int, steps: int = 5000) -> float:
+    """Aggregate raw engine steps/s of ``processes`` engines stepped at once: what the machine's cores can
+    simulate at most, the ceiling of any number of packed runs."""
+    with _pool(processes) as pool:
+        return sum(pool.map(_raw_steps, [config] * processes, [steps] * processes))
+
+
+def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000) -> dict:
+    """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
+    split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
+    N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
+    the raw simulator limit of all cores."""
+    import dataclasses
+    import os
+
+    before = _model_only(cfg, updates)
+    e2e, split = _end_to_end(cfg, updates)
+    after = _model_only(cfg, updates)  # measured on both sides of the end-to-end run: this machine's speed drifts
+    model_fps = (before + after) / 2
+    out = {
+        "model": cfg.model,
+        "aux": cfg.aux,
+        "height": cfg.env.height,
+        "width": cfg.env.width,
+        "num_envs": cfg.num_envs,
+        "num_steps": cfg.num_steps,
+        "env_groups": cfg.env_groups,
+        "device": cfg.device,
+        "updates": updates,
+        "model_only_fps": round(model_fps, 1),
+        "model_only_before_after": [round(before, 1), round(after, 1)],
+        "end_to_end_fps": round(e2e, 1),
+        "ratio": round(e2e / model_fps, 3),
+        "time_split": split,
+    }
+    if cfg.env_groups > 1:
+        lockstep, _ = _end_to_end(dataclasses.replace(cfg, env_groups=1), updates)
+        out["lockstep_fps"] = round(lockstep, 1)
+        out["double_buffer_gain"] = round(e2e / lockstep, 3)
+    if runs:
+        cores = os.cpu_count() or 1
+        packed = dataclasses.replace(cfg, threads=max(1, cores // runs))
+        with _pool(runs) as pool:
+            per_run = [fps for fps, _ in pool.map(_end_to_end, [packed] * runs, [updates] * runs)]
+        limit = simulator_limit(cfg.env, cores, limit_steps)
+        out["packed"] = {
+            "runs": runs,
+            "threads_per_run": packed.threads,
+            "per_run_fps": [round(f, 1) for f in per_run],
+            "aggregate_fps": round(sum(per_run), 1),
+            "simulator_limit_fps": round(limit, 1),
+            "fraction_of_limit": round(sum(per_run) / limit, 3),
+            "cores": cores,
+        }
+    return out

@@ -1,0 +1,595 @@
+"""`emml …`: one typer app. Thin: parses arguments, calls the library, prints (or `--json`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="EMML: reproduce 'Embodied Multimodal Multitask Learning' (Chaplot et al., 2019) on ViZDoom.",
+)
+tasks_app = typer.Typer(no_args_is_help=True, help="The datasets: instructions and questions with their splits.")
+bench_app = typer.Typer(no_args_is_help=True, help="Throughput benchmarks (ratios measured in one run).")
+app.add_typer(tasks_app, name="tasks")
+app.add_typer(bench_app, name="bench")
+visualize_app = typer.Typer(no_args_is_help=True, help="The paper's figures on a checkpoint (emml/report/visualize.py)")
+app.add_typer(visualize_app, name="visualize")
+
+
+def _fail(message: str) -> None:
+    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(2)
+
+
+@app.callback()
+def _check_project_files() -> None:
+    """Every command reads reproduce/profiles.toml: a broken one is named in one line before anything runs."""
+    from emml.profiles import ProfileError, load_profiles
+
+    try:
+        load_profiles()
+    except ProfileError as e:
+        _fail(str(e))
+
+
+def _check_checkpoint(path: Path) -> None:
+    """Fail with one line naming the path unless it holds an emml checkpoint (before any engine starts)."""
+    from emml.rl.checkpoint import CheckpointError, load_checkpoint
+
+    try:
+        load_checkpoint(path)
+    except CheckpointError as e:
+        _fail(str(e))
+
+
+def _out(path: Path) -> Path:
+    """An output folder, made; relative paths resolve under the checkout like runs/ and results/ (README)."""
+    from emml.tracking import project_path
+
+    path = project_path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _echo(data, as_json: bool, text: str) -> None:
+    typer.echo(json.dumps(data, indent=2) if as_json else text)
+
+
+@tasks_app.command("show")
+def tasks_show(
+    dataset: str = typer.Argument("doom", help="doom (house: not built yet)"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """List a dataset's instructions and questions by task and split."""
+    from emml.tasks.language import KINDS, SPLITS, Vocabulary, load_dataset
+
+    try:
+        ds = load_dataset(dataset)
+    except ValueError as e:
+        _fail(str(e))
+    data = {
+        "dataset": ds.name,
+        "vocabulary": list(Vocabulary.from_dataset(ds).words),
+        "actors": {n: {"words": list(a.words()), "area": a.area} for n, a in ds.actors.items()},
+    }
+    lines = []
+    for kind in KINDS:
+        for split in SPLITS:
+            sents = ds.select(kind, split)
+            data[f"{kind}_{split}"] = [s.text for s in sents]
+            lines.append(f"{kind.upper()} {split} ({len(sents)}):")
+            lines += [f"  {s.text}" for s in sents]
+    _echo(data, as_json, "\n".join(lines))
+
+
+@app.command()
+def oracle(
+    difficulty: str = typer.Option("easy", help="easy | hard"),
+    task: str = typer.Option("sgn", help="sgn | eqa | both"),
+    split: str = typer.Option("train", help="train | test"),
+    episodes: int = typer.Option(100, min=1),
+    seed: int = 0,
+    height: int = 168,
+    width: int = 300,
+    as_json: bool = typer.Option(False, "--json"),
+    video: Path = typer.Option(None, help="Also record a few Easy and Hard episodes as a GIF in this folder."),
+):
+    """Accuracy of the scripted expert (privileged state): every episode must be solvable."""
+    from emml.agents.oracle import run_oracle
+    from emml.config import DoomConfig
+    from emml.envs.doom import DoomEnv
+    from emml.envs.engine import install_signal_handlers
+
+    install_signal_handlers()
+    try:
+        cfg = DoomConfig(difficulty=difficulty, tasks=task, split=split, height=height, width=width).validate()
+    except ValueError as e:
+        _fail(str(e))
+    env = DoomEnv(cfg)
+    try:
+        result = run_oracle(env, episodes, seed)
+    finally:
+        env.close()
+    result = {"difficulty": difficulty, "task": task, "split": split, **result}
+    if video is not None:
+        from emml.report.oracle_video import oracle_demo
+
+        result["video"] = [str(p) for p in oracle_demo(_out(video), episodes=min(episodes, 3), seed=seed)]
+    _echo(
+        result,
+        as_json,
+        f"oracle {difficulty}/{task}/{split}: accuracy {result['accuracy']:.3f} "
+        f"over {episodes} episodes, mean {result['mean_steps']:.1f} steps (max {result['max_steps']})",
+    )
+
+
+@bench_app.command("env")
+def bench_env(
+    height: int = 168,
+    width: int = 300,
+    difficulty: str = "easy",
+    interpolation: str = typer.Option("linear", help="linear | area | nearest"),
+    steps: int = typer.Option(2000, min=100),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Raw ViZDoom vs our env (labels off/on), and the vector env with 1 and 2 workers."""
+    from emml.bench import bench_env as run
+    from emml.config import DoomConfig
+    from emml.envs.engine import install_signal_handlers
+
+    install_signal_handlers()
+    try:
+        cfg = DoomConfig(height=height, width=width, difficulty=difficulty, interpolation=interpolation).validate()
+    except ValueError as e:
+        _fail(str(e))
+    result = run(cfg, steps=steps, vector_steps=steps)
+    text = [f"env bench at {width}x{height} (render {result['render']}):"]
+    for key in ("labels_off", "labels_on"):
+        r = result[key]
+        text.append(
+            f"  {key}: raw {r['raw_steps_per_s']:.0f} steps/s, ours {r['env_steps_per_s']:.0f} steps/s "
+            f"(ratio {r['ratio']:.2f}); reset {r['env_reset_ms']:.2f} ms "
+            f"vs new_episode {r['raw_new_episode_ms']:.2f} ms"
+        )
+    for w in (1, 2):
+        text.append(f"  vector env, {w} worker(s): {result[f'vector_{w}_workers_steps_per_s']:.0f} steps/s")
+    _echo(result, as_json, "\n".join(text))
+
+
+@bench_app.command("train")
+def bench_train_cmd(
+    model: str = "dual_attention",
+    aux: bool = typer.Option(True, "--aux/--no-aux"),
+    profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
+    updates: int = typer.Option(5, min=1),
+    device: str = "cpu",
+    runs: int = typer.Option(0, min=0, help="Also pack N end-to-end runs side by side: aggregate vs simulator limit."),
+    sets: list[str] = typer.Option([], "--set", help="Override any config field."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
+    with --runs N, the aggregate of N packed runs against the raw simulator limit of the machine's cores."""
+    from emml.bench import bench_train
+    from emml.envs.engine import install_signal_handlers
+    from emml.profiles import profile_config
+
+    try:
+        cfg = profile_config(profile, "easy", _parse_sets(sets), model=model, aux=aux, device=device).validate()
+    except ValueError as e:
+        _fail(str(e))
+    _use_tcmalloc()
+    install_signal_handlers()
+    r = bench_train(cfg, updates, runs)
+    split = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r["time_split"].items())
+    lines = [
+        f"{model} at {r['width']}x{r['height']} on {r['device']}, {r['num_envs']}x{r['num_steps']} per update, "
+        f"{r['env_groups']} env group(s): model-only {r['model_only_fps']:.0f} frames/s, end-to-end "
+        f"{r['end_to_end_fps']:.0f} frames/s (ratio {r['ratio']:.2f}); end-to-end time: {split}"
+    ]
+    if "lockstep_fps" in r:
+        gain = r["double_buffer_gain"]
+        lines.append(f"lockstep (1 group): {r['lockstep_fps']:.0f} frames/s (double buffering ×{gain})")
+    if "packed" in r:
+        p = r["packed"]
+        lines.append(
+            f"{p['runs']} packed runs ({p['threads_per_run']} threads each): {p['aggregate_fps']:.0f} frames/s in all "
+            f"{p['per_run_fps']}; raw simulator limit of {p['cores']} cores {p['simulator_limit_fps']:.0f} steps/s "
+            f"(fraction {p['fraction_of_limit']:.2f})"
+        )
+    _echo(r, as_json, "\n".join(lines))
+
+
+@app.command()
+def models(
+    height: int = 168,
+    width: int = 300,
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """The model registry with parameter counts at an input size (vocabulary of the Doom dataset)."""
+    from emml.models import model_table
+    from emml.tasks.language import Vocabulary, load_dataset
+
+    vocab = Vocabulary.from_dataset(load_dataset("doom"))
+    try:
+        rows = model_table(len(vocab), height, width, 210)
+    except ValueError as e:
+        _fail(str(e))
+    _echo(rows, as_json, "\n".join(f"{r['name']:<18} {r['parameters']:>10,}  {r.get('description', '')}" for r in rows))
+
+
+TCMALLOC_PATHS = (
+    "/usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4",
+    "/usr/lib/x86_64-linux-gnu/libtcmalloc.so.4",
+    "/usr/lib/aarch64-linux-gnu/libtcmalloc_minimal.so.4",
+)
+
+
+def _use_tcmalloc() -> None:
+    """Re-exec once under tcmalloc when it is installed and not loaded (~2× CPU training speed, notes)."""
+    import os
+    import sys
+
+    if os.environ.get("EMML_NO_TCMALLOC") or "tcmalloc" in os.environ.get("LD_PRELOAD", ""):
+        return
+    lib = next((p for p in TCMALLOC_PATHS if os.path.exists(p)), None)
+    if lib is None:
+        return
+    env = {**os.environ, "LD_PRELOAD": f"{lib} {os.environ.get('LD_PRELOAD', '')}".strip()}
+    os.execve(sys.executable, [sys.executable, "-m", "emml.cli", *sys.argv[1:]], env)
+
+
+def _parse_sets(sets: list[str]) -> dict:
+    """'--set env.height=84 --set ppo.lr=1e-4' → {'env.height': 84, 'ppo.lr': 0.0001} (values parsed as TOML)."""
+    import tomllib
+
+    out = {}
+    for item in sets:
+        if "=" not in item:
+            _fail(f"--set {item!r}: expected FIELD=VALUE, e.g. --set env.height=84")
+        key, value = item.split("=", 1)
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = value
+    return out
+
+
+@app.command()
+def train(
+    model: str = typer.Option("dual_attention", help="Model registry name (emml models)."),
+    difficulty: str = typer.Option("easy", help="easy | hard"),
+    aux: bool = typer.Option(False, "--aux/--no-aux", help="Train with the auxiliary task."),
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
+    seed: int = 0,
+    table: str = typer.Option("adhoc", help="MLflow experiment / results table."),
+    device: str = typer.Option("cpu", help="cpu | cuda"),
+    frames: int = typer.Option(0, help="Override the profile's frames (0: keep)."),
+    sets: list[str] = typer.Option([], "--set", help="Override any config field: --set env.shaping=false"),
+    quiet: bool = False,
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Train one run (resumes it if interrupted; a finished run is not retrained)."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.profiles import profile_config
+
+    overrides = _parse_sets(sets)
+    if frames:
+        overrides["frames"] = frames
+    try:
+        cfg = profile_config(
+            profile, difficulty, overrides, model=model, aux=aux, seed=seed, table=table, device=device
+        ).validate()
+    except ValueError as e:
+        _fail(str(e))
+    _use_tcmalloc()
+    install_signal_handlers()
+    from emml.rl.checkpoint import CheckpointError
+    from emml.rl.trainer import ConfigMismatch
+    from emml.rl.trainer import train as run
+
+    try:  # both are raised before any engine starts or anything is written
+        result = run(cfg, quiet=quiet or as_json)
+    except (CheckpointError, ConfigMismatch) as e:
+        _fail(str(e))
+    data = {
+        "run_dir": str(result.run_dir),
+        "run_id": result.run_id,
+        "frames": result.frames,
+        "skipped": result.skipped,
+        "resumed": result.resumed,
+        **result.metrics,
+    }
+    _echo(
+        data,
+        as_json,
+        ("already finished: " if result.skipped else "")
+        + f"{cfg.run_name()} after {result.frames:,} frames: "
+        + ", ".join(f"{k} {v:.3f}" for k, v in result.metrics.items())
+        + f"\n  run dir {result.run_dir}",
+    )
+
+
+@app.command("eval")
+def eval_checkpoint(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    episodes: int = typer.Option(100, min=1, help="Episodes per (task, split)."),
+    seed: int = 10_000,
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Greedy accuracy of a checkpoint on SGN/EQA train/test (reproducible under --seed)."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.evaluate import evaluate_checkpoint
+
+    _check_checkpoint(checkpoint)
+    install_signal_handlers()
+    if not as_json:
+        typer.echo(f"evaluating {checkpoint}: {episodes} greedy episodes per task and split…", err=True)
+    result = evaluate_checkpoint(checkpoint, episodes, seed)
+    _echo(result, as_json, ", ".join(f"{k} {v:.3f}" for k, v in result.items()))
+
+
+@app.command()
+def diagnose(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    episodes: int = typer.Option(20, min=1, help="Sampled SGN episodes for the attention and detector figures."),
+    step0_episodes: int = typer.Option(100, min=0, help="Resets for the actor's sensitivity to the target slot."),
+    seed: int = 20_000,
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Why a model does (not) follow instructions: attention on the target, per-word detector AP, and how much
+    the first move depends on where the target stands (emml/diagnose.py)."""
+    from emml.diagnose import diagnose_checkpoint, summary_line
+    from emml.envs.engine import install_signal_handlers
+
+    _check_checkpoint(checkpoint)
+    install_signal_handlers()
+    result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed)
+    words = ", ".join(f"{w} {ap:.2f}" for w, ap in sorted(result["detector_ap_words"].items(), key=lambda x: -x[1]))
+    slots = "; ".join(f"slot {s}: " + " ".join(f"{p:.2f}" for p in m) for s, m in result["step0_moves"].items())
+    text = "\n".join(
+        [
+            summary_line(result) + f" ({result['frames']} frames)",
+            f"detector AP per word: {words}",
+            f"step-0 move distribution (forward left right answer) by target slot: {slots or 'n/a (Hard)'}",
+        ]
+    )
+    _echo(result, as_json, text)
+
+
+def _models(*paths: Path) -> list[tuple[str, object, object]]:
+    """(label, model, config) per checkpoint, each checked first; the label says aux or no aux and the run."""
+    from emml.evaluate import load_model
+
+    out = []
+    for path in paths:
+        _check_checkpoint(path)
+        model, cfg = load_model(path)
+        out.append((f"{cfg.model} {'aux' if cfg.aux else 'no aux'} ({path.parent.name})", model, cfg))
+    return out
+
+
+@visualize_app.command("channels")
+def visualize_channels(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    compare: Path | None = typer.Option(None, help="A second checkpoint (e.g. the No-Aux run) for another column."),
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+):
+    """The channel figure: per word, its aux label, each model's conv3 channel, and the frame."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.visualize import channels_figure
+
+    models = _models(checkpoint, *([compare] if compare else []))
+    install_signal_handlers()
+    out = _out(out)
+    path = out / f"channels-{checkpoint.parent.name}.png"
+    channels_figure([(label, m) for label, m, _ in models], models[0][2].env, path, seed=seed)
+    typer.echo(f"wrote {path}")
+
+
+@visualize_app.command("attention")
+def visualize_attention(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    task: str = typer.Option("sgn", help="sgn | eqa"),
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+    rows: int = typer.Option(6, min=1, help="Steps shown, spread over the episode."),
+):
+    """The attention figure: one greedy episode, rows over time (frame, x_spat, x_Ans, action), x_sent on top."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.visualize import attention_figure, record_episode
+    from emml.tasks.language import check_choice
+
+    try:
+        check_choice("task", task, ("sgn", "eqa"))
+    except ValueError as e:
+        _fail(str(e))
+    ((_, model, cfg),) = _models(checkpoint)
+    install_signal_handlers()
+    out = _out(out)
+    ep = record_episode(model, cfg.env, task, seed)
+    path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
+    attention_figure(ep, path, rows)
+    typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'} in {len(ep.frames)} steps)")
+
+
+@app.command()
+def video(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    episodes: int = typer.Option(3, min=1, help="Episodes per task (SGN, then EQA unless the run is SGN only)."),
+    out: Path = typer.Option(Path("reports"), help="Folder for the GIFs."),
+    seed: int = 0,
+):
+    """A captioned GIF per greedy episode: the sentence, each action, the outcome."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.visualize import episode_gif, record_episode
+
+    ((_, model, cfg),) = _models(checkpoint)
+    install_signal_handlers()
+    out = _out(out)
+    tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
+    for task in tasks:
+        for i in range(episodes):
+            ep = record_episode(model, cfg.env, task, seed + i)
+            path = episode_gif(ep, out / f"{checkpoint.parent.name}-{task}-s{seed + i}.gif")
+            typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'})")
+
+
+@app.command()
+def demo(
+    out: Path = typer.Option(Path("reports"), help="Where the report goes."),
+    profile: str = typer.Option("demo", help="Profile of the demo run."),
+):
+    """The main job: a short Dual-Attention training (aux on) on Doom Easy instruction following (SGN), evaluated,
+    logged to MLflow, with a report (accuracies, training curve, diagnostics) in reports/."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.profiles import profile_config
+
+    # SGN only: within the demo's minutes the agent leaves chance on instructions (both tasks need more frames)
+    over = {"env.tasks": "sgn"}
+    cfg = profile_config(profile, "easy", over, model="dual_attention", aux=True, seed=0, table="demo").validate()
+    _use_tcmalloc()
+    install_signal_handlers()
+    from emml.report.demo import write_demo_report
+    from emml.rl.trainer import train as run
+
+    result = run(cfg)
+    for path in write_demo_report(cfg, result, _out(out)):
+        typer.echo(f"wrote {path}")
+
+
+@app.command("list")
+def list_experiments(
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper: which results count as finished."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Every table in reproduce/ with its runs and how many are finished under the profile."""
+    from emml.launch import run_states
+    from emml.profiles import load_profiles
+    from emml.registry import list_tables, load_table
+
+    if profile not in load_profiles():
+        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
+    data, lines = [], []
+    for name in list_tables():
+        try:
+            table = load_table(name)
+            states = run_states(name, profile)
+        except ValueError as e:
+            _fail(str(e))
+        runs = [{"run_name": rname, "row": spec.row, "state": state} for rname, (spec, state) in states.items()]
+        finished = sum(r["state"] in ("finished", "unrecorded") for r in runs)
+        data.append(
+            {
+                "table": name,
+                "status": table.status,
+                "title": table.title,
+                "finished": finished,
+                "total": len(runs),
+                "runs": runs,
+            }
+        )
+        head = f"{name} ({table.paper_label}): {table.status}"
+        lines.append(head + ("" if table.placeholder else f", {finished}/{len(runs)} runs finished [{profile}]"))
+        lines += [f"  {r['state']:<10} {r['run_name']}" for r in runs]
+    _echo({"profile": profile, "tables": data}, as_json, "\n".join(lines))
+
+
+@app.command("run")
+def run_table(
+    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5 (reproduce/<table>.toml)"),
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
+    backend: str = typer.Option("local", help="local (process pool) | slurm (submitit)"),
+    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores; cuda: and what GPU memory holds)."),
+    device: str = typer.Option("cpu", help="cpu | cuda"),
+    partition: str = typer.Option(None, help="Slurm partition."),
+    time_min: int = typer.Option(24 * 60, help="Slurm time limit per run, minutes."),
+    gpus: int = typer.Option(0, help="GPUs per Slurm job."),
+    cpus: int = typer.Option(8, help="CPUs per Slurm job."),
+    wait: bool = typer.Option(False, help="Slurm: wait for the jobs to end."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Train every run of a table (skips finished runs, resumes interrupted ones); a placeholder table exits 0."""
+    from dataclasses import asdict
+
+    from emml.launch import run_table as launch
+    from emml.registry import load_table
+
+    try:
+        placeholder = load_table(table).placeholder
+    except ValueError as e:
+        _fail(str(e))
+    if backend == "local" and not placeholder:
+        _use_tcmalloc()  # ~2x CPU training speed; the pool's workers inherit LD_PRELOAD
+    try:
+        report = launch(
+            table,
+            profile,
+            backend=backend,
+            jobs=jobs or None,
+            device=device,
+            partition=partition,
+            time_min=time_min,
+            gpus=gpus,
+            cpus=cpus,
+            wait=wait,
+            log=(lambda m: None) if as_json else typer.echo,
+        )
+    except ValueError as e:
+        _fail(str(e))
+    data = asdict(report)
+    _echo(
+        data,
+        as_json,
+        f"{table} [{profile}]: {len(report.done)} trained, {len(report.skipped)} already finished, "
+        f"{len(report.failed)} failed" + (f", {len(report.submitted)} jobs submitted" if report.submitted else ""),
+    )
+    if report.failed:
+        raise typer.Exit(1)
+
+
+@app.command()
+def report(
+    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5"),
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper"),
+    curves: bool = typer.Option(True, "--curves/--no-curves", help="Also plot training curves (needs MLflow)."),
+    out: Path = typer.Option(None, help="Output folder (default: reports/)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Ours beside the paper: reports/TABLE-PROFILE.md/.tex (mean [95% CI] | paper) and -curves.png/.pdf."""
+    from emml.profiles import load_profiles
+    from emml.report.tables import report_table
+
+    if profile not in load_profiles():
+        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
+    try:
+        data = report_table(table, profile, out=_out(out) if out else None)
+    except ValueError as e:
+        _fail(str(e))
+    data["notes"] = []
+    if curves:
+        from emml.report.curves import plot_table
+
+        paths, notes = plot_table(table, profile, out=_out(out) if out else None)
+        data["paths"] += [str(p) for p in paths]
+        data["notes"] = notes
+    text = "\n".join([data["caption"], *[f"note: {n}" for n in data["notes"]], *[f"wrote {p}" for p in data["paths"]]])
+    _echo(data, as_json, text)
+
+
+@app.command("reports")
+def reports(out: Path = typer.Option(None, help="Output folder (default: reports/).")):
+    """Every table, curve and figure for the profiles that have results, and reports/index.md linking them."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.index import write_reports
+
+    install_signal_handlers()
+    typer.echo(f"wrote {write_reports(_out(out) if out else None, log=typer.echo)}")
+
+
+if __name__ == "__main__":
+    app()

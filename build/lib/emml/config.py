@@ -1,0 +1,296 @@
+"""Dataclass configs. Every field has a docstring with its unit and source (paper section, or 'our choice' with
+the reason, collected in docs/fidelity.md). `validate()` fails before any compute with the field's name and the
+allowed values."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+
+from emml.tasks.language import check_choice
+
+RESOLUTIONS_16_9 = ((256, 144), (320, 180), (400, 225), (512, 288), (640, 360), (800, 450), (1024, 576))
+"""ViZDoom's 16:9 screen resolutions (width, height), the aspect of the paper's 300×168 input."""
+
+
+@dataclass
+class DoomConfig:
+    """The Doom environment `emml/Doom-v0` (paper §4 'Environments', §5.1, Appendix B)."""
+
+    difficulty: str = "easy"
+    """'easy': agent fixed, objects at 5 fixed slots in view; 'hard': random agent pose and object positions."""
+    split: str = "train"
+    """'train' or 'test' instructions/questions (Table 7)."""
+    tasks: str = "both"
+    """'both' (SGN and EQA, 50/50 per episode), 'sgn' or 'eqa' (single-task ablation, Table 3)."""
+    height: int = 168
+    """Observation height in pixels (Appendix A: 3×168×300)."""
+    width: int = 300
+    """Observation width in pixels (Appendix A)."""
+    aux_labels: bool = False
+    """Add the V×h×w auxiliary detection labels ('aux') to the observation (§3.2 'Auxiliary Task')."""
+    max_steps: int = 210
+    """Episode limit in agent steps (§5.1: 'maximum length of 210 time steps')."""
+    frame_skip: int = 5
+    """Engine tics per agent step (paper silent; the reference SGN environment repeats each action 5 tics)."""
+    turn_degrees: float = 15.0
+    """Turn per left/right step, in degrees (paper silent; our choice: 3°/tic × 5 tics, 24 steps a full turn)."""
+    reach_distance: float = 40.0
+    """An object is reached within this 2-D distance of its centre, map units (reference SGN environment)."""
+    success_reward: float = 1.0
+    """Reaching the right object (SGN) or answering correctly (EQA) (§5.1)."""
+    step_reward: float = -0.001
+    """Every step (§5.1)."""
+    wrong_reward: float = 0.0
+    """Reaching a wrong object or answering wrongly. §5.1 names only +1 and -0.001 per step, so 0; the SGN
+    environment the paper adapts used -0.2, under which a PPO agent can settle on never touching an object
+    (measured in docs/fidelity.md)."""
+    shaping: bool = True
+    """Distance-based reward shaping in SGN (§5.1; off for the 'w/o reward shaping' ablation, Table 3)."""
+    shaping_coef: float = 0.001
+    """Shaping reward per map unit of decrease in distance to the target (paper silent: 'small'; ~0.1 per Easy
+    episode)."""
+    render: str = "auto"
+    """ViZDoom render resolution 'WxH' (16:9); 'auto' takes the smallest one at least the observation size."""
+    interpolation: str = "linear"
+    """Resize filter from render to observation size: 'linear' (our choice: 5× faster than 'area', the reference
+    env's cv2.INTER_AREA, and alike at the 0.94 scale of 320×180 → 300×168), 'area' or 'nearest'."""
+    label_grid: str = "receptive_field"
+    """How label pixels meet the conv3 grid (paper silent): 'receptive_field', the cell whose receptive field is
+    centred nearest (emml/geometry.py), or 'even', an even partition of the frame (off by up to one cell at
+    the right and bottom edges, since conv3 has no padding)."""
+    max_words: int = 10
+    """Token sequence length (padded with 0)."""
+    vocabulary: tuple[str, ...] | None = None
+    """The run's vocabulary (channel order); None builds the default: every word of the dataset."""
+    aux_words: tuple[str, ...] | None = None
+    """Words that get aux labels; None: every word but the superlatives (§3.2; function words get all-zero
+    labels). The transfer experiment passes the training words only."""
+    instructions: tuple[str, ...] | None = None
+    """Restrict episodes to these sentences (must be in the chosen split); None: all of the split."""
+    dataset: str = "doom"
+    """Which tasks/<name>.toml."""
+
+    def validate(self) -> DoomConfig:
+        check_choice("difficulty", self.difficulty, ("easy", "hard"))
+        check_choice("split", self.split, ("train", "test"))
+        check_choice("tasks", self.tasks, ("both", "sgn", "eqa"))
+        check_choice("interpolation", self.interpolation, ("area", "linear", "nearest"))
+        check_choice("label_grid", self.label_grid, ("receptive_field", "even"))
+        from emml.geometry import conv_output_size
+
+        conv_output_size(self.height, self.width)  # raises naming height/width when too small
+        for name in ("max_steps", "frame_skip", "max_words"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
+        if self.render != "auto":
+            allowed = [f"{w}x{h}" for w, h in RESOLUTIONS_16_9]
+            check_choice("render", self.render, ["auto", *allowed])
+        if self.render_size()[0] < self.width or self.render_size()[1] < self.height:
+            raise ValueError(f"render={self.render!r} is smaller than the observation {self.width}x{self.height}")
+        return self
+
+    def render_size(self) -> tuple[int, int]:
+        """(width, height) the engine renders at."""
+        if self.render == "auto":
+            for w, h in RESOLUTIONS_16_9:
+                if w >= self.width and h >= self.height:
+                    return w, h
+            return RESOLUTIONS_16_9[-1]
+        w, h = self.render.split("x")
+        return int(w), int(h)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def config_from_dict(cls, values: dict):
+    """Build a config dataclass from a dict, rejecting unknown keys by name (tuples restored from lists)."""
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown {cls.__name__} field(s) {unknown}; known fields: {sorted(known)}")
+    fixed = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+    return cls(**fixed)
+
+
+@dataclass
+class TrainConfig:
+    """One training run: environment, model, PPO and the run's own settings (issue: one trainer for all tables).
+
+    Defaults are the paper's protocol (Appendix A); profiles in reproduce/profiles.toml change cost, not
+    protocol, and every report states its profile."""
+
+    model: str = "dual_attention"
+    """Registry name of the model (`emml models`), ablations included."""
+    aux: bool = False
+    """Train with the auxiliary detection task (§3.2); turns on the env's aux labels."""
+    seed: int = 0
+    """Seeds Python, NumPy, torch and the envs (worker i gets seed + i)."""
+    frames: int = 10_000_000
+    """Agent steps to train, summed over actors (§5.1: 10M Easy, 50M Hard)."""
+    num_envs: int = 8
+    """Parallel actors (Appendix A: 8)."""
+    num_steps: int = 128
+    """Rollout horizon per actor and update (Appendix A: 128)."""
+    profile: str = "paper"
+    """Name of the profile the run came from (smoke, demo, quick, paper), recorded everywhere."""
+    eval_every: int = 0
+    """Evaluate every this many frames for the curves; 0: only at the end."""
+    eval_episodes: int = 100
+    """Greedy evaluation episodes per (task, split)."""
+    diagnose_episodes: int = 20
+    """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP; the actor's
+    sensitivity reads 5× as many first steps: emml/diagnose.py); 0: none."""
+    checkpoint_every: int = 10
+    """Write the checkpoint every this many updates (and at the end)."""
+    log_every: int = 10
+    """A log line every this many updates (metrics go to MLflow every update)."""
+    answer_supervision: str = "eqa_steps"
+    """Which steps train the answer cross-entropy: 'eqa_steps' (every step of an EQA episode: the correct answer
+    is fixed for the episode) or 'answer_steps' (only steps where the agent answered). Paper silent."""
+    device: str = "cpu"
+    """'cpu' or 'cuda'."""
+    threads: int = 0
+    """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
+    asynchronous: bool = True
+    """Env workers in processes (True) or in the learner process (False, for debugging)."""
+    env_groups: int = 2
+    """Actors are stepped in this many groups, in turn: one group simulates while the policy acts for the next
+    (double-buffered sampling; same algorithm, see emml/rl/sampler.py). 1: all actors in lockstep. Must divide
+    num_envs."""
+    acting_threads: int = 1
+    """torch threads while acting (batches of num_envs/env_groups, one step): one is about as fast as two for
+    such small batches and leaves the other cores to the env workers; 0: as many as the learner."""
+    max_engine_restarts: int = 3
+    """An env worker restarts its engine when it dies (the episode in flight is dropped and counted); this many
+    deaths in a row, less than `engine_restart_window` steps apart, end the run with an EngineError."""
+    engine_restart_window: int = 1000
+    """Steps of a worker after which an engine death no longer counts as repeated."""
+    table: str = "adhoc"
+    """MLflow experiment / results table the run belongs to."""
+    run_root: str = "runs"
+    """Where run directories (checkpoints, results.json) go, relative to the project root unless absolute."""
+    results_root: str = "results"
+    """Where finished runs are recorded as rows of `<table>/<profile>.csv` (small, committed), relative to the
+    project root unless absolute."""
+    env: DoomConfig = field(default_factory=DoomConfig)
+    """The environment (its aux_labels follows `aux`)."""
+    ppo: object = None
+    """PPOConfig (emml/rl/ppo.py); None: the paper's defaults."""
+    model_options: dict = field(default_factory=dict)
+    """Overrides of the model registry entry's ModelConfig fields."""
+
+    def __post_init__(self):
+        if self.ppo is None:
+            from emml.rl.ppo import PPOConfig
+
+            self.ppo = PPOConfig()
+        self.env.aux_labels = self.aux
+
+    def validate(self) -> TrainConfig:
+        from emml.models import model_config
+
+        model_config(self.model, **self.model_options)  # names the model and any unknown option
+        self.env.validate()
+        self.ppo.validate()
+        check_choice("answer_supervision", self.answer_supervision, ("eqa_steps", "answer_steps"))
+        check_choice("device", self.device.split(":")[0], ("cpu", "cuda"))
+        for name in ("frames", "num_envs", "num_steps", "eval_episodes", "checkpoint_every", "log_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
+        if self.env_groups < 1 or self.num_envs % self.env_groups:
+            raise ValueError(f"env_groups={self.env_groups!r} must be a positive divisor of num_envs={self.num_envs}")
+        control = self.model_options.get("control", "none")
+        if control != "none" and not self.aux:
+            raise ValueError(f"model_options.control={control!r} reads the aux labels: it needs aux=True")
+        for name in (
+            "eval_every",
+            "diagnose_episodes",
+            "threads",
+            "acting_threads",
+            "max_engine_restarts",
+            "engine_restart_window",
+        ):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
+        if self.device.startswith("cuda"):
+            import torch
+
+            if not torch.cuda.is_available():
+                raise ValueError("device='cuda' but torch sees no CUDA device; use device='cpu'")
+        return self
+
+    @property
+    def frames_per_update(self) -> int:
+        """Derived: num_envs × num_steps (1,024 under the paper's protocol)."""
+        return self.num_envs * self.num_steps
+
+    @property
+    def num_updates(self) -> int:
+        """Derived: updates to reach `frames` (rounded up)."""
+        return -(-self.frames // self.frames_per_update)
+
+    def run_name(self) -> str:
+        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, seed, profile."""
+        parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
+        if self.env.tasks != "both":
+            parts.append(f"{self.env.tasks}only")
+        if not self.env.shaping:
+            parts.append("noshaping")
+        return "-".join([*parts, f"s{self.seed}", self.profile])
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["ppo"] = asdict(self.ppo)
+        return d
+
+    @classmethod
+    def from_dict(cls, values: dict) -> TrainConfig:
+        """Inverse of to_dict (unknown keys are rejected by name)."""
+        from emml.rl.ppo import PPOConfig
+
+        values = dict(values)
+        env = config_from_dict(DoomConfig, values.pop("env", {}))
+        ppo = config_from_dict(PPOConfig, values.pop("ppo", {}) or {})
+        cfg = config_from_dict(cls, {k: v for k, v in values.items()})
+        cfg.env, cfg.ppo = env, ppo
+        cfg.env.aux_labels = cfg.aux
+        return cfg
+
+
+def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") -> TrainConfig:
+    """Set fields by dotted name ('frames', 'env.height', 'ppo.lr'); an unknown name or a value of the wrong type
+    fails naming ``source`` (the --set option, or the profile it came from), the field and what it accepts."""
+    for key, value in overrides.items():
+        target, name = cfg, key
+        if "." in key:
+            section, name = key.split(".", 1)
+            if section not in ("env", "ppo"):
+                raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo'")
+            target = getattr(cfg, section)
+        known = [f.name for f in fields(target)]
+        if name not in known:
+            raise ValueError(f"{source} {key!r}: unknown field; known: {', '.join(known)}")
+        setattr(target, name, _typed(value, getattr(target, name), f"{source} {key!r}"))
+    cfg.env.aux_labels = cfg.aux
+    return cfg
+
+
+def _typed(value, current, where: str):
+    """``value`` checked against the type of the field's current value (an int is accepted for a float)."""
+    if current is None or isinstance(current, (tuple, list, dict)):
+        return value
+    if isinstance(current, bool):
+        ok, what = type(value) is bool, "true or false"
+    elif isinstance(current, int):
+        ok, what = type(value) is int, "an integer"
+    elif isinstance(current, float):
+        ok, what = type(value) in (int, float), "a number"
+        value = float(value) if ok else value
+    elif isinstance(current, str):
+        ok, what = isinstance(value, str), "a string"
+    else:
+        return value
+    if not ok:
+        raise ValueError(f"{where}: expected {what}, got {value!r}")
+    return value

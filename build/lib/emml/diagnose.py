@@ -1,0 +1,153 @@
+"""What a researcher looks at when a variant does not learn SGN (issue 12): three numbers, at every evaluation and
+for any checkpoint (`emml diagnose CHECKPOINT`).
+
+* ``attention_on_target`` — on SGN frames that show the referent, how often the argmax of the spatial attention
+  x_spat (Eq. 2) falls on one of its cells; ``attention_mass_on_target`` — the mass x_spat puts there. Dual-Attention
+  only (None for models without a spatial map).
+* ``detector_ap`` — per supervised word, the average precision of the conv3 channel sigmoid(conv3)[w] against the
+  aux labels (§3.2) over every cell of those frames; the mean over words that occur, and each word's.
+* ``actor_sensitivity`` — in Easy, how much the first move distribution pi(a_0 | I_0, T) depends on where the
+  referent stands: the largest total-variation distance between the mean step-0 move distributions of two target
+  slots. An actor that ignores x_S scores ~0 (the noise floor of `step0_episodes` episodes); one that turns toward
+  the target scores up to 1.
+
+Frames come from the model's own sampled actions (a seeded generator), so that the views are the ones it meets
+in training; the referent's cells come from the env's privileged label buffer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from itertools import combinations
+
+import numpy as np
+import torch
+
+from emml.config import DoomConfig
+from emml.envs.doom import DoomEnv
+from emml.evaluate import eval_settings, obs_to_torch
+
+
+def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
+    """AP of ranking ``scores`` against binary ``labels``: the mean precision at each positive (nan if none)."""
+    labels = labels.astype(bool).ravel()
+    positives = int(labels.sum())
+    if positives == 0:
+        return float("nan")
+    order = np.argsort(-scores.ravel(), kind="stable")
+    hits = labels[order]
+    precision_at = np.cumsum(hits) / np.arange(1, hits.size + 1)
+    return float(precision_at[hits].sum() / positives)
+
+
+def _single(obs: dict, device) -> dict[str, torch.Tensor]:
+    """One env's observation as a (1, 1, ...) model input."""
+    return obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, device)
+
+
+def _step0(model, env: DoomEnv, episodes: int, seed: int, device) -> dict:
+    """Mean step-0 move distribution per target slot (Easy), from ``episodes`` resets of ``env``."""
+    per_slot: dict[int, list[np.ndarray]] = {}
+    for i in range(episodes):
+        obs, _ = env.reset(seed=seed + i)
+        out, _ = model(_single(obs, device), model.initial_state(1, device), _starts(1, device))
+        probs = torch.softmax(out.logits[0, 0], -1).cpu().numpy()
+        per_slot.setdefault(env.episode.target, []).append(probs)
+    means = {slot: np.mean(p, axis=0) for slot, p in sorted(per_slot.items())}
+    tv = [0.5 * float(np.abs(means[a] - means[b]).sum()) for a, b in combinations(means, 2)]
+    return {
+        "actor_sensitivity": max(tv) if tv else float("nan"),
+        "step0_moves": {int(s): [round(float(x), 3) for x in m] for s, m in means.items()},
+    }
+
+
+def _starts(n: int, device) -> torch.Tensor:
+    return torch.ones(1, n, dtype=torch.bool, device=device)
+
+
+@torch.no_grad()
+def diagnose(
+    model,
+    env_cfg: DoomConfig,
+    episodes: int = 20,
+    step0_episodes: int = 100,
+    seed: int = 20_000,
+    device="cpu",
+    max_frames: int = 2000,
+) -> dict:
+    """The three diagnostics on SGN train episodes of ``env_cfg``'s difficulty (see the module docstring).
+
+    ``episodes`` sampled episodes (at most ``max_frames`` frames) give the attention and detector figures;
+    ``step0_episodes`` resets give the actor's sensitivity (Easy only; None in Hard)."""
+    was_training = model.training
+    model.eval()
+    # a run restricted to some instructions is diagnosed on its SGN training ones (all of them if it has none)
+    chosen = {(task, split): sents for task, split, sents in eval_settings(env_cfg)}.get(("sgn", "train"))
+    cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=chosen)
+    gen = torch.Generator().manual_seed(seed)
+    env = DoomEnv(cfg)
+    probs, labels, attn, target = [], [], [], []
+    try:
+        for i in range(episodes):
+            obs, _ = env.reset(seed=seed + i)
+            state, start = model.initial_state(1, device), _starts(1, device)
+            done = False
+            while not done and len(labels) < max_frames:
+                out, state = model(_single(obs, device), state, start)
+                start = torch.zeros_like(start)
+                probs.append(torch.sigmoid(out.aux_logits[0, 0]).cpu().numpy())
+                labels.append(obs["aux"])
+                target.append(obs["target"])
+                if out.attention is not None:
+                    attn.append(out.attention[0, 0].cpu().numpy())
+                move = int(torch.multinomial(torch.softmax(out.logits[0, 0].cpu(), -1), 1, generator=gen))
+                obs, _, terminated, truncated, _ = env.step(np.array([move, 0]))
+                done = terminated or truncated
+        aux_mask = env.aux_mask
+        words = env.vocab.words
+        easy = env_cfg.difficulty == "easy" and step0_episodes
+        step0 = _step0(model, env, step0_episodes, seed + episodes, device) if easy else None
+    finally:
+        env.close()
+    result: dict = {"frames": len(labels)}
+    target_a = np.stack(target).astype(bool)
+    seen = target_a.reshape(len(target_a), -1).any(1)
+    if attn and seen.any():
+        a = np.stack(attn)[seen].reshape(int(seen.sum()), -1)
+        t = target_a[seen].reshape(len(a), -1)
+        result["attention_on_target"] = float(t[np.arange(len(a)), a.argmax(1)].mean())
+        result["attention_mass_on_target"] = float((a * t).sum(1).mean())
+    else:
+        result["attention_on_target"] = result["attention_mass_on_target"] = None
+    p, y = np.stack(probs), np.stack(labels)
+    per_word = {}
+    for w in np.flatnonzero(aux_mask):
+        ap = average_precision(p[:, w], y[:, w])
+        if not np.isnan(ap):
+            per_word[words[w]] = round(ap, 3)
+    result["detector_ap"] = float(np.mean(list(per_word.values()))) if per_word else None
+    result["detector_ap_words"] = per_word
+    result.update(step0 or {"actor_sensitivity": None, "step0_moves": {}})
+    model.train(was_training)
+    return result
+
+
+SCALARS = ("attention_on_target", "attention_mass_on_target", "detector_ap", "actor_sensitivity")
+"""The figures logged to MLflow (as diag/<name>) and printed at each evaluation."""
+
+
+def summary_line(result: dict) -> str:
+    """One line of the scalar figures, for logs."""
+    parts = []
+    for k in SCALARS:
+        v = result.get(k)
+        parts.append(f"{k} {'n/a' if v is None else f'{v:.2f}'}")
+    return "diagnose: " + ", ".join(parts)
+
+
+def diagnose_checkpoint(path, episodes: int = 20, step0_episodes: int = 100, seed: int = 20_000) -> dict:
+    """Rebuild a checkpoint's model (its own config and vocabulary) and diagnose it."""
+    from emml.evaluate import load_model
+
+    model, cfg = load_model(path)
+    return diagnose(model, cfg.env, episodes, step0_episodes, seed)

@@ -1,0 +1,305 @@
+"""`emml/Doom-v0`: the ViZDoom language-grounding tasks of Chaplot et al. (2019), SGN and EQA, Easy and Hard.
+
+One room, 5 objects (§4 'Environments'). Easy: the agent starts at (128, 512) facing east, the objects stand at
+x = 256, y ∈ {384, 448, 512, 576, 640}. Hard: the agent and the objects at random points at least
+`HARD_SPACING` apart, inside the room less a margin, the agent facing one of four directions. Actions: forward,
+turn left, turn right, answer (the answer word is the second action component, the argmax of the model's
+answer distribution). Rewards follow §5.1; the choices where the paper is silent are DoomConfig fields.
+
+Objects are placed exactly, per episode, with console commands executed in one tic: the player is warped to a
+point from which `summon` spawns the object at its slot (summon puts it 2·radius + 16 units ahead), then warped
+to its start.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from emml.config import DoomConfig, config_from_dict
+from emml.envs import engine as eng
+from emml.envs.labels import LabelGrid, channel_mask, default_aux_words
+from emml.envs.objects import ACTORS, iwad_path
+from emml.envs.wad import ROOM, map_name, wad_path
+from emml.geometry import conv_output_size
+from emml.tasks.episodes import Episode, sample_episode
+from emml.tasks.language import Vocabulary, load_dataset
+
+MOVES = ("forward", "left", "right", "answer")
+FORWARD, LEFT, RIGHT, ANSWER = range(4)
+TASKS = ("sgn", "eqa")
+
+EASY_START = (128, 512, 0)
+"""(x, y, angle°) of the agent in Easy (the reference SGN room)."""
+EASY_SLOTS = tuple((256, y) for y in (384, 448, 512, 576, 640))
+"""The 5 fixed object positions in Easy, in the agent's view."""
+HARD_MARGIN = 32
+"""Hard: positions keep this distance from the walls (reference SGN environment)."""
+HARD_SPACING = 90
+"""Hard: minimum distance between any two of the agent and the objects (reference: Poisson-disc, 90)."""
+PLAYER_RADIUS = 16
+EPISODE_START_TICS = 10
+"""The engine ignores input for the first ~8 tics of an episode (notes/vizdoom.md)."""
+
+
+def sample_positions(rng: np.random.Generator, n: int) -> list[tuple[int, int]]:
+    """``n`` integer points in the room less the margin, pairwise at least HARD_SPACING apart (dart throwing,
+    restarted when stuck; each dart uniform in the free square)."""
+    lo_x, hi_x = ROOM.x_min + HARD_MARGIN, ROOM.x_max - HARD_MARGIN
+    lo_y, hi_y = ROOM.y_min + HARD_MARGIN, ROOM.y_max - HARD_MARGIN
+    while True:
+        points: list[tuple[int, int]] = []
+        for _ in range(200):
+            p = (int(rng.integers(lo_x, hi_x + 1)), int(rng.integers(lo_y, hi_y + 1)))
+            if all(math.dist(p, q) >= HARD_SPACING for q in points):
+                points.append(p)
+                if len(points) == n:
+                    return points
+
+
+class DoomEnv(gym.Env):
+    """The EMML Doom environment. Construct with keyword arguments of `DoomConfig` (or ``config=``)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 35 / 5}
+    objects_info = False
+    """Ask the engine for every actor's position (``state.objects``): off for speed; tests turn it on."""
+
+    def __init__(self, config: DoomConfig | None = None, render_mode: str | None = None, **kwargs):
+        cfg = config if config is not None else config_from_dict(DoomConfig, kwargs)
+        self.cfg = cfg.validate()
+        self.render_mode = render_mode
+        self.dataset = load_dataset(cfg.dataset)
+        self.vocab = Vocabulary(tuple(cfg.vocabulary)) if cfg.vocabulary else Vocabulary.from_dataset(self.dataset)
+        kinds = TASKS if cfg.tasks == "both" else (cfg.tasks,)
+        self.sentences = {k: self.dataset.select(k, cfg.split) for k in kinds}
+        if cfg.instructions:
+            wanted = [self.dataset.find(t) for t in cfg.instructions]
+            for s in wanted:
+                if s.split != cfg.split or s.kind not in kinds:
+                    raise ValueError(
+                        f"instructions: {s.text!r} is a {s.split} {s.kind} sentence, not in split={cfg.split!r} "
+                        f"tasks={cfg.tasks!r}"
+                    )
+            self.sentences = {k: tuple(s for s in wanted if s.kind == k) for k in kinds}
+            self.sentences = {k: v for k, v in self.sentences.items() if v}
+        for sents in self.sentences.values():
+            for s in sents:
+                self.vocab.encode(s.text, cfg.max_words)  # every word known, and it fits: fail now, not mid-run
+        self.grid_hw = conv_output_size(cfg.height, cfg.width)
+        self.aux_words = (
+            tuple(cfg.aux_words) if cfg.aux_words is not None else default_aux_words(self.vocab, self.dataset)
+        )
+        self.aux_mask = channel_mask(self.vocab, self.aux_words)
+        """bool (V,): the channels the aux labels supervise (all but the superlatives, by default)."""
+        self.render_wh = cfg.render_size()
+
+        V = len(self.vocab)
+        obs = {
+            "image": spaces.Box(0, 255, (3, cfg.height, cfg.width), np.uint8),
+            "tokens": spaces.Box(0, V, (cfg.max_words,), np.int64),
+            "task": spaces.Discrete(2),
+            "time": spaces.Discrete(cfg.max_steps + 1),
+        }
+        if cfg.aux_labels:
+            obs["aux"] = spaces.Box(0, 1, (V, *self.grid_hw), np.uint8)
+            # the cells showing the episode's referent: privileged, read only by the diagnostics and the
+            # 'target_mask' control (emml/diagnose.py), never by a model under the paper's protocol
+            obs["target"] = spaces.Box(0, 1, self.grid_hw, np.uint8)
+        self.observation_space = spaces.Dict(obs)
+        self.action_space = spaces.MultiDiscrete([len(MOVES), V])
+        self._labels = (
+            LabelGrid(
+                self.vocab,
+                self.dataset,
+                self.aux_words,
+                self.render_wh[::-1],
+                self.grid_hw,
+                (cfg.height, cfg.width) if cfg.label_grid == "receptive_field" else None,
+            )
+            if cfg.aux_labels
+            else None
+        )
+        self._interp = {"area": cv2.INTER_AREA, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[
+            cfg.interpolation
+        ]
+        self._turn = cfg.turn_degrees / cfg.frame_skip
+        self._engine: eng.Engine | None = None
+        self._map: str | None = None
+        self.episode: Episode | None = None
+
+    # --- engine -------------------------------------------------------------------------------------------
+    def _game(self):
+        if self._engine is None:
+            import vizdoom as vzd
+
+            g = vzd.DoomGame()
+            g.set_doom_game_path(str(iwad_path()))
+            g.set_doom_scenario_path(str(wad_path()))
+            g.set_doom_map(map_name(0))
+            w, h = self.render_wh
+            g.set_screen_resolution(getattr(vzd.ScreenResolution, f"RES_{w}X{h}"))
+            g.set_screen_format(vzd.ScreenFormat.CRCGCB)  # planar 3×H×W: no transpose needed
+            g.set_labels_buffer_enabled(self.cfg.aux_labels)
+            g.set_objects_info_enabled(self.objects_info)
+            for setter in ("hud", "weapon", "crosshair", "decals", "particles", "messages", "corpses"):
+                getattr(g, f"set_render_{setter}")(False)
+            g.set_available_buttons([vzd.Button.MOVE_FORWARD, vzd.Button.TURN_LEFT_RIGHT_DELTA])
+            g.set_available_game_variables(
+                [vzd.GameVariable.POSITION_X, vzd.GameVariable.POSITION_Y, vzd.GameVariable.ANGLE]
+            )
+            g.set_episode_start_time(EPISODE_START_TICS)
+            g.set_episode_timeout(0)
+            g.set_window_visible(False)
+            g.set_sound_enabled(False)
+            g.set_mode(vzd.Mode.PLAYER)
+            g.add_game_args("+sv_cheats 1")
+            self._engine = eng.start_engine(g)
+        return self._engine.game
+
+    def _call(self, fn, *args):
+        try:
+            return fn(*args)
+        except Exception as e:
+            pid = self._engine.pid if self._engine else None
+            self.close()
+            raise eng.EngineError(f"ViZDoom engine (pid {pid}) failed: {type(e).__name__}: {e}") from e
+
+    # --- episode --------------------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        rng = self.np_random
+        kinds = tuple(self.sentences)
+        kind = kinds[int(rng.integers(len(kinds)))]  # 50/50 when both tasks are on
+        pool = self.sentences[kind]
+        sentence = pool[int(rng.integers(len(pool)))]  # uniform in the split
+        self.episode = sample_episode(sentence, self.dataset, rng)
+        if self.cfg.difficulty == "easy":
+            ax, ay, angle = EASY_START
+            self.positions = list(EASY_SLOTS)
+        else:
+            pts = sample_positions(rng, 6)
+            (ax, ay), self.positions = pts[0], pts[1:]
+            angle = int(rng.choice([0, 90, 180, 270]))
+        game = self._game()
+        if seed is not None:
+            game.set_seed(int(seed) & 0xFFFFFFFF)  # engine-side randomness (animations) follows the seed too
+        wanted = map_name(angle)
+        if wanted != self._map:
+            game.set_doom_map(wanted)
+            self._map = wanted
+        self._call(game.new_episode)
+        c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+        for name, (x, y) in zip(self.episode.scene, self.positions):
+            actor = ACTORS[name]
+            ahead = 2 * actor.radius + PLAYER_RADIUS  # where summon puts it, ahead of the player
+            game.send_game_command(f"warp {round(x - ahead * c)} {round(y - ahead * s)}")
+            game.send_game_command(f"summon {actor.spawn_class}")
+        game.send_game_command(f"warp {ax} {ay}")
+        self._call(game.advance_action, 1)  # the commands run in this one tic
+        self.t = 0
+        self.ended = False
+        self.tokens = np.array(self.vocab.encode(sentence.text, self.cfg.max_words), dtype=np.int64)
+        self.task_id = TASKS.index(kind)
+        self.answer_id = self.vocab.index(self.episode.answer) if self.episode.answer else -1
+        self._read_state()
+        self._dist = self._distances()[self.episode.target]
+        return self._obs(), self._info(False)
+
+    def step(self, action):
+        if self._engine is None and self.episode is not None:
+            raise RuntimeError("step() after close(): this env is closed; make a new one")
+        if self.episode is None:
+            raise RuntimeError("call reset() before step()")
+        if self.ended:  # Gymnasium's convention: a finished episode pays nothing more
+            raise RuntimeError("step() after the episode ended (terminated or truncated): call reset() first")
+        arr = np.asarray(action)
+        if not self.action_space.contains(arr):
+            raise ValueError(
+                f"action {action!r}: expected two integers [move, word], move in 0..{len(MOVES) - 1} "
+                f"({', '.join(MOVES)}) and word in 0..{len(self.vocab) - 1} (a vocabulary index, read on 'answer')"
+            )
+        move, word = int(arr[0]), int(arr[1])
+        cfg, game = self.cfg, self._engine.game
+        reward, terminated, success = cfg.step_reward, False, False
+        if move == ANSWER and self.task_id == 1:  # EQA: any answer ends the episode
+            terminated = True
+            success = word == self.answer_id
+            reward += cfg.success_reward if success else cfg.wrong_reward
+        else:
+            buttons = {FORWARD: [1, 0], LEFT: [0, -self._turn], RIGHT: [0, self._turn], ANSWER: [0, 0]}[move]
+            self._call(game.make_action, buttons, cfg.frame_skip)  # SGN: 'answer' is a no-op step
+            self._read_state()
+            dists = self._distances()
+            if self.task_id == 0:
+                d = dists[self.episode.target]
+                if cfg.shaping:
+                    reward += cfg.shaping_coef * (self._dist - d)
+                self._dist = d
+                nearest = int(np.argmin(dists))
+                if dists[nearest] <= cfg.reach_distance:  # SGN ends at any object
+                    terminated = True
+                    success = nearest == self.episode.target
+                    reward += cfg.success_reward if success else cfg.wrong_reward
+        self.t += 1
+        truncated = not terminated and self.t >= cfg.max_steps
+        self.ended = terminated or truncated
+        return self._obs(), float(reward), terminated, truncated, self._info(success)
+
+    # --- observation ------------------------------------------------------------------------------------------
+    def _read_state(self):
+        state = self._engine.game.get_state()
+        self.state = state
+        if state is None:
+            raise eng.EngineError("ViZDoom returned no state: the episode ended inside the engine")
+        self.pose = tuple(float(v) for v in state.game_variables)
+        frame = state.screen_buffer  # 3×h×w
+        if frame.shape[1] != self.cfg.height or frame.shape[2] != self.cfg.width:
+            out = np.empty((3, self.cfg.height, self.cfg.width), dtype=np.uint8)
+            for c in range(3):  # per plane: cheaper than resizing H×W×3 and transposing
+                cv2.resize(frame[c], (self.cfg.width, self.cfg.height), dst=out[c], interpolation=self._interp)
+            frame = out
+        self.frame = frame
+        self.aux = None
+        if self._labels:
+            self.aux = self._labels(state.labels_buffer, state.labels)
+            target = self.episode.scene[self.episode.target]
+            self.target_grid = self._labels.object_grid(state.labels_buffer, state.labels, target)
+
+    def _distances(self) -> np.ndarray:
+        x, y = self.pose[0], self.pose[1]
+        return np.array([math.hypot(px - x, py - y) for px, py in self.positions])
+
+    def _obs(self) -> dict:
+        obs = {
+            "image": self.frame,
+            "tokens": self.tokens.copy(),
+            "task": self.task_id,
+            "time": min(self.t, self.cfg.max_steps),
+        }
+        if self.aux is not None:
+            obs["aux"] = self.aux
+            obs["target"] = self.target_grid
+        return obs
+
+    def _info(self, success: bool) -> dict:
+        return {
+            "task": self.task_id,
+            "answer": self.answer_id,
+            "success": bool(success),
+            "text": self.episode.sentence.text,
+            "target": self.episode.scene[self.episode.target],
+        }
+
+    def render(self):
+        return None if self.render_mode is None else np.ascontiguousarray(self.frame.transpose(1, 2, 0))
+
+    def close(self):
+        with eng.signals_held():  # an interrupt must not drop the engine between these lines
+            if self._engine is not None:
+                engine, self._engine = self._engine, None
+                eng.end_engine(engine)
+            self._map = None

@@ -1,0 +1,282 @@
+"""Start and end ViZDoom engines, by pid, whatever way their owner ends.
+
+`DoomGame.init()` forks an engine process and shares memory with it through /dev/shm/ViZDoom*<instance id>
+files. If the Python owner dies without `close()`, the engine keeps running and the files stay. So every engine
+started here is recorded with its pid and instance id, and `end_engine` closes the game, kills the pid if it
+still lives and removes its shm files. An atexit hook ends what is left on normal exit, and
+`install_signal_handlers` turns SIGTERM into SystemExit so that `finally` blocks and context managers run.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import glob
+import hashlib
+import multiprocessing
+import multiprocessing.util
+import os
+import shutil
+import signal
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+SHM_DIR = "/dev/shm"
+
+
+class EngineError(RuntimeError):
+    """The ViZDoom engine failed to start, died, or stopped answering."""
+
+
+class WorkerDied(EngineError):
+    """An env worker process died (killed, out of memory): its engine is orphaned and its pipe never closes."""
+
+
+@dataclass
+class Engine:
+    game: object
+    """The vizdoom.DoomGame."""
+    pid: int | None
+    """The engine process, a child of this process."""
+    instance_id: str | None
+    """ViZDoom's instance id: names the engine's shm files."""
+
+
+_LIVE: dict[int, Engine] = {}
+_LOCK = threading.Lock()
+
+
+def _children_named(name: str) -> dict[int, str]:
+    """pid → command line of this process's children whose executable is ``name``."""
+    me = os.getpid()
+    out = {}
+    for stat in glob.glob("/proc/[0-9]*/stat"):
+        try:
+            with open(stat) as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            if int(fields[1]) != me:
+                continue
+            pid = int(stat.split("/")[2])
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                argv = f.read().split(b"\0")
+            if os.path.basename(argv[0].decode()) == name:
+                out[pid] = " ".join(a.decode() for a in argv)
+        except (OSError, IndexError, ValueError):
+            continue
+    return out
+
+
+def _instance_id(cmd: str) -> str | None:
+    """The engine's instance id (it names its shm files) from its command line, None if absent."""
+    argv = cmd.split()
+    return argv[argv.index("+viz_instance_id") + 1] if "+viz_instance_id" in argv[:-1] else None
+
+
+def engine_home() -> Path:
+    """Where engines run: ViZDoom writes ``_vizdoom/`` and ``_vizdoom.ini`` into its working directory, which is
+    this one (in the temp dir, per user) rather than the user's. ``_vizdoom/`` is made here first: engines that
+    start together race on the engine's own check-then-create."""
+    home = Path(tempfile.gettempdir()) / f"emml-vizdoom-{os.getuid()}"
+    (home / "_vizdoom").mkdir(parents=True, exist_ok=True)
+    return home
+
+
+def engine_launcher(binary: str) -> Path:
+    """A launcher that starts the engine ``binary`` in :func:`engine_home` (``exec``: the engine keeps the pid
+    and name the library and :func:`start_engine` expect). Written once per content, atomically."""
+    home = engine_home()
+    script = f'#!/bin/sh\ncd "{home}" || exit 1\nexec "{binary}" "$@"\n'
+    path = home / f"vizdoom-{hashlib.sha1(script.encode()).hexdigest()[:12]}.sh"
+    if not path.exists():
+        fd, tmp = tempfile.mkstemp(dir=home, suffix=".tmp")
+        with os.fdopen(fd, "w") as f:
+            f.write(script)
+        os.chmod(tmp, 0o755)
+        os.replace(tmp, path)
+    return path
+
+
+def start_engine(game) -> Engine:
+    """``game.init()`` (the engine running in :func:`engine_home`) and record the engine it forked. Raises
+    EngineError on failure."""
+    before = set(_children_named("vizdoom"))
+    binary = game.get_vizdoom_path()
+    if not binary.endswith(".sh"):
+        if not binary:  # the library's default: the engine shipped in its package
+            import vizdoom
+
+            binary = os.path.join(os.path.dirname(vizdoom.__file__), "vizdoom")
+        game.set_vizdoom_path(str(engine_launcher(binary)))
+    try:
+        game.init()
+    except Exception as e:  # vizdoom raises its own exception types
+        raise EngineError(f"ViZDoom failed to start: {e}") from e
+    new = {p: c for p, c in _children_named("vizdoom").items() if p not in before}
+    pid, instance = None, None
+    if len(new) == 1:
+        pid, cmd = next(iter(new.items()))
+        instance = _instance_id(cmd)
+    engine = Engine(game, pid, instance)
+    if pid is not None:
+        with _LOCK:
+            _LIVE[pid] = engine
+    return engine
+
+
+def _alive(pid: int) -> bool:
+    try:
+        done, _ = os.waitpid(pid, os.WNOHANG)  # reaps it if it has exited (it is our child)
+        return done == 0
+    except ChildProcessError:
+        return False
+
+
+def end_engine(engine: Engine) -> None:
+    """Close the game, then make sure its process is gone and its shm files removed. Idempotent."""
+    with signals_held():
+        _end(engine)
+
+
+@contextlib.contextmanager
+def signals_held():
+    """Hold SIGINT and SIGTERM back (they are delivered right after): a second signal, such as the parent's
+    terminate() after a Ctrl-C that already reached this worker, must not cut a cleanup short."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+def _end(engine: Engine, grace: float = 1.0) -> None:
+    """Close the game, give its process `grace` seconds to exit, then SIGKILL it; remove its shm files."""
+    try:
+        if engine.game is not None:
+            engine.game.close()
+    except Exception:
+        pass
+    if engine.pid is not None:
+        deadline = time.monotonic() + grace
+        while _alive(engine.pid) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if _alive(engine.pid):
+            try:
+                os.kill(engine.pid, signal.SIGKILL)
+                os.waitpid(engine.pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+        with _LOCK:
+            _LIVE.pop(engine.pid, None)
+    if engine.instance_id:
+        for path in glob.glob(os.path.join(SHM_DIR, f"ViZDoom*{engine.instance_id}")):
+            try:
+                os.unlink(path)
+            except FileNotFoundError:
+                pass
+
+
+class RestartBudget:
+    """How many deaths in a row a restarting owner tolerates: a death less than ``window`` steps after the last
+    restart continues the streak, a later one starts a new streak; a streak longer than ``max_restarts`` raises
+    ``error`` (an engine or worker that cannot stay up ends the run with a clear message instead of looping)."""
+
+    def __init__(self, max_restarts: int, window: int, what: str, error: type[EngineError] = EngineError):
+        self.max_restarts, self.window, self.what, self.error = max_restarts, window, what, error
+        self.restarts = 0
+        """Restarts granted so far."""
+        self._in_a_row = 0
+        self._steps_since = 0
+
+    def step(self) -> None:
+        self._steps_since += 1
+
+    def death(self, cause: Exception) -> None:
+        """Record a death; raises when the streak is past the budget, else counts a restart."""
+        self._in_a_row = self._in_a_row + 1 if self._steps_since < self.window else 1
+        self._steps_since = 0
+        if self._in_a_row > self.max_restarts:
+            raise self.error(
+                f"the {self.what} died {self._in_a_row} times in a row, each within {self.window} steps of the last "
+                f"restart (max_engine_restarts={self.max_restarts}); last error: {cause}"
+            ) from cause
+        self.restarts += 1
+
+
+def become_subreaper() -> bool:
+    """Make this process adopt its orphaned descendants (Linux PR_SET_CHILD_SUBREAPER). An env worker that is
+    killed leaves its engine running; as our child, `end_orphan_engines` can then end it by pid. False where
+    the call is not available."""
+    import ctypes
+
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0) == 0  # 36 = PR_SET_CHILD_SUBREAPER
+    except (OSError, AttributeError):
+        return False
+
+
+def end_orphan_engines() -> list[int]:
+    """End (SIGKILL, by pid) every engine that is this process's child but not one it started: engines adopted
+    from dead workers (see `become_subreaper`). Their shm files go too. Returns their pids."""
+    with _LOCK:
+        own = set(_LIVE)
+    ended = []
+    for pid, cmd in _children_named("vizdoom").items():
+        if pid in own:
+            continue
+        with signals_held():
+            _end(Engine(game=None, pid=pid, instance_id=_instance_id(cmd)), grace=0.0)  # nobody is left to close it
+        ended.append(pid)
+    return ended
+
+
+def live_engines() -> list[int]:
+    """Pids of engines started by this process and not yet ended."""
+    with _LOCK:
+        return list(_LIVE)
+
+
+@atexit.register
+def _end_all() -> None:
+    with _LOCK:
+        engines = list(_LIVE.values())
+    for engine in engines:
+        end_engine(engine)
+
+
+# Worker processes of multiprocessing leave through os._exit, which skips atexit; multiprocessing's own exit
+# finalizers do run there, so the same net is hung on them too (it ends what an interrupted close left).
+multiprocessing.util.Finalize(None, _end_all, exitpriority=100)
+
+
+def private_mp_tempdir() -> Path:
+    """Put this process's multiprocessing temp dir (the forkserver's socket) under a folder of its own,
+    ``<tmp>/emml-mp-<uid>/<pid>/``, and remove the folders of processes that are gone. multiprocessing removes its
+    ``pymp-*`` dir at a normal exit but a SIGKILLed learner leaves it: here, the next start sweeps it away, without
+    ever touching another program's ``/tmp/pymp-*``. Call before the first worker process starts."""
+    base = Path(tempfile.gettempdir()) / f"emml-mp-{os.getuid()}"
+    mine = base / str(os.getpid())
+    mine.mkdir(parents=True, exist_ok=True)
+    for other in base.iterdir():
+        if other.name.isdigit() and other != mine and not Path(f"/proc/{other.name}").exists():
+            shutil.rmtree(other, ignore_errors=True)
+    if multiprocessing.current_process()._config.get("tempdir") is None:  # not created yet: create it in ours
+        saved, tempfile.tempdir = tempfile.tempdir, str(mine)
+        try:
+            multiprocessing.util.get_temp_dir()
+        finally:
+            tempfile.tempdir = saved
+    return mine
+
+
+def _raise_exit(signum, frame):
+    raise SystemExit(128 + signum)
+
+
+def install_signal_handlers() -> None:
+    """SIGTERM (and SIGHUP) raise SystemExit in the main thread, so cleanup code runs as on Ctrl-C."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            signal.signal(sig, _raise_exit)

@@ -1,0 +1,191 @@
+"""N Doom envs in worker processes, observations through shared memory (uint8), clean shutdown, engine restarts.
+
+Gymnasium's AsyncVectorEnv does the protocol (step/reset/close over pipes, observations in shared memory).
+What this module adds: workers that end their engine however they end — normal close, an exception, Ctrl-C,
+SIGTERM, or the parent dying (the worker's pipe read fails, its `finally` closes the env) — same-step
+autoreset, so that a PPO rollout never holds a dummy transition: after an episode ends, the step returns the next
+episode's first observation, and the ended episode's info under ``final_info`` — and engine restarts: a worker
+whose engine dies starts a new one and goes on (`RestartingEnv`).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import time
+from dataclasses import asdict
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
+from gymnasium.vector.async_vector_env import AsyncState
+
+from emml.config import DoomConfig
+from emml.envs.engine import (
+    EngineError,
+    RestartBudget,
+    WorkerDied,
+    become_subreaper,
+    end_orphan_engines,
+    private_mp_tempdir,
+)
+
+
+class RestartingEnv(gym.Wrapper):
+    """Survives engine deaths: when a step finds the engine dead, the episode in flight is dropped — it ends
+    there as truncated, with reward 0 and ``engine_restart=True`` in its info, so that the trainer leaves it out
+    of the success rates and counts it — and the next reset (same-step autoreset: at once) starts a new engine.
+    ``max_restarts`` deaths in a row, each less than ``window`` steps after the previous restart, raise
+    EngineError: an engine that cannot stay up ends the run with a clear error instead of looping.
+
+    Every info carries ``engine_restart`` (False normally) so that batched infos have the key for every env."""
+
+    def __init__(self, env, max_restarts: int = 3, window: int = 1000):
+        super().__init__(env)
+        self.budget = RestartBudget(max_restarts, window, "engine")
+        self._blank = {k: np.zeros(s.shape, s.dtype) for k, s in env.observation_space.spaces.items()}
+
+    @property
+    def engine_restarts(self) -> int:
+        """Engines this worker restarted (all of the run)."""
+        return self.budget.restarts
+
+    @property
+    def engine_pid(self) -> int | None:
+        """The pid of this env's engine process (None before the first reset)."""
+        engine = self.env.unwrapped._engine
+        return engine.pid if engine is not None else None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        info["engine_restart"] = False
+        return obs, info
+
+    def step(self, action):
+        try:
+            obs, reward, terminated, truncated, info = self.env.step(action)
+        except EngineError as e:
+            self.env.close()  # ends what is left of the dead engine: its pid, its shm files (idempotent)
+            self.budget.death(e)
+            episode = self.env.unwrapped
+            info = {"task": episode.task_id, "answer": episode.answer_id, "success": False, "engine_restart": True}
+            return self._blank, 0.0, False, True, info
+        self.budget.step()
+        info["engine_restart"] = False
+        return obs, reward, terminated, truncated, info
+
+
+def _make_env(config: dict, max_restarts: int, window: int):
+    from emml.envs.doom import DoomEnv
+    from emml.envs.engine import install_signal_handlers
+
+    install_signal_handlers()  # in the worker: SIGTERM → SystemExit → the worker's finally closes the env
+    import cv2
+
+    cv2.setNumThreads(1)  # parallelism comes from one process per env: a resize thread pool per worker only thrashes
+    return RestartingEnv(DoomEnv(DoomConfig(**config)), max_restarts, window)
+
+
+class _Closing:
+    """Context manager protocol for the vector envs: ``with make_vector_env(...) as venv``."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
+    """Gymnasium's AsyncVectorEnv, plus: a dead worker is noticed (`WorkerDied`) instead of waited on forever
+    — its orphaned engine keeps the pipe open — and closing ends the engines that dead workers left behind."""
+
+    poll_interval = 0.5
+    """Seconds between liveness checks of the workers while waiting on them."""
+
+    def __init__(self, *args, **kwargs):
+        become_subreaper()  # before the workers start: engines of workers that die are then adopted by us
+        super().__init__(*args, **kwargs)
+
+    def _poll_pipe_envs(self, timeout: float | None = None) -> bool:
+        self._assert_is_running()
+        deadline = None if timeout is None else time.monotonic() + timeout
+        for index, (pipe, process) in enumerate(zip(self.parent_pipes, self.processes)):
+            if pipe is None or pipe.closed:
+                return False
+            while True:
+                left = self.poll_interval if deadline is None else min(self.poll_interval, deadline - time.monotonic())
+                if pipe.poll(max(left, 0)):
+                    break
+                if not process.is_alive():
+                    self._state = AsyncState.DEFAULT
+                    raise WorkerDied(f"env worker {index} (pid {process.pid}) died with exit code {process.exitcode}")
+                if deadline is not None and time.monotonic() >= deadline:
+                    return False
+        return True
+
+    def close_extras(self, timeout: float | None = None, terminate: bool = False) -> None:
+        terminate = terminate or not all(p.is_alive() for p in self.processes)  # a dead one would never answer
+        try:
+            super().close_extras(timeout, terminate)
+        finally:
+            end_orphan_engines()
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+        return False
+
+    def abort(self) -> None:
+        """End the workers without talking to them: after an interrupt (SIGTERM, Ctrl-C) the parent may have
+        stopped in the middle of reading a message, and a graceful close would then wait forever on a pipe out
+        of step. Each worker gets SIGTERM instead; its handler raises SystemExit and its `finally` ends its
+        engine."""
+        self._state = AsyncState.DEFAULT  # forget the pending call: its reply may be half read
+        self.close(terminate=True)
+
+
+class SyncDoomVectorEnv(_Closing, SyncVectorEnv):
+    pass
+
+
+class _EnvFactory:
+    """Picklable env constructor (lambdas don't survive forkserver)."""
+
+    def __init__(self, config: DoomConfig, max_restarts: int, window: int):
+        self.config = asdict(config)
+        self.max_restarts = max_restarts
+        self.window = window
+
+    def __call__(self):
+        return _make_env(self.config, self.max_restarts, self.window)
+
+
+def make_vector_env(
+    config: DoomConfig,
+    num_envs: int,
+    asynchronous: bool = True,
+    copy: bool = True,
+    max_restarts: int = 3,
+    restart_window: int = 1000,
+):
+    """``num_envs`` copies of the env. Asynchronous: one worker process each (forkserver: workers don't inherit
+    the learner's torch threads or open files). Use it as a context manager, or call ``close()``.
+
+    ``copy=False`` returns observations as views of the shared buffers (no copy): valid until the next step of
+    this vector env. ``max_restarts``/``restart_window``: see `RestartingEnv`."""
+    config.validate()
+    fns = [_EnvFactory(config, max_restarts, restart_window) for _ in range(num_envs)]
+    if not asynchronous:
+        return SyncDoomVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP, copy=copy)
+    private_mp_tempdir()
+    return AsyncDoomVectorEnv(
+        fns,
+        copy=copy,
+        shared_memory=True,
+        context="forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn",
+        daemon=True,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    )

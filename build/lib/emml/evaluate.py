@@ -1,0 +1,118 @@
+"""Greedy evaluation (§5.1, Table 2): accuracy = fraction of episodes ending in success, per task and split.
+
+The policy acts greedily (argmax over the 4 moves; the answer word is always the argmax of x_Ans). Episodes run in
+a few envs in lockstep so that the model sees batches; each (task, split) gets exactly ``episodes`` episodes, with
+seeds ``seed, seed+1, …`` so that a checkpoint's numbers are reproducible.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import torch
+
+from emml.config import DoomConfig
+from emml.envs.doom import DoomEnv
+
+SETTINGS = (("sgn", "train"), ("sgn", "test"), ("eqa", "train"), ("eqa", "test"))
+
+
+def obs_to_torch(obs: dict, device) -> dict[str, torch.Tensor]:
+    """Numpy observation batch (B, ...) → tensors with a leading time axis (1, B, ...)."""
+    return {k: torch.as_tensor(np.asarray(v)).to(device, non_blocking=True).unsqueeze(0) for k, v in obs.items()}
+
+
+def eval_settings(env_cfg: DoomConfig) -> list[tuple[str, str, tuple[str, ...] | None]]:
+    """(task, split, instructions) to evaluate: the tasks the run trains on (a single-task run is scored on its
+    task only, as in Table 3), both splits; a run restricted to some sentences is scored on those only."""
+    tasks = ("sgn", "eqa") if env_cfg.tasks == "both" else (env_cfg.tasks,)
+    if not env_cfg.instructions:
+        return [(t, s, None) for t, s in SETTINGS if t in tasks]
+    from emml.tasks.language import load_dataset
+
+    ds = load_dataset(env_cfg.dataset)
+    found = [ds.find(text) for text in env_cfg.instructions]
+    out = []
+    for task, split in SETTINGS:
+        chosen = tuple(x.text for x in found if x.kind == task and x.split == split)
+        if task in tasks and chosen:
+            out.append((task, split, chosen))
+    return out
+
+
+@torch.no_grad()
+def evaluate(
+    model, env_cfg: DoomConfig, episodes: int, seed: int = 10_000, device="cpu", batch: int = 8
+) -> dict[str, float]:
+    """Accuracy per '<task>_<split>' over ``episodes`` greedy episodes each."""
+    was_training = model.training
+    model.eval()
+    results = {}
+    # the diagnostic controls read the privileged labels; every real model plays without them
+    labels = getattr(getattr(model, "cfg", None), "control", "none") != "none"
+    for task, split, instructions in eval_settings(env_cfg):
+        cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
+        n_envs = min(batch, episodes)
+        envs = [DoomEnv(cfg) for _ in range(n_envs)]
+        try:
+            results[f"{task}_{split}"] = _run(model, envs, episodes, seed, device)
+        finally:
+            for env in envs:
+                env.close()
+    model.train(was_training)
+    return results
+
+
+def _run(model, envs, episodes: int, seed: int, device) -> float:
+    started, successes, finished = 0, 0, 0
+    obs_list, active = [], []
+    for env in envs:
+        obs_list.append(env.reset(seed=seed + started)[0])
+        started += 1
+        active.append(True)
+    state = model.initial_state(len(envs), device=device)
+    episode_start = torch.ones(1, len(envs), dtype=torch.bool, device=device)
+    while finished < episodes:
+        batch = {k: np.stack([o[k] for o in obs_list]) for k in obs_list[0]}
+        out, state = model(obs_to_torch(batch, device), state, episode_start)
+        moves = out.logits[0].argmax(-1).cpu().numpy()
+        words = out.answer_logits[0].argmax(-1).cpu().numpy()
+        starts = np.zeros(len(envs), dtype=bool)
+        for i, env in enumerate(envs):
+            if not active[i]:
+                continue
+            obs, _, terminated, truncated, info = env.step(np.array([moves[i], words[i]]))
+            obs_list[i] = obs
+            if terminated or truncated:
+                finished += 1
+                successes += bool(info["success"])
+                if started < episodes:
+                    obs_list[i] = env.reset(seed=seed + started)[0]
+                    started += 1
+                    starts[i] = True
+                else:
+                    active[i] = False
+        episode_start = torch.as_tensor(starts, device=device).unsqueeze(0)
+    return successes / episodes
+
+
+def load_model(path, device: str = "cpu"):
+    """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary."""
+    from emml.config import TrainConfig
+    from emml.models import build_model
+    from emml.rl.checkpoint import load_checkpoint
+
+    ckpt = load_checkpoint(path)
+    cfg = TrainConfig.from_dict(ckpt["config"])
+    env = cfg.env
+    model = build_model(cfg.model, len(ckpt["vocabulary"]), env.height, env.width, env.max_steps, **cfg.model_options)
+    model.load_state_dict(ckpt["model"])
+    return model.to(device), cfg
+
+
+def evaluate_checkpoint(path, episodes: int, seed: int = 10_000, device: str = "cpu") -> dict[str, float]:
+    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily."""
+    model, cfg = load_model(path, device)
+    torch.manual_seed(seed)
+    return evaluate(model, cfg.env, episodes, seed=seed, device=device)

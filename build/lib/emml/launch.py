@@ -1,0 +1,227 @@
+"""Launch every run of a table: a local process pool, or Slurm through submitit.
+
+Before fanning out, the MLflow experiment and one parent run per (table, profile) are created (one writer; the
+sqlite store dislikes concurrent creation), and every child run is tagged with `mlflow.parentRunId`. Runs already
+recorded in results/<table>/<profile>.csv are not launched; any other run is handed to the trainer, which resumes
+an interrupted run from its checkpoint and re-records a finished run missing from the CSV (a fresh checkout).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import traceback
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from emml.registry import RunSpec, load_table
+from emml.tracking import project_path
+
+BACKENDS = ("local", "slurm")
+STATES = ("finished", "unrecorded", "reference", "partial", "missing")
+"""finished: a finished run dir here and its row in the results CSV; unrecorded: run dir finished but no CSV row;
+reference: a CSV row with no run dir here (results committed to the repository, or made on another machine):
+trained here, its row then replaced; partial: interrupted (a checkpoint, not finished); missing: nothing yet."""
+
+
+GPU_MEMORY_PER_RUN = 3 * 2**30
+"""Bytes of GPU memory one run may take (paper protocol at 168×300: the uint8 rollout, ~155 MB, the model and the
+PPO minibatch activations, with room to spare); caps the runs packed on one GPU."""
+
+
+def default_jobs(device: str = "cpu") -> int:
+    """Concurrent local runs: half the cores (each run has env worker processes and a learner); on a GPU also no
+    more than its free memory holds at GPU_MEMORY_PER_RUN each (the runs share it)."""
+    jobs = max(1, (os.cpu_count() or 1) // 2)
+    if device.startswith("cuda"):
+        import torch
+
+        free, _ = torch.cuda.mem_get_info(torch.device(device))
+        jobs = max(1, min(jobs, free // GPU_MEMORY_PER_RUN))
+    return jobs
+
+
+@dataclass
+class LaunchReport:
+    """What `run_table` did."""
+
+    table: str
+    profile: str
+    backend: str
+    total: int = 0
+    """Runs the table declares under the profile."""
+    skipped: list[str] = field(default_factory=list)
+    """Already finished (recorded in the results CSV): not launched."""
+    done: list[str] = field(default_factory=list)
+    """Trained (or resumed, or re-recorded) to the end in this launch."""
+    failed: dict[str, str] = field(default_factory=dict)
+    """Run name → error (the others went on)."""
+    submitted: list[str] = field(default_factory=list)
+    """Slurm job ids (backend slurm)."""
+    parent_run_id: str | None = None
+    placeholder: bool = False
+    """The table is a placeholder: nothing to run."""
+
+
+def run_states(name: str, profile: str, run_root: str | None = None, results_root: str | None = None) -> dict:
+    """Run name → (RunSpec, state) for every run of table `name` under `profile` (see STATES)."""
+
+    from emml.profiles import profile_seeds
+    from emml.results import read_results
+    from emml.rl.trainer import CHECKPOINT, RESULTS, results_csv, run_dir
+
+    table = load_table(name)
+    fields = _roots(run_root, results_root)
+    out: dict[str, tuple[RunSpec, str]] = {}
+    recorded: set[str] | None = None
+    for spec in table.runs(profile_seeds(profile)):
+        cfg = spec.to_config(profile, **fields)
+        if recorded is None:
+            path = results_csv(cfg)
+            recorded = set(read_results(path)["run_name"])
+        rname, rdir = cfg.run_name(), run_dir(cfg)
+        done = (rdir / CHECKPOINT).exists() and (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT)
+        if rname in recorded:
+            state = "finished" if done else "partial" if (rdir / CHECKPOINT).exists() else "reference"
+        elif (rdir / CHECKPOINT).exists():
+            state = "unrecorded" if done else "partial"
+        else:
+            state = "missing"
+        out[rname] = (spec, state)
+    return out
+
+
+def _finished(path: Path) -> bool:
+    from emml.rl.checkpoint import load_checkpoint
+
+    try:
+        return bool(load_checkpoint(path, require=()).get("finished"))
+    except Exception:  # a checkpoint we cannot read is not finished; the trainer will say why
+        return False
+
+
+def _roots(run_root: str | None, results_root: str | None) -> dict:
+    return {k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None}
+
+
+def _train_one(spec: RunSpec, profile: str, fields: dict, parent_run_id: str | None, train_fn: Callable | None):
+    """Worker body (a pool process, a Slurm job or in-process): train one run; returns its run name."""
+    from emml.envs.engine import install_signal_handlers
+
+    install_signal_handlers()
+    if train_fn is None:
+        from emml.rl.trainer import train as train_fn
+    cfg = spec.to_config(profile, **fields).validate()
+    train_fn(cfg, quiet=True, parent_run_id=parent_run_id)
+    return cfg.run_name()
+
+
+def run_table(
+    name: str,
+    profile: str,
+    backend: str = "local",
+    jobs: int | None = None,
+    run_root: str | None = None,
+    results_root: str | None = None,
+    device: str = "cpu",
+    partition: str | None = None,
+    time_min: int = 24 * 60,
+    gpus: int = 0,
+    cpus: int = 8,
+    slurm_cluster: str = "slurm",
+    wait: bool = False,
+    train_fn: Callable | None = None,
+    log: Callable[[str], None] = print,
+) -> LaunchReport:
+    """Train every unfinished run of table `name` under `profile`.
+
+    backend 'local': `jobs` concurrent runs (default: half the cores) in a forkserver process pool, each with
+    cores // jobs torch threads; jobs=1 runs in this process. backend 'slurm': one submitit job per run on
+    `partition` with `time_min` minutes, `gpus` GPUs and `cpus` CPUs each (`slurm_cluster`='local'/'debug' runs
+    submitit's local executors, for tests); returns after submission unless `wait`. `train_fn` replaces the
+    trainer (tests; must be picklable).
+    """
+    from emml.profiles import load_profiles
+    from emml.tasks.language import check_choice
+    from emml.tracking import parent_run, set_run_status
+
+    check_choice("backend", backend, BACKENDS)
+    check_choice("profile", profile, tuple(load_profiles()))
+    table = load_table(name)
+    report = LaunchReport(name, profile, backend)
+    if table.placeholder:
+        report.placeholder = True
+        log(f"{name} is a placeholder ({table.path.name}: status = 'placeholder'); no runs are declared yet")
+        return report
+    jobs = jobs or default_jobs(device)
+    if jobs < 1:
+        raise ValueError(f"jobs={jobs} must be >= 1")
+    states = run_states(name, profile, run_root, results_root)
+    report.total = len(states)
+    todo = [spec for spec, state in states.values() if state != "finished"]
+    report.skipped = [rname for rname, (_, state) in states.items() if state == "finished"]
+    log(f"{name} [{profile}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
+    if not todo:
+        return report
+    report.parent_run_id = parent_run(name, f"{name}-{profile}", {"table": name, "profile": profile})
+    fields = {**_roots(run_root, results_root), "device": device}
+    if backend == "local" and jobs > 1:
+        fields["threads"] = max(1, (os.cpu_count() or 1) // jobs)
+    args = [(spec, profile, fields, report.parent_run_id, train_fn) for spec in todo]
+    if backend == "slurm":
+        folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile}"
+        return _submit(report, args, folder, partition, time_min, gpus, cpus, slurm_cluster, wait, log)
+    set_run_status(report.parent_run_id, "RUNNING")
+    if jobs == 1:
+        for a in args:
+            _collect(report, a[0], a[1], lambda a=a: _train_one(*a), log)
+    else:
+        from emml.envs.engine import private_mp_tempdir
+
+        private_mp_tempdir()
+        ctx = multiprocessing.get_context("forkserver")
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+            futures = {pool.submit(_train_one, *a): a for a in args}
+            for fut in as_completed(futures):
+                spec, prof = futures[fut][:2]
+                _collect(report, spec, prof, fut.result, log)
+    set_run_status(report.parent_run_id, "FAILED" if report.failed else "FINISHED")
+    return report
+
+
+def _collect(report: LaunchReport, spec: RunSpec, profile: str, result: Callable[[], str], log) -> None:
+    """Record one run's outcome; a failure is kept and the launch goes on."""
+    rname = spec.run_name(profile)
+    try:
+        result()
+    except Exception as e:  # noqa: BLE001 - one failed run must not stop the table
+        report.failed[rname] = f"{type(e).__name__}: {e}"
+        log(f"  FAILED {rname}: {e}\n{traceback.format_exc(limit=3)}")
+        return
+    report.done.append(rname)
+    log(f"  done {rname} ({len(report.done)}/{report.total - len(report.skipped)})")
+
+
+def _submit(report, args, folder, partition, time_min, gpus, cpus, cluster, wait, log) -> LaunchReport:
+    """One submitit job per run (a Slurm job array), logs in `folder` (runs/slurm/<table>-<profile>/)."""
+    try:
+        import submitit
+    except ImportError as e:
+        raise ValueError("backend='slurm' needs submitit: pip install -e '.[slurm]'") from e
+    executor = submitit.AutoExecutor(folder=folder, cluster=cluster)
+    params = {"name": f"emml-{report.table}-{report.profile}", "timeout_min": time_min, "cpus_per_task": cpus}
+    if gpus:
+        params["gpus_per_node"] = gpus
+    if partition:
+        params["slurm_partition"] = partition
+    executor.update_parameters(**params)
+    with executor.batch():
+        jobs = [executor.submit(_train_one, *a) for a in args]
+    report.submitted = [str(j.job_id) for j in jobs]
+    log(f"submitted {len(jobs)} jobs to {cluster} (logs in {folder})")
+    if wait:
+        for job, a in zip(jobs, args):
+            _collect(report, a[0], a[1], job.result, log)
+    return report

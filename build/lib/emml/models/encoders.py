@@ -1,0 +1,87 @@
+"""Image and text encoders of "Embodied Multimodal Multitask Learning"
+(Chaplot et al. 2019, arXiv 1902.01385), Section 3 and appendix
+"Hyperparameters and network details".
+
+* Image: conv1 32@8x8 stride 4 + ReLU, conv2 64@4x4 stride 2 + ReLU,
+  conv3 V@3x3 stride 2 + sigmoid (no padding), V = vocabulary size, so that
+  channel i of x_I is aligned with word i.
+* Text: bag-of-words x_BoW in {0,1}^V and sentence embedding
+  x_sent = ReLU(Linear_V(GRU_32(Embedding_32(T)))).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from emml.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv geometry
+from emml.geometry import MIN_INPUT_SIZE, conv_output_size  # noqa: F401  (re-exported)
+
+
+class ImageEncoder(nn.Module):
+    """Conv stack f(I; theta_conv) -> conv3 pre-sigmoid logits (N, V, h, w).
+
+    x_I = sigmoid(logits); the logits are also the auxiliary-task predictions
+    (per-channel object/attribute detection), trained with cross-entropy.
+    """
+
+    def __init__(self, vocab_size: int) -> None:
+        super().__init__()
+        (k1, s1), (k2, s2), (k3, s3) = _CONV_LAYERS
+        self.conv1 = nn.Conv2d(3, 32, kernel_size=k1, stride=s1)
+        self.conv2 = nn.Conv2d(32, 64, kernel_size=k2, stride=s2)
+        self.conv3 = nn.Conv2d(64, vocab_size, kernel_size=k3, stride=s3)
+
+    def forward(self, image: Tensor) -> Tensor:
+        """uint8 image (N, 3, H, W) -> conv3 logits (N, V, h, w)."""
+        if image.dtype != torch.uint8:
+            raise TypeError(f"ImageEncoder expects a uint8 image, got {image.dtype}")
+        x = image.float().div_(255.0)
+        x = torch.relu(self.conv1(x))
+        x = torch.relu(self.conv2(x))
+        return self.conv3(x)
+
+
+class TextEncoder(nn.Module):
+    """Token ids (N, L) -> x_BoW (N, V) and x_sent (N, V) (Section 3).
+
+    Token id 0 is padding and word index i has token id i + 1. Sequences are
+    expected to be right-padded; x_sent reads the GRU output at the last
+    non-padding position, and is ReLU(bias-only Linear) for an all-padding row.
+    With ``sentence=False`` the GRU/Linear are not built and x_sent is None
+    (for fusions that never read it, so no dead parameters exist).
+    """
+
+    def __init__(self, vocab_size: int, embed_dim: int = 32, gru: int = 32, sentence: bool = True) -> None:
+        super().__init__()
+        self.vocab_size = vocab_size
+        self.sentence = sentence
+        if sentence:
+            self.embedding = nn.Embedding(vocab_size + 1, embed_dim, padding_idx=0)
+            self.gru = nn.GRU(embed_dim, gru, batch_first=True)
+            self.linear = nn.Linear(gru, vocab_size)
+
+    def bag_of_words(self, tokens: Tensor) -> Tensor:
+        """x_BoW[n, i] = 1 iff word i (token id i + 1) occurs in row n."""
+        bow = tokens.new_zeros(tokens.shape[0], self.vocab_size + 1, dtype=torch.float32)
+        bow.scatter_(1, tokens, 1.0)
+        return bow[:, 1:]
+
+    def sentence_embedding(self, tokens: Tensor) -> Tensor:
+        """x_sent = ReLU(Linear(GRU(Embedding(tokens))[last non-pad step]))."""
+        n, length = tokens.shape
+        out, _ = self.gru(self.embedding(tokens))  # (N, L, gru)
+        positions = torch.arange(1, length + 1, device=tokens.device)
+        last = ((tokens != 0).long() * positions).amax(dim=1)  # 1-based; 0 = all pad
+        index = (last - 1).clamp(min=0).view(n, 1, 1).expand(n, 1, out.shape[-1])
+        final = out.gather(1, index).squeeze(1)
+        final = final * (last > 0).unsqueeze(1).to(final.dtype)  # all-pad rows -> h = 0
+        return torch.relu(self.linear(final))
+
+    def forward(self, tokens: Tensor) -> tuple[Tensor, Tensor | None]:
+        """int64 tokens (N, L) -> (x_BoW (N, V), x_sent (N, V) or None)."""
+        if tokens.dtype != torch.int64:
+            raise TypeError(f"TextEncoder expects int64 tokens, got {tokens.dtype}")
+        bow = self.bag_of_words(tokens)
+        sent = self.sentence_embedding(tokens) if self.sentence else None
+        return bow, sent

@@ -1,0 +1,232 @@
+"""Policy module and the shared model of "Embodied Multimodal Multitask
+Learning" (Chaplot et al. 2019, arXiv 1902.01385), Section 3 ("Policy
+Module") and appendix "Hyperparameters and network details".
+
+All models share: image encoder -> fusion -> policy module. Only the fusion
+unit differs between the proposed Dual-Attention model and the baselines
+("we replace the proposed Dual-Attention unit ... keep everything else
+identical").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+
+from emml.models.config import ModelConfig
+from emml.models.encoders import ImageEncoder, TextEncoder, conv_output_size
+from emml.models.fusion import FusionOutput, Pacman, build_fusion
+
+NUM_ACTIONS = 4
+"""Navigation actions (the harness's action set size)."""
+NUM_TASKS = 2
+"""Task indicator classes: 0 = SGN, 1 = EQA."""
+
+
+@dataclass
+class ModelOutput:
+    """Outputs of `EmmlModel.forward` for a (T, B) block of steps."""
+
+    logits: Tensor
+    """(T, B, 4) action logits of pi(a_t | I_t, T)."""
+    value: Tensor
+    """(T, B) value estimate V(I_t, T)."""
+    answer_logits: Tensor
+    """(T, B, V) pre-softmax answer scores; x_Ans = softmax(answer_logits)."""
+    aux_logits: Tensor
+    """(T, B, V, h, w) conv3 pre-sigmoid logits (auxiliary detection task)."""
+    attention: Tensor | None
+    """(T, B, h, w) spatial attention x_spat (Dual-Attention only), else None."""
+
+
+def _layer_init(layer: nn.Linear, std: float) -> nn.Linear:
+    """Orthogonal weights with gain `std`, zero bias (CleanRL PPO convention)."""
+    nn.init.orthogonal_(layer.weight, std)
+    nn.init.zeros_(layer.bias)
+    return layer
+
+
+class PolicyModule(nn.Module):
+    """[x_S, x_Ans, time embedding, task one-hot] -> Linear+ReLU -> GRU -> pi, V.
+
+    Section 3 "Policy Module"; hidden size 128 (appendix). The time step is a
+    learned embedding over 0..max_steps (indices are clamped into that range);
+    the task indicator is a one-hot of 2 and is omitted when
+    ``task_indicator=False`` (the 'w/o indicator' ablation).
+    """
+
+    def __init__(
+        self,
+        state_dim: int,
+        vocab_size: int,
+        max_steps: int,
+        hidden: int = 128,
+        time_dim: int = 32,
+        task_indicator: bool = True,
+    ) -> None:
+        super().__init__()
+        self.max_steps = max_steps
+        self.task_indicator = task_indicator
+        self.time_embedding = nn.Embedding(max_steps + 1, time_dim)
+        in_dim = state_dim + vocab_size + time_dim + (NUM_TASKS if task_indicator else 0)
+        self.linear = nn.Linear(in_dim, hidden)
+        self.gru = nn.GRUCell(hidden, hidden)
+        self.actor = _layer_init(nn.Linear(hidden, NUM_ACTIONS), std=0.01)
+        self.critic = _layer_init(nn.Linear(hidden, 1), std=1.0)
+
+    def initial_state(self, batch_size: int, device=None) -> Tensor:
+        return torch.zeros(batch_size, self.gru.hidden_size, device=device)
+
+    def forward(
+        self,
+        state: Tensor,
+        answer_probs: Tensor,
+        time: Tensor,
+        task: Tensor,
+        h: Tensor,
+        episode_start: Tensor,
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        """Inputs (T, B, ...) -> logits (T, B, 4), value (T, B), final h (B, hidden).
+
+        ``h`` is reset to zeros before every step whose ``episode_start`` is True.
+        """
+        t_len, batch = time.shape
+        parts = [state, answer_probs, self.time_embedding(time.clamp(0, self.max_steps))]
+        if self.task_indicator:
+            parts.append(nn.functional.one_hot(task, NUM_TASKS).to(state.dtype))
+        x = torch.relu(self.linear(torch.cat(parts, dim=-1)))  # batched over T*B
+        keep = (~episode_start.bool()).to(x.dtype).unsqueeze(-1)  # (T, B, 1)
+        outs = []
+        for t in range(t_len):
+            h = self.gru(x[t], h * keep[t])
+            outs.append(h)
+        out = torch.stack(outs)  # (T, B, hidden)
+        return self.actor(out), self.critic(out).squeeze(-1), h
+
+
+class EmmlModel(nn.Module):
+    """Encoders + fusion unit + policy module; one class for every model.
+
+    ``forward`` takes a (T, B) block: conv and text encoders and the fusion run
+    batched over T*B; only the policy GRU loops over T. ``episode_start[t, b]``
+    True resets that env's recurrent state (GRU h and PACMAN frame window)
+    before step t. Returned state tensors are not detached.
+
+    PACMAN: the window holds the last ``pacman_frames`` frames, oldest first.
+    State "frames" carries the previous K-1 raw uint8 frames; their conv
+    features are recomputed each call (so gradients reach them in PPO replay).
+    At an episode start the window is padded by repeating the episode's first
+    frame (a fresh `initial_state` without an episode_start flag pads with
+    black frames).
+    """
+
+    def __init__(self, cfg: ModelConfig, vocab_size: int, height: int, width: int, max_steps: int) -> None:
+        super().__init__()
+        cfg.validate()
+        if isinstance(vocab_size, bool) or not isinstance(vocab_size, int) or vocab_size < 1:
+            raise ValueError(f"vocab_size={vocab_size!r} must be a positive integer")
+        if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+            raise ValueError(f"max_steps={max_steps!r} must be a positive integer")
+        self.cfg = cfg
+        self.vocab_size, self.height, self.width = vocab_size, height, width
+        self.grid = conv_output_size(height, width)
+        self.image_encoder = ImageEncoder(vocab_size)
+        self.fusion = build_fusion(cfg, vocab_size, *self.grid)
+        self.text_encoder = TextEncoder(vocab_size, cfg.embed_dim, cfg.gru_text, sentence=self.fusion.uses_sent)
+        self.policy = PolicyModule(
+            self.fusion.state_dim,
+            vocab_size,
+            max_steps,
+            hidden=cfg.hidden,
+            time_dim=cfg.time_dim,
+            task_indicator=cfg.task_indicator,
+        )
+        self.window = cfg.pacman_frames if isinstance(self.fusion, Pacman) else 0
+
+    def initial_state(self, batch_size: int, device=None) -> dict[str, Tensor]:
+        """{"h": (B, hidden) zeros} (+ PACMAN {"frames": (B, K-1, 3, H, W) uint8 zeros})."""
+        state = {"h": self.policy.initial_state(batch_size, device)}
+        if self.window:
+            state["frames"] = torch.zeros(
+                batch_size,
+                self.window - 1,
+                3,
+                self.height,
+                self.width,
+                dtype=torch.uint8,
+                device=device,
+            )
+        return state
+
+    def _window_positions(self, episode_start: Tensor) -> Tensor:
+        """(T, B, K) index into the [carried K-1 frames; T new frames] sequence.
+
+        Window slot k of step t holds frame t-(K-1)+k, clamped to the step's
+        episode start (repeat the episode's first frame) when one lies inside.
+        """
+        t_len, batch = episode_start.shape
+        k = self.window
+        steps = torch.arange(t_len, device=episode_start.device)
+        start_at = torch.where(episode_start.bool(), steps[:, None], -(k - 1))
+        last_start = torch.cummax(start_at, dim=0).values  # (T, B); -(K-1) = none
+        source = steps[:, None, None] - (k - 1) + torch.arange(k, device=steps.device)
+        source = torch.maximum(source, last_start[:, :, None])  # (T, B, K) step index
+        return source + (k - 1)
+
+    def _fuse_pacman(self, obs, state, episode_start, x_sent):
+        t_len, batch = episode_start.shape
+        carried = state["frames"].transpose(0, 1)  # (K-1, B, 3, H, W)
+        images = torch.cat([carried, obs["image"]], dim=0)  # (T+K-1, B, 3, H, W)
+        logits = self.image_encoder(images.flatten(0, 1))
+        logits = logits.unflatten(0, images.shape[:2])  # (T+K-1, B, V, h, w)
+        pos = self._window_positions(episode_start)  # (T, B, K)
+        cols = torch.arange(batch, device=pos.device)[None, :, None]
+        frames = torch.sigmoid(logits[pos, cols])  # (T, B, K, V, h, w)
+        n = t_len * batch
+        fused = self.fusion(frames.flatten(0, 1), None, x_sent)
+        new_frames = images[pos[-1, :, 1:], torch.arange(batch, device=pos.device)[:, None]]
+        aux = logits[self.window - 1 :].reshape(n, *logits.shape[2:])
+        return fused, aux, new_frames
+
+    def forward(
+        self, obs: dict[str, Tensor], state: dict[str, Tensor], episode_start: Tensor
+    ) -> tuple[ModelOutput, dict[str, Tensor]]:
+        """obs["image"] uint8 (T,B,3,H,W), obs["tokens"] int64 (T,B,L),
+        obs["task"] int64 (T,B), obs["time"] int64 (T,B); episode_start bool (T,B)."""
+        image = obs["image"]
+        t_len, batch = image.shape[:2]
+        if episode_start.shape != (t_len, batch):
+            raise ValueError(f"episode_start shape {tuple(episode_start.shape)} != (T, B) = {(t_len, batch)}")
+        x_bow, x_sent = self.text_encoder(obs["tokens"].flatten(0, 1))
+        new_state: dict[str, Tensor] = {}
+        if self.window:
+            fused, aux, new_state["frames"] = self._fuse_pacman(obs, state, episode_start, x_sent)
+        else:
+            aux = self.image_encoder(image.flatten(0, 1))  # (N, V, h, w)
+            x_image = torch.sigmoid(aux) if self.cfg.x_image == "sigmoid" else torch.relu(aux)  # x_I from conv3
+            if self.cfg.control == "detectors":  # diagnostic: perfect detectors
+                x_image = obs["aux"].flatten(0, 1).to(x_image.dtype)
+            fused = self.fusion(x_image, x_bow, x_sent)
+            if self.cfg.control == "target_mask":  # diagnostic: perfect x_S, the referent's cells
+                fused.state = obs["target"].flatten(0, 1).flatten(1).to(fused.state.dtype)
+        fused: FusionOutput
+        answer_probs = torch.softmax(fused.answer_logits, dim=-1)  # x_Ans
+        logits, value, new_state["h"] = self.policy(
+            fused.state.unflatten(0, (t_len, batch)),
+            answer_probs.unflatten(0, (t_len, batch)),
+            obs["time"],
+            obs["task"],
+            state["h"],
+            episode_start,
+        )
+        attention = None if fused.attention is None else fused.attention.unflatten(0, (t_len, batch))
+        out = ModelOutput(
+            logits=logits,
+            value=value,
+            answer_logits=fused.answer_logits.unflatten(0, (t_len, batch)),
+            aux_logits=aux.unflatten(0, (t_len, batch)),
+            attention=attention,
+        )
+        return out, new_state

@@ -1,0 +1,64 @@
+"""Profiles (reproduce/profiles.toml): the same protocol at different cost — smoke, demo, quick, paper."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import tomllib
+
+from emml.config import TrainConfig, apply_overrides
+
+PROFILES_FILE = Path(__file__).resolve().parent.parent / "reproduce" / "profiles.toml"
+
+
+class ProfileError(ValueError):
+    """reproduce/profiles.toml cannot be read or holds a value that is not a TrainConfig field of its type."""
+
+
+def load_profiles(path: Path | None = None) -> dict[str, dict]:
+    """Every profile of the file, each checked against TrainConfig (names and types) before anything uses it."""
+    path = path or PROFILES_FILE
+    try:
+        with open(path, "rb") as f:
+            profiles = tomllib.load(f)
+    except OSError as e:
+        raise ProfileError(f"{path}: cannot be read ({e.strerror})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ProfileError(f"{path}: not valid TOML ({e})") from None
+    for name, values in profiles.items():
+        where = f"{path} [{name}]"
+        if not isinstance(values, dict):
+            raise ProfileError(f"{where}: a profile is a table of TrainConfig fields, found {values!r}")
+        seeds = values.get("seeds", [0])
+        if not isinstance(seeds, list) or not seeds or not all(type(s) is int for s in seeds):
+            raise ProfileError(f"{where}: 'seeds' must be a non-empty list of integers, found {seeds!r}")
+        frames_hard = values.get("frames_hard", 1)
+        if type(frames_hard) is not int:
+            raise ProfileError(f"{where}: 'frames_hard' must be an integer, found {frames_hard!r}")
+        fields_only = {k: v for k, v in values.items() if k not in ("seeds", "frames_hard")}
+        try:
+            apply_overrides(TrainConfig(profile=name), fields_only, source=where)
+        except ValueError as e:
+            raise ProfileError(str(e)) from None
+    return profiles
+
+
+def profile_config(profile: str, difficulty: str = "easy", overrides: dict | None = None, **fields) -> TrainConfig:
+    """A TrainConfig for ``profile`` (its frames chosen by difficulty), then ``fields`` and dotted ``overrides``."""
+    profiles = load_profiles()
+    if profile not in profiles:
+        raise ValueError(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, profiles))}")
+    values = dict(profiles[profile])
+    values.pop("seeds", None)
+    hard_frames = values.pop("frames_hard", values.get("frames"))
+    if difficulty == "hard":
+        values["frames"] = hard_frames
+    cfg = TrainConfig(profile=profile, **fields)
+    cfg.env.difficulty = difficulty
+    apply_overrides(cfg, values, source=f"{PROFILES_FILE} [{profile}]")
+    apply_overrides(cfg, overrides or {})
+    return cfg
+
+
+def profile_seeds(profile: str) -> list[int]:
+    return list(load_profiles()[profile].get("seeds", [0]))

@@ -1,0 +1,276 @@
+"""The experiment registry: reproduce/tableN.toml → `Table` → `RunSpec`s (one per setting and seed).
+
+A table file reads like the paper's table (Chaplot et al. 2019, arXiv:1902.01385): `[[rows]]` are its rows (a
+model, optionally with config overrides), `[columns]` its columns (difficulties × aux × metrics). Each
+(row, difficulty, aux) is a *setting*; a setting is trained once per seed of the profile (reproduce/profiles.toml).
+A row with `metric_overrides` trains one setting per metric (Table 3's "DA Single-Task": SGN cells from SGN-only
+runs, EQA cells from EQA-only runs). Run names derive from the config (`TrainConfig.run_name`), and two runs of a
+table may not share one. A malformed file fails with the file, the key and what is wrong.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import tomllib
+
+from emml.config import TrainConfig, apply_overrides
+
+REPRODUCE_DIR = Path(__file__).resolve().parent.parent / "reproduce"
+"""reproduce/: profiles.toml, table*.toml and paper/table*.csv."""
+STATUSES = ("active", "placeholder")
+DIFFICULTIES = ("easy", "hard")
+METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
+"""Results columns a cell may read (written by the trainer's greedy evaluation)."""
+TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows")
+COLUMN_KEYS = ("difficulties", "aux", "metrics")
+ROW_KEYS = ("label", "model", "overrides", "metric_overrides")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One training run of a table: a setting (row, difficulty, aux, overrides) and a seed."""
+
+    table: str
+    """Table name (tableN), also the MLflow experiment and the results/<table>/ folder."""
+    row: str
+    """The paper's row label the run fills (e.g. 'Dual-Attention', 'w/o SA')."""
+    model: str
+    """Model registry name (`emml models`)."""
+    difficulty: str
+    """'easy' or 'hard'."""
+    aux: bool
+    """Trained with the auxiliary task."""
+    seed: int
+    """Seed (from the profile's `seeds`)."""
+    overrides: dict = field(default_factory=dict)
+    """TrainConfig fields by dotted name (e.g. {'env.shaping': False}) applied after the profile."""
+    metrics: tuple[str, ...] = ()
+    """The results columns this run fills in its row."""
+
+    def to_config(self, profile: str, **fields) -> TrainConfig:
+        """The run's TrainConfig under `profile` (extra `fields`, e.g. run_root, go to TrainConfig)."""
+        from emml.profiles import profile_config
+
+        return profile_config(
+            profile,
+            self.difficulty,
+            self.overrides,
+            model=self.model,
+            aux=self.aux,
+            seed=self.seed,
+            table=self.table,
+            **fields,
+        )
+
+    def run_name(self, profile: str) -> str:
+        return self.to_config(profile).run_name()
+
+
+@dataclass(frozen=True)
+class Row:
+    """A row of the paper's table."""
+
+    label: str
+    """The paper's label, used to join with reproduce/paper/<table>.csv."""
+    model: str
+    """Model registry name."""
+    overrides: dict = field(default_factory=dict)
+    """Config overrides for every run of the row."""
+    metric_overrides: dict = field(default_factory=dict)
+    """metric → extra overrides: the row's cells of that metric come from runs with them."""
+
+    def settings(self, metrics: tuple[str, ...]) -> list[tuple[dict, tuple[str, ...]]]:
+        """(overrides, metrics filled) for each distinct setting of the row."""
+        if not self.metric_overrides:
+            return [(dict(self.overrides), metrics)]
+        return [({**self.overrides, **self.metric_overrides[m]}, (m,)) for m in metrics]
+
+
+@dataclass(frozen=True)
+class Table:
+    """A paper table as data: rows, columns and where its numbers come from."""
+
+    name: str
+    """File stem: table2, table3, …"""
+    path: Path
+    """The TOML file."""
+    title: str
+    """The paper's caption (shortened where long)."""
+    paper_label: str
+    """The LaTeX label of the paper's table."""
+    status: str
+    """'active' (declares runs) or 'placeholder' (completed by its own issue; no runs)."""
+    row_header: str = "Model"
+    """Header of the row-label column."""
+    rows: tuple[Row, ...] = ()
+    difficulties: tuple[str, ...] = ()
+    aux: tuple[bool, ...] = ()
+    metrics: dict = field(default_factory=dict)
+    """Column label (SGN) → results column (sgn_test), in the paper's order."""
+
+    @property
+    def placeholder(self) -> bool:
+        return self.status == "placeholder"
+
+    def columns(self) -> list[tuple[str, bool, str]]:
+        """(difficulty, aux, metric) for every cell column, in the paper's order."""
+        return [(d, a, m) for d in self.difficulties for a in self.aux for m in self.metrics.values()]
+
+    def runs(self, seeds: list[int]) -> list[RunSpec]:
+        """Every run: rows × difficulties × aux × row settings × seeds."""
+        out = []
+        for row in self.rows:
+            for difficulty in self.difficulties:
+                for aux in self.aux:
+                    for overrides, metrics in row.settings(tuple(self.metrics.values())):
+                        for seed in seeds:
+                            out.append(
+                                RunSpec(self.name, row.label, row.model, difficulty, aux, seed, overrides, metrics)
+                            )
+        return out
+
+    def cell_runs(self, row: str, difficulty: str, aux: bool, metric: str, runs: list[RunSpec]) -> list[RunSpec]:
+        """The runs (one per seed) whose `metric` fills the cell."""
+        return [r for r in runs if r.row == row and r.difficulty == difficulty and r.aux == aux and metric in r.metrics]
+
+
+def table_path(name: str) -> Path:
+    return REPRODUCE_DIR / f"{name}.toml"
+
+
+def list_tables(directory: Path = REPRODUCE_DIR) -> list[str]:
+    """Names of every table file in reproduce/ (table2, table3, …), sorted."""
+    return sorted(p.stem for p in directory.glob("table*.toml"))
+
+
+def load_table(name: str, path: Path | None = None) -> Table:
+    """Load and validate reproduce/<name>.toml (or `path`)."""
+    if path is None:
+        path = table_path(name)
+        if not path.exists():
+            raise ValueError(f"table={name!r} is unknown; choose one of {', '.join(map(repr, list_tables()))}")
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{path}: not valid TOML: {e}") from e
+    return _parse(name, Path(path), data)
+
+
+def _err(path: Path, key: str, what: str) -> ValueError:
+    return ValueError(f"{path}: key {key!r}: {what}")
+
+
+def _check_keys(path: Path, where: str, data: dict, allowed: tuple[str, ...]) -> None:
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise _err(path, f"{where}{unknown[0]}", f"unknown key; allowed keys: {', '.join(allowed)}")
+
+
+def _typed(path: Path, key: str, value, kind: type, what: str):
+    if not isinstance(value, kind):
+        raise _err(path, key, f"must be {what}, got {value!r}")
+    return value
+
+
+def _parse(name: str, path: Path, data: dict) -> Table:
+    _check_keys(path, "", data, TOP_KEYS)
+    for key in ("title", "paper_label", "status"):
+        if key not in data:
+            raise _err(path, key, "missing")
+        _typed(path, key, data[key], str, "a string")
+    if data["status"] not in STATUSES:
+        raise _err(path, "status", f"{data['status']!r} is not allowed; choose one of {', '.join(STATUSES)}")
+    common = dict(
+        name=name,
+        path=path,
+        title=data["title"],
+        paper_label=data["paper_label"],
+        status=data["status"],
+        row_header=_typed(path, "row_header", data.get("row_header", "Model"), str, "a string"),
+    )
+    if data["status"] == "placeholder":
+        for key in ("rows", "columns"):
+            if key in data:
+                raise _err(path, key, "a placeholder table declares no runs; set status = 'active' to add them")
+        return Table(**common)
+    columns = _parse_columns(path, data)
+    rows = _parse_rows(path, data, tuple(columns["metrics"].values()))
+    table = Table(**common, rows=rows, **columns)
+    _check_runs(path, table)
+    return table
+
+
+def _parse_columns(path: Path, data: dict) -> dict:
+    if "columns" not in data:
+        raise _err(path, "columns", "missing: an active table needs [columns] difficulties, aux, metrics")
+    cols = _typed(path, "columns", data["columns"], dict, "a table")
+    _check_keys(path, "columns.", cols, COLUMN_KEYS)
+    for key in COLUMN_KEYS:
+        if key not in cols:
+            raise _err(path, f"columns.{key}", "missing")
+    difficulties = _typed(path, "columns.difficulties", cols["difficulties"], list, "a list")
+    for d in difficulties:
+        if d not in DIFFICULTIES:
+            raise _err(path, "columns.difficulties", f"{d!r} is not allowed; choose from {', '.join(DIFFICULTIES)}")
+    aux = _typed(path, "columns.aux", cols["aux"], list, "a list of booleans")
+    if not aux or not all(isinstance(a, bool) for a in aux):
+        raise _err(path, "columns.aux", f"must be a non-empty list of booleans, got {aux!r}")
+    metrics = _typed(path, "columns.metrics", cols["metrics"], dict, "a table of label = results column")
+    for label, key in metrics.items():
+        if key not in METRICS:
+            raise _err(path, f"columns.metrics.{label}", f"{key!r} is not allowed; choose one of {', '.join(METRICS)}")
+    if not difficulties or not metrics:
+        raise _err(path, "columns", "difficulties and metrics must not be empty")
+    return {"difficulties": tuple(difficulties), "aux": tuple(aux), "metrics": dict(metrics)}
+
+
+def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, ...]:
+    from emml.models import MODELS
+
+    raw = _typed(path, "rows", data.get("rows", []), list, "an array of tables ([[rows]])")
+    if not raw:
+        raise _err(path, "rows", "an active table needs at least one [[rows]]")
+    rows, labels = [], set()
+    for i, r in enumerate(raw):
+        where = f"rows[{i}]"
+        _check_keys(path, f"{where}.", r, ROW_KEYS)
+        for key in ("label", "model"):
+            if key not in r:
+                raise _err(path, f"{where}.{key}", "missing")
+            _typed(path, f"{where}.{key}", r[key], str, "a string")
+        if r["label"] in labels:
+            raise _err(path, f"{where}.label", f"{r['label']!r} appears twice")
+        labels.add(r["label"])
+        if r["model"] not in MODELS:
+            raise _err(path, f"{where}.model", f"unknown model {r['model']!r}; known models: {', '.join(MODELS)}")
+        overrides = _typed(path, f"{where}.overrides", r.get("overrides", {}), dict, "a table")
+        per_metric = _typed(path, f"{where}.metric_overrides", r.get("metric_overrides", {}), dict, "a table")
+        for m, extra in per_metric.items():
+            if m not in metrics:
+                raise _err(path, f"{where}.metric_overrides.{m}", f"not a column metric; columns: {', '.join(metrics)}")
+            _typed(path, f"{where}.metric_overrides.{m}", extra, dict, "a table of overrides")
+        if per_metric and set(per_metric) != set(metrics):
+            raise _err(path, f"{where}.metric_overrides", f"must give every column metric: {', '.join(metrics)}")
+        for key, ov in [(f"{where}.overrides", overrides)] + [
+            (f"{where}.metric_overrides.{m}", {**overrides, **e}) for m, e in per_metric.items()
+        ]:
+            try:
+                apply_overrides(TrainConfig(model=r["model"]), ov, source="override").validate()
+            except ValueError as e:
+                raise _err(path, key, str(e)) from e
+        rows.append(Row(r["label"], r["model"], dict(overrides), dict(per_metric)))
+    return tuple(rows)
+
+
+def _check_runs(path: Path, table: Table) -> None:
+    """Two settings of one table may not share a run name (an override outside the name's fields would collide)."""
+    seen: dict[str, tuple] = {}
+    for spec in table.runs([0]):
+        name = spec.run_name("paper")
+        setting = (spec.row, sorted(spec.overrides.items()))
+        if name in seen and seen[name] != setting:
+            raise _err(path, "rows", f"rows {seen[name][0]!r} and {spec.row!r} give the same run name {name!r}")
+        seen[name] = setting

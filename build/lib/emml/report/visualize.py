@@ -1,0 +1,177 @@
+"""The paper's visualisations on any checkpoint (issue 13): what each conv3 channel detects beside its aux label
+(the channel figure), and over one episode the frame, the spatial attention x_spat, the answer distribution x_Ans
+and the action taken (the attention figure); plus a captioned GIF per episode.
+
+Every plotted array is the model's own output, recorded while the episode is played (`record_episode`); nothing
+is recomputed for the figure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from emml.config import DoomConfig  # noqa: E402
+from emml.envs.doom import MOVES, DoomEnv  # noqa: E402
+from emml.evaluate import obs_to_torch  # noqa: E402
+
+CHANNEL_WORDS = ("red", "green", "torch", "pillar", "smallest", "tall", "armor")
+"""The rows of the channel figure: colours, objects, a size word and a superlative (no aux label exists for it)."""
+
+
+@dataclass
+class Episode:
+    """One greedy episode as the model saw and answered it; step arrays are the model's outputs at that step."""
+
+    sentence: str
+    task: str
+    words: tuple[str, ...]
+    x_sent: np.ndarray
+    """(V,) the sentence representation x_sent (Section 3), over the vocabulary."""
+    frames: list[np.ndarray] = field(default_factory=list)
+    """(H, W, 3) uint8 per step."""
+    attention: list[np.ndarray] = field(default_factory=list)
+    """(h, w) x_spat per step (Dual-Attention; empty for models without spatial attention)."""
+    answers: list[np.ndarray] = field(default_factory=list)
+    """(V,) x_Ans = softmax of the answer logits per step."""
+    channels: list[np.ndarray] = field(default_factory=list)
+    """(V, h, w) sigmoid of the conv3 output per step (the aux predictions)."""
+    labels: list[np.ndarray] = field(default_factory=list)
+    """(V, h, w) aux labels per step (empty when the env has none)."""
+    moves: list[int] = field(default_factory=list)
+    answer_word: int = -1
+    """The answer word taken with the last move (EQA)."""
+    success: bool = False
+    tokens: np.ndarray | None = None
+
+
+@torch.no_grad()
+def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0, device="cpu") -> Episode:
+    """Play one greedy episode of ``task`` (train split) and record the model's outputs at every step."""
+    was_training = model.training
+    model.eval()
+    cfg = dataclasses.replace(env_cfg, tasks=task, split="train", aux_labels=True, instructions=None)
+    env = DoomEnv(cfg)
+    try:
+        obs, _ = env.reset(seed=seed)
+        _, x_sent = model.text_encoder(torch.as_tensor(obs["tokens"])[None].to(device))
+        ep = Episode(
+            sentence=env.episode.sentence.text,
+            task=task,
+            words=tuple(env.vocab.words),
+            x_sent=np.zeros(len(env.vocab)) if x_sent is None else x_sent[0].cpu().numpy(),
+            tokens=obs["tokens"].copy(),
+        )
+        state = model.initial_state(1, device)
+        start = torch.ones(1, 1, dtype=torch.bool, device=device)
+        done, info = False, {}
+        while not done:
+            out, state = model(obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, device), state,
+                               start)
+            start = torch.zeros_like(start)
+            ep.frames.append(np.ascontiguousarray(obs["image"].transpose(1, 2, 0)))
+            ep.labels.append(obs["aux"])
+            ep.channels.append(torch.sigmoid(out.aux_logits[0, 0]).cpu().numpy())
+            ep.answers.append(torch.softmax(out.answer_logits[0, 0], -1).cpu().numpy())
+            if out.attention is not None:
+                ep.attention.append(out.attention[0, 0].cpu().numpy())
+            move = int(out.logits[0, 0].argmax())
+            word = int(out.answer_logits[0, 0].argmax())
+            ep.moves.append(move)
+            ep.answer_word = word
+            obs, _, terminated, truncated, info = env.step(np.array([move, word]))
+            done = terminated or truncated
+        ep.success = bool(info.get("success"))
+    finally:
+        env.close()
+        model.train(was_training)
+    return ep
+
+
+def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure:
+    """The attention figure: on top x_sent over the sentence's words; then ``rows`` steps spread over the
+    episode, each with the frame, the frame under x_spat, the top answers of x_Ans, and the action taken."""
+    steps = np.unique(np.linspace(0, len(ep.frames) - 1, min(rows, len(ep.frames))).round().astype(int))
+    fig = plt.figure(figsize=(11, 1.9 * (len(steps) + 1)))
+    grid = fig.add_gridspec(len(steps) + 1, 3, width_ratios=[1.6, 1.6, 1.2])
+    top = fig.add_subplot(grid[0, :])
+    sent_words = [w for w in ep.sentence.split() if w in ep.words]
+    top.bar(range(len(sent_words)), [ep.x_sent[ep.words.index(w)] for w in sent_words], color="tab:purple")
+    top.set_xticks(range(len(sent_words)), sent_words)
+    outcome = "success" if ep.success else "failure"
+    top.set_title(f"{ep.task.upper()} '{ep.sentence}' ({outcome}, {len(ep.frames)} steps): x_sent on its words")
+    for r, t in enumerate(steps, start=1):
+        frame = ep.frames[t]
+        ax = fig.add_subplot(grid[r, 0])
+        ax.imshow(frame)
+        ax.set_title(f"t={t}: {MOVES[ep.moves[t]]}", fontsize=9)
+        ax.axis("off")
+        ax = fig.add_subplot(grid[r, 1])
+        ax.imshow(frame)
+        if ep.attention:
+            h, w = frame.shape[:2]
+            ax.imshow(ep.attention[t], cmap="inferno", alpha=0.6, extent=(0, w, h, 0), interpolation="nearest")
+            ax.set_title(f"x_spat (max {ep.attention[t].max():.2f})", fontsize=9)
+        else:
+            ax.set_title("no spatial attention in this model", fontsize=9)
+        ax.axis("off")
+        ax = fig.add_subplot(grid[r, 2])
+        best = np.argsort(ep.answers[t])[::-1][:5]
+        ax.barh(range(len(best))[::-1], ep.answers[t][best], color="tab:green")
+        ax.set_yticks(range(len(best))[::-1], [ep.words[i] for i in best], fontsize=8)
+        ax.set_xlim(0, 1)
+        ax.set_title("x_Ans (top 5)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    return fig
+
+
+def channels_figure(
+    models: list[tuple[str, object]], env_cfg: DoomConfig, path: str | Path, seed: int = 0, device="cpu",
+    words: tuple[str, ...] = CHANNEL_WORDS,
+) -> tuple[plt.Figure, np.ndarray, dict[str, np.ndarray]]:
+    """The channel figure on the first frame of an Easy SGN episode: a row per word, with the aux label, each
+    model's conv3 channel for the word (sigmoid), and the frame. Returns the figure, the labels and the channels
+    (name → (V, h, w)) it plotted."""
+    episodes = {name: record_episode(m, env_cfg, "sgn", seed, device) for name, m in models}
+    first = next(iter(episodes.values()))
+    labels, frame = first.labels[0], first.frames[0]
+    channels = {name: ep.channels[0] for name, ep in episodes.items()}
+    cols = 2 + len(models)
+    fig, axes = plt.subplots(len(words), cols, figsize=(2.6 * cols, 1.5 * len(words)), squeeze=False)
+    h, w = frame.shape[:2]
+    for r, word in enumerate(words):
+        v = first.words.index(word)
+        panels = [("aux label", labels[v])] + [(name, channels[name][v]) for name in channels]
+        for c, (title, arr) in enumerate(panels):
+            ax = axes[r, c]
+            ax.imshow(arr, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+            ax.set_title(title if r == 0 else "", fontsize=9)
+            ax.set_xticks([]), ax.set_yticks([])
+        axes[r, 0].set_ylabel(word, fontsize=10)
+        axes[r, -1].imshow(frame)
+        axes[r, -1].set_title("frame" if r == 0 else "", fontsize=9)
+        axes[r, -1].axis("off")
+    fig.suptitle(f"conv3 channels and aux labels, '{first.sentence}' (first frame)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    return fig, labels, channels
+
+
+def episode_gif(ep: Episode, path: str | Path) -> Path:
+    """A captioned GIF of the episode: the sentence, each step's action, and the outcome at the end."""
+    from emml.report.oracle_video import _captioned
+
+    answer = f" -> {ep.words[ep.answer_word]}" if ep.task == "eqa" and ep.moves[-1] == MOVES.index("answer") else ""
+    images = [_captioned(f, f"{ep.sentence} | t={t} {MOVES[m]}") for t, (f, m) in enumerate(zip(ep.frames, ep.moves))]
+    images += [_captioned(ep.frames[-1], f"{ep.sentence}{answer}: {'success' if ep.success else 'failure'}")] * 5
+    images[0].save(path, save_all=True, append_images=images[1:], duration=150, loop=0)
+    return Path(path)

@@ -1,0 +1,63 @@
+"""Other learners on this machine: two trainings that each use every core slow each other ~10× (measured on
+2 cores: 205 s instead of 18 s each, notes/cpu-training.md), so a learner that finds others shares the cores and
+says so."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+LEARNER_COMMANDS = ("train", "run", "demo", "bench")
+"""`emml` subcommands that run a learner (a process of one of them counts as one)."""
+
+
+def _is_learner(argv: list[str]) -> bool:
+    """An `emml <command>` (console script or `python -m emml.cli`) whose command runs a learner."""
+    for i, arg in enumerate(argv[:-1]):
+        if os.path.basename(arg) == "emml" or (arg == "-m" and argv[i + 1] == "emml.cli"):
+            rest = argv[i + 1 :] if arg != "-m" else argv[i + 2 :]
+            return bool(rest) and rest[0] in LEARNER_COMMANDS
+    return False
+
+
+def other_learners(proc: Path = Path("/proc")) -> list[int]:
+    """Pids of emml learners other than this process and its ancestors (a re-exec'd or `run`-spawned parent)."""
+    mine = {os.getpid()}
+    pid = os.getppid()
+    while pid > 1 and pid not in mine:
+        mine.add(pid)
+        pid = _parent(proc / str(pid))
+    found = {}  # pid -> parent pid
+    for entry in proc.glob("[0-9]*"):
+        pid = int(entry.name)
+        if pid in mine:
+            continue
+        try:
+            argv = (entry / "cmdline").read_bytes().decode(errors="replace").split("\0")
+            if _is_learner([a for a in argv if a]):
+                found[pid] = _parent(entry)
+        except OSError:
+            continue
+    return sorted(p for p, parent in found.items() if parent not in found)  # a forked worker is its learner's
+
+
+def _parent(entry: Path) -> int:
+    try:
+        return int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def share_cores(threads: int, cores: int | None = None, others: list[int] | None = None) -> tuple[int, str | None]:
+    """(torch threads for this learner, a warning or None). ``threads`` > 0 is the user's choice and is kept."""
+    cores = cores or os.cpu_count() or 1
+    others = other_learners() if others is None else others
+    if not others:
+        return threads, None
+    share = threads or max(1, cores // (len(others) + 1))
+    pids = ", ".join(map(str, others))
+    return share, (
+        f"{len(others)} other emml learner(s) running (pid {pids}): learners that share {cores} cores slow each "
+        f"other ~10x; this one uses {share} thread(s). Run them one after another, or give each "
+        f"--set threads=N with N x learners <= {cores}."
+    )

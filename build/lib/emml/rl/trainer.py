@@ -1,0 +1,369 @@
+"""The one trainer of every table: PPO + answer cross-entropy + auxiliary BCE (paper §3.3, Appendix A).
+
+Loop: collect `num_steps` steps from `num_envs` actors (worker processes, uint8 shared-memory observations), then
+`ppo_update` replays each actor's sequence from the stored GRU state with resets at episode starts. Metrics go to
+MLflow every update under `losses/`, `charts/`, `train/`, `eval/`; a checkpoint (model, optimizer, RNG states,
+counters, vocabulary, config, MLflow run id) is written atomically every `checkpoint_every` updates. Rerunning
+the same config resumes from it in the same MLflow run; a finished run is not retrained.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import random
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from emml.config import TrainConfig
+from emml.diagnose import SCALARS, diagnose, summary_line
+from emml.envs.labels import channel_mask
+from emml.evaluate import evaluate
+from emml.models import build_model
+from emml.results import upsert_result
+from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml.rl.contention import share_cores
+from emml.rl.ppo import make_optimizer, ppo_update
+from emml.rl.rollout import RolloutBuffer
+from emml.rl.sampler import Sampler
+from emml.tasks.language import Vocabulary, load_dataset
+from emml.tracking import Tracker, project_path, project_root
+
+log = logging.getLogger(__name__)
+CHECKPOINT = "checkpoint.pt"
+METRICS = "metrics.csv"
+"""Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.tracking.Tracker.mirror_to)."""
+RESULTS = "results.json"
+
+
+def git_sha() -> str:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=project_root(), capture_output=True, text=True, timeout=5
+        )
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def allocator() -> str:
+    """Which malloc this process runs on (tcmalloc roughly doubles CPU training speed: notes/cpu-training.md)."""
+    try:
+        with open("/proc/self/maps") as f:
+            maps = f.read()
+    except OSError:
+        return "unknown"
+    return "tcmalloc" if "tcmalloc" in maps else "jemalloc" if "jemalloc" in maps else "glibc"
+
+
+def run_dir(cfg: TrainConfig) -> Path:
+    return project_path(cfg.run_root) / cfg.table / cfg.run_name()
+
+
+@dataclass
+class RunResult:
+    run_dir: Path
+    run_id: str
+    frames: int
+    metrics: dict
+    resumed: bool = False
+    skipped: bool = False
+
+
+def _seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+class ConfigMismatch(ValueError):
+    """A rerun whose config differs from the checkpoint's run (the message names the fields)."""
+
+
+def _check_same_config(saved: dict, current: dict, path: Path) -> None:
+    """A rerun resumes only the same experiment: differing fields fail by name before anything is touched."""
+    ignore = {
+        "frames",  # asking for more frames continues a run (finished or not) to the new target
+        "eval_every",
+        "diagnose_episodes",
+        "checkpoint_every",
+        "log_every",
+        "threads",
+        "asynchronous",
+        "env_groups",  # how the actors are stepped, not what they do
+        "acting_threads",
+        "max_engine_restarts",
+        "engine_restart_window",
+        "device",
+        "run_root",
+        "results_root",
+    }
+    diffs = []
+    for key in sorted(set(saved) | set(current)):
+        if key in ignore:
+            continue
+        a, b = saved.get(key), current.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            diffs += [f"{key}.{k}" for k in sorted(set(a) | set(b)) if _norm(a.get(k)) != _norm(b.get(k))]
+        elif _norm(a) != _norm(b):
+            diffs.append(key)
+    if diffs:
+        raise ConfigMismatch(
+            f"{path} holds a run with a different config ({', '.join(diffs)}); use another seed/table/run_root, "
+            "or delete that run directory"
+        )
+
+
+def _norm(v):
+    return list(v) if isinstance(v, tuple) else v
+
+
+class Trainer:
+    def __init__(
+        self, cfg: TrainConfig, tracker: Tracker | None = None, quiet: bool = False, parent_run_id: str | None = None
+    ):
+        self.cfg = cfg.validate()
+        self.parent_run_id = parent_run_id
+        self.dir = run_dir(cfg)
+        self.tracker = tracker or Tracker()
+        self.quiet = quiet
+        dataset = load_dataset(cfg.env.dataset)
+        if cfg.env.vocabulary is None:  # the vocabulary is part of the run's config and saved with checkpoints
+            cfg.env.vocabulary = Vocabulary.from_dataset(dataset).words
+        self.vocab = Vocabulary(tuple(cfg.env.vocabulary))
+        if cfg.env.aux_words is None:
+            from emml.envs.labels import default_aux_words
+
+            cfg.env.aux_words = default_aux_words(self.vocab, dataset)
+        self.device = torch.device(cfg.device)
+        self.git_sha = git_sha()  # the code this process runs: read once, before the tree can change under it
+        self.timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
+        """Seconds spent per part of an update in this process (log lines, `emml bench train`)."""
+
+    # --- public ---------------------------------------------------------------------------------------------
+    def train(self) -> RunResult:
+        cfg = self.cfg
+        ckpt_path = self.dir / CHECKPOINT
+        saved = load_checkpoint(ckpt_path) if ckpt_path.exists() else None
+        if saved is not None:
+            _check_same_config(saved["config"], cfg.to_dict(), ckpt_path)
+            if saved.get("finished") and saved["frames"] >= cfg.num_updates * cfg.frames_per_update:
+                results = json.loads((self.dir / RESULTS).read_text())
+                record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
+                return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
+        threads, warning = share_cores(cfg.threads)
+        if warning:
+            log.warning(warning)
+        if threads:
+            torch.set_num_threads(threads)
+        _seed_everything(cfg.seed)
+        env_cfg = cfg.env
+        model = build_model(
+            cfg.model, len(self.vocab), env_cfg.height, env_cfg.width, env_cfg.max_steps, **cfg.model_options
+        ).to(self.device)
+        optimizer = make_optimizer(model.parameters(), cfg.ppo)
+        update, frames = 0, 0
+        if saved is not None:
+            model.load_state_dict(saved["model"])
+            optimizer.load_state_dict(saved["optimizer"])
+            set_rng_state(saved["rng"])
+            update, frames = saved["update"], saved["frames"]
+        tags = {
+            "table": cfg.table,
+            "model": cfg.model,
+            "difficulty": env_cfg.difficulty,
+            "aux": cfg.aux,
+            "seed": cfg.seed,
+            "profile": cfg.profile,
+            "git_sha": self.git_sha,
+            "allocator": allocator(),
+            "tasks": env_cfg.tasks,
+            "shaping": env_cfg.shaping,
+            "checkpoint": str(self.dir / CHECKPOINT),
+        }
+        self.tracker.mirror_to(self.dir / METRICS)
+        if saved is not None and not (self.dir / METRICS).exists() and self.tracker.has_run(saved["run_id"]):
+            self.tracker.export_to_mirror(saved["run_id"])  # a run dir from before the mirror existed
+        if saved is not None:
+            self.tracker.resume_after(frames)  # before start: a replay into a new store reads the mirror
+        run_id = self.tracker.start(
+            cfg.table,
+            cfg.run_name(),
+            tags,
+            cfg.to_dict(),
+            run_id=saved["run_id"] if saved else None,
+            parent_run_id=self.parent_run_id,
+        )
+        if saved is not None:
+            if not self.quiet:
+                tqdm.write(f"resuming {cfg.run_name()} from frame {frames:,} (update {update}), MLflow run {run_id}")
+        else:  # at once, so that a run killed before its first update resumes this MLflow run, not a second one
+            self._checkpoint(model, optimizer, update, frames, finished=False)
+        try:
+            metrics = self._loop(model, optimizer, update, frames)
+        except (KeyboardInterrupt, SystemExit):  # Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers)
+            self.tracker.finish("KILLED")
+            raise
+        except BaseException:
+            self.tracker.finish("FAILED")
+            raise
+        self.tracker.finish("FINISHED")
+        return RunResult(self.dir, run_id, metrics.pop("_frames"), metrics, resumed=saved is not None)
+
+    # --- the loop ---------------------------------------------------------------------------------------------
+    def _loop(self, model, optimizer, update: int, frames: int) -> dict:
+        cfg, device = self.cfg, self.device
+        B, T = cfg.num_envs, cfg.num_steps
+        mask = torch.as_tensor(channel_mask(self.vocab, tuple(cfg.env.aux_words)), device=device)
+        with Sampler(cfg, device) as sampler:
+            shapes = {k: (s.shape, _dtype(s)) for k, s in sampler.single_observation_space.spaces.items()}
+            buffer = RolloutBuffer(T, B, shapes, device=device)
+            sampler.reset(model, seed=cfg.seed * 1000 + update * B)
+            recent = sampler.recent
+            next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
+            bar = tqdm(
+                total=cfg.num_updates * cfg.frames_per_update,
+                initial=frames,
+                unit="frame",
+                disable=self.quiet,
+                dynamic_ncols=True,
+                smoothing=0.1,
+            )
+            timing = self.timing
+            log_mark = (time.perf_counter(), frames)
+            while update < cfg.num_updates:
+                t_start = time.perf_counter()
+                sampler.collect(model, buffer)
+                t_learn = time.perf_counter()
+                buffer.compute_returns(sampler.last_value(model), cfg.ppo.gamma, cfg.ppo.gae_lambda)
+
+                def forward(o, s, e):
+                    return vars(model(o, s, e)[0])
+
+                stats = ppo_update(forward, optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux)
+                update += 1
+                frames += B * T
+                now = time.perf_counter()
+                timing["learn"] += now - t_learn
+                timing["simulate"], timing["infer"] = sampler.timing["simulate"], sampler.timing["infer"]
+                metrics = {f"losses/{k}": v for k, v in stats.items()}
+                metrics["charts/fps"] = B * T / (now - t_start)
+                for task_id, name in ((0, "sgn"), (1, "eqa")):
+                    if recent[task_id]:
+                        metrics[f"train/success_{name}"] = float(np.mean(recent[task_id]))
+                metrics["charts/update"] = update
+                metrics["charts/dropped_episodes"] = sampler.dropped_episodes
+                self.tracker.log_metrics(metrics, step=frames)
+                bar.update(B * T)
+                bar.set_postfix(
+                    sgn=f"{metrics.get('train/success_sgn', 0):.2f}", eqa=f"{metrics.get('train/success_eqa', 0):.2f}"
+                )
+                if update % cfg.log_every == 0 and not self.quiet:
+                    now, since = time.perf_counter(), log_mark
+                    log_mark = (now, frames)
+                    fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
+                    bar.write(_log_line(update, frames, fps, metrics, timing))
+                if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
+                    self._eval(model, frames)
+                    next_eval += cfg.eval_every
+                if update % cfg.checkpoint_every == 0 or update == cfg.num_updates:
+                    self._checkpoint(model, optimizer, update, frames, finished=False)
+            bar.close()
+        final = self._eval(model, frames)
+        self._checkpoint(model, optimizer, update, frames, finished=False)
+        self._write_results(final, frames)
+        self._checkpoint(model, optimizer, update, frames, finished=True)
+        final["_frames"] = frames
+        return final
+
+    # --- pieces -----------------------------------------------------------------------------------------------
+    def _eval(self, model, frames: int) -> dict:
+        acc = evaluate(model, self.cfg.env, self.cfg.eval_episodes, seed=10_000, device=self.device)
+        metrics = {f"eval/{k}": v for k, v in acc.items()}
+        if self.cfg.diagnose_episodes and self.cfg.env.tasks != "eqa":
+            n = self.cfg.diagnose_episodes
+            diag = diagnose(model, self.cfg.env, n, step0_episodes=5 * n, device=self.device)
+            metrics.update({f"diag/{k}": diag[k] for k in SCALARS if diag[k] is not None})
+            if not self.quiet:
+                tqdm.write(f"frames {frames:,} eval " + ", ".join(f"{k} {v:.2f}" for k, v in acc.items()))
+                tqdm.write(summary_line(diag))
+        self.tracker.log_metrics(metrics, step=frames)
+        return acc
+
+    def _checkpoint(self, model, optimizer, update: int, frames: int, finished: bool) -> None:
+        save_checkpoint(
+            self.dir / CHECKPOINT,
+            {
+                "model": model.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "rng": rng_state(),
+                "update": update,
+                "frames": frames,
+                "vocabulary": list(self.vocab.words),
+                "config": self.cfg.to_dict(),
+                "run_id": self.tracker.run_id,
+                "finished": finished,
+            },
+        )
+
+    def _write_results(self, metrics: dict, frames: int) -> None:
+        cfg = self.cfg
+        payload = {
+            "run_name": cfg.run_name(),
+            "table": cfg.table,
+            "model": cfg.model,
+            "difficulty": cfg.env.difficulty,
+            "aux": cfg.aux,
+            "seed": cfg.seed,
+            "profile": cfg.profile,
+            "frames": frames,
+            "git_sha": self.git_sha,
+            "run_id": self.tracker.run_id,
+            "eval_episodes": cfg.eval_episodes,
+            "metrics": metrics,
+        }
+        tmp = self.dir / (RESULTS + ".tmp")
+        tmp.write_text(json.dumps(payload, indent=2))
+        os.replace(tmp, self.dir / RESULTS)
+        record_result(payload, cfg)
+
+
+def results_csv(cfg: TrainConfig) -> Path:
+    return project_path(cfg.results_root) / cfg.table / f"{cfg.profile}.csv"
+
+
+def record_result(payload: dict, cfg: TrainConfig) -> Path:
+    """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv (emml.results)."""
+    row = {k: v for k, v in payload.items() if k != "metrics"}
+    row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, **payload["metrics"])
+    return upsert_result(results_csv(cfg), row)
+
+
+def _dtype(space) -> torch.dtype:
+    return {np.uint8: torch.uint8}.get(space.dtype.type, torch.int64)
+
+
+def _log_line(update: int, frames: int, fps: float, m: dict, timing: dict) -> str:
+    total = sum(timing.values()) or 1.0
+    split = "/".join(f"{100 * v / total:.0f}" for v in timing.values())
+    return (
+        f"update {update:>5} frames {frames:>9,} fps {fps:6.0f} "
+        f"sgn {m.get('train/success_sgn', float('nan')):.2f} eqa {m.get('train/success_eqa', float('nan')):.2f} "
+        f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
+        f"ans {m['losses/answer']:.3f}"
+        + (f" aux {m['losses/aux']:.3f}" if "losses/aux" in m else "")
+        + (f" dropped {m['charts/dropped_episodes']}" if m.get("charts/dropped_episodes") else "")
+        + f" | sim/infer/learn % {split}"
+    )
+
+
+def train(cfg: TrainConfig, quiet: bool = False, parent_run_id: str | None = None) -> RunResult:
+    """Train (or resume, or skip if finished) one run; `parent_run_id` nests its MLflow run (emml/launch.py)."""
+    return Trainer(cfg, quiet=quiet, parent_run_id=parent_run_id).train()

@@ -1,0 +1,61 @@
+"""Sampling the language side of an episode: which sentence, and which 5 actors make the scene.
+
+SGN: exactly one actor satisfies the instruction; the other four are drawn from actors that do not (for a
+superlative, actors that match its other words only if the target beats them by the margin). EQA: the same
+construction around the question's referent, so the question has exactly one referent and so one answer word.
+The referent's place in the scene is uniform (the env puts scene[i] at slot i).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from emml.tasks.language import Dataset, Sentence, answer, describe, referents
+
+N_OBJECTS = 5
+"""Objects per episode (the paper: 'a single room with 5 objects')."""
+
+
+@dataclass(frozen=True)
+class Episode:
+    sentence: Sentence
+    scene: tuple[str, ...]
+    """Actor names; scene[i] goes to object slot i."""
+    target: int
+    """Index in ``scene`` of the referent: the goal (SGN) or the object the question is about (EQA)."""
+    answer: str | None
+    """EQA: the correct answer word; None for SGN."""
+
+
+def sample_episode(sentence: Sentence, dataset: Dataset, rng: np.random.Generator) -> Episode:
+    """A scene for ``sentence`` with a unique referent, at a uniformly random index."""
+    desc = describe(sentence, dataset)
+    names = sorted(dataset.actors)
+    sign = {"largest": 1, "smallest": -1}.get(desc.superlative or "", 0)
+    margin = dataset.superlative_margin
+
+    def allowed(n: str, target: str) -> bool:
+        if n == target:
+            return False
+        if not desc.matches(dataset.actors[n]):
+            return True
+        # a matching distractor is allowed only under a superlative that the target still wins by the margin
+        return sign != 0 and sign * (dataset.actors[target].area - dataset.actors[n].area) > margin
+
+    pools = {t: [n for n in names if allowed(n, t)] for t in names if desc.matches(dataset.actors[t])}
+    candidates = [t for t, pool in pools.items() if len(pool) >= N_OBJECTS - 1]
+    if not candidates:
+        raise ValueError(f"no scene of {N_OBJECTS} objects gives {sentence.text!r} a unique referent")
+    target = candidates[rng.integers(len(candidates))]
+    pool = pools[target]
+    distractors = list(rng.choice(pool, size=N_OBJECTS - 1, replace=False))
+    scene = [str(d) for d in distractors]
+    slot = int(rng.integers(N_OBJECTS))
+    scene.insert(slot, target)
+    scene_t = tuple(scene)
+    found = referents(sentence, scene_t, dataset)
+    assert found == [slot], (sentence.text, scene_t, found)  # the construction guarantees uniqueness
+    ans = answer(sentence, scene_t, dataset) if sentence.kind == "eqa" else None
+    return Episode(sentence, scene_t, slot, ans)

@@ -1,0 +1,411 @@
+"""Experiment tracking: the project's only interface to MLflow.
+
+Every other module logs through :class:`Tracker` so that swapping the backend
+(local sqlite file, shared ``mlflow server``) is a matter of the
+``MLFLOW_TRACKING_URI`` environment variable. ``mlflow`` is imported lazily
+inside functions: it takes over a second to import and ``import emml`` must
+stay fast.
+
+Conventions (see docs / shared notes on MLflow 3.x):
+
+* Default store is ``sqlite:///<project root>/mlflow.db`` (the plain file store
+  is deprecated); artifacts of experiments created here go to
+  ``<db dir>/mlartifacts`` rather than the current directory.
+* Metrics are logged once per update in one batched call; SQLite "database is
+  locked" errors (many concurrent writers) are retried with backoff.
+* A run is resumed by passing its ``run_id`` to :meth:`Tracker.start`; steps
+  should keep increasing (use the global env-step counter).
+* :func:`metric_history` returns full curves (``search_runs`` only keeps the
+  latest value per metric).
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, is_dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+_MAX_PARAM_LEN = 6000  # mlflow.utils.validation.MAX_PARAM_VAL_LENGTH
+_MAX_TAG_LEN = 8000  # mlflow.utils.validation.MAX_TAG_VAL_LENGTH
+_BATCH_PARAMS = 100  # MAX_PARAMS_TAGS_PER_BATCH
+_BATCH_METRICS = 1000  # MAX_METRICS_PER_BATCH
+_STATUSES = ("FINISHED", "FAILED", "KILLED")
+
+
+def project_root() -> Path:
+    """Directory holding ``pyproject.toml`` above this file (fallback: the cwd)."""
+    for parent in Path(__file__).resolve().parents:
+        if (parent / "pyproject.toml").is_file():
+            return parent
+    return Path.cwd()
+
+
+def project_path(path: str | Path) -> Path:
+    """``path`` as given when absolute, else under the project root (run and results roots are set this way)."""
+    path = Path(path)
+    return path if path.is_absolute() else project_root() / path
+
+
+def tracking_uri() -> str:
+    """``$MLFLOW_TRACKING_URI`` if set, else ``sqlite:///<project root>/mlflow.db``."""
+    env = os.environ.get("MLFLOW_TRACKING_URI")
+    if env:
+        return env
+    return f"sqlite:///{project_root() / 'mlflow.db'}"
+
+
+def _sqlite_path(uri: str) -> Path | None:
+    """Filesystem path of a ``sqlite:///`` database (None for other backends / in-memory)."""
+    prefix = "sqlite:///"
+    if not uri.startswith(prefix):
+        return None
+    path = uri[len(prefix) :].split("?", 1)[0]
+    if not path or path == ":memory:":
+        return None
+    return Path(path).resolve()
+
+
+def _client(uri: str | None = None):
+    """MlflowClient for ``uri``; creates the sqlite file's directory if missing."""
+    from mlflow import MlflowClient
+
+    uri = uri or tracking_uri()
+    db = _sqlite_path(uri)
+    if db is not None:
+        db.parent.mkdir(parents=True, exist_ok=True)
+    return _retry(lambda: MlflowClient(tracking_uri=uri))
+
+
+def _is_lock_error(exc: BaseException) -> bool:
+    text = str(exc).lower()
+    return "database is locked" in text or "database table is locked" in text
+
+
+def _retry(fn: Callable[[], T], attempts: int = 8, base_delay: float = 0.1) -> T:
+    """Call ``fn``; retry SQLite lock errors with jittered exponential backoff."""
+    for i in range(attempts):
+        try:
+            return fn()
+        except Exception as exc:  # mlflow wraps sqlalchemy errors in MlflowException
+            if not _is_lock_error(exc) or i == attempts - 1:
+                raise
+            time.sleep(base_delay * (2**i) * (0.5 + random.random()))
+    raise AssertionError("unreachable")
+
+
+def flatten(params: Mapping[str, Any] | Any, prefix: str = "") -> dict[str, str]:
+    """Flatten nested dicts/dataclasses into ``{"a.b.c": "value"}`` strings."""
+    if is_dataclass(params) and not isinstance(params, type):
+        params = asdict(params)
+    out: dict[str, str] = {}
+    for key, value in params.items():
+        name = f"{prefix}{key}"
+        if is_dataclass(value) and not isinstance(value, type):
+            value = asdict(value)
+        if isinstance(value, Mapping):
+            out.update(flatten(value, prefix=f"{name}."))
+        else:
+            out[name] = str(value)[:_MAX_PARAM_LEN]
+    return out
+
+
+class Tracker:
+    """One MLflow run: start (or resume), log metrics/artifacts/tags, finish.
+
+    Usable as a context manager: an exception inside the block finishes the run
+    as FAILED, a normal exit as FINISHED.
+    """
+
+    def __init__(self, uri: str | None = None) -> None:
+        self._uri = uri
+        self._client_obj = None
+        self._run_id: str | None = None
+        self._resume_step: int | None = None
+        self._logged: dict[str, set[int]] = {}
+        """Per metric key, the steps after ``_resume_step`` that a killed process already logged."""
+        self._mirror: Path | None = None
+        self._mirrored: set[tuple[str, int]] = set()
+        """(key, step) pairs after ``_resume_step`` already in the mirror file."""
+
+    def mirror_to(self, path: str | os.PathLike) -> None:
+        """Also append every metric point to ``path`` (CSV: step,key,value), beside the run's checkpoint: the run
+        directory then holds its whole curve, so that it can resume in another MLflow store (another machine,
+        a fresh clone), which gets the curve replayed (:meth:`start`)."""
+        self._mirror = Path(path)
+
+    def resume_after(self, step: int) -> None:
+        """The run resumes from a checkpoint at ``step``: points a killed process logged after it are kept and
+        the resumed run does not log those (key, step) again, so that every curve has one value per step."""
+        self._resume_step, self._logged = step, {}
+        self._mirrored = {(k, st) for st, k, _ in read_mirror(self._mirror) if st > step} if self._mirror else set()
+
+    def _already_logged(self, key: str, step: int) -> bool:
+        if self._resume_step is None or step <= self._resume_step:
+            return False
+        if key not in self._logged:  # once per key after a resume
+            hist = _retry(lambda: self._client.get_metric_history(self.run_id, key))
+            self._logged[key] = {m.step for m in hist if m.step > self._resume_step}
+        return step in self._logged[key]
+
+    @property
+    def _client(self):
+        if self._client_obj is None:
+            self._client_obj = _client(self._uri)
+        return self._client_obj
+
+    @property
+    def run_id(self) -> str:
+        if self._run_id is None:
+            raise RuntimeError("Tracker.start() has not been called")
+        return self._run_id
+
+    def _experiment_id(self, name: str) -> str:
+        from mlflow.exceptions import MlflowException
+
+        exp = _retry(lambda: self._client.get_experiment_by_name(name))
+        if exp is not None:
+            return exp.experiment_id
+        db = _sqlite_path(self._uri or tracking_uri())
+        artifacts = (db.parent / "mlartifacts").as_uri() if db is not None else None
+        try:
+            return _retry(lambda: self._client.create_experiment(name, artifact_location=artifacts))
+        except MlflowException:
+            # Another process created it between our lookup and create.
+            exp = _retry(lambda: self._client.get_experiment_by_name(name))
+            if exp is None:
+                raise
+            return exp.experiment_id
+
+    def start(
+        self,
+        experiment: str,
+        run_name: str,
+        tags: Mapping[str, Any] | None = None,
+        params: Mapping[str, Any] | Any = None,
+        run_id: str | None = None,
+        parent_run_id: str | None = None,
+    ) -> str:
+        """Create a run (creating the experiment if missing) or resume ``run_id``.
+
+        ``parent_run_id`` nests the run under a parent (tag ``mlflow.parentRunId``, which MLflow reads across
+        processes). On resume, params already logged are left alone; new keys are added and
+        keys whose value changed are skipped with a warning (MLflow params are
+        immutable). Returns the run id.
+        """
+        from mlflow.entities import Param
+
+        flat = flatten(params or {})
+        if parent_run_id is not None:
+            tags = {**(tags or {}), "mlflow.parentRunId": parent_run_id}
+        if run_id is None:
+            exp_id = self._experiment_id(experiment)
+            tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
+            run = _retry(lambda: self._client.create_run(exp_id, tags=tag_strs, run_name=run_name))
+            self._run_id = run.info.run_id
+        elif not self.has_run(run_id):  # the run dir came from another store: a new run, its curve replayed
+            exp_id = self._experiment_id(experiment)
+            tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
+            tag_strs["emml.resumed_from_run_id"] = run_id
+            run = _retry(lambda: self._client.create_run(exp_id, tags=tag_strs, run_name=run_name))
+            self._run_id = run.info.run_id
+            replayed = self._replay()
+            warnings.warn(
+                f"MLflow run {run_id} is not in this store ({self._uri or tracking_uri()}): continuing as run "
+                f"{self._run_id}, {replayed} metric points replayed from {self._mirror}",
+                stacklevel=2,
+            )
+        else:
+            run = _retry(lambda: self._client.get_run(run_id))
+            self._run_id = run.info.run_id
+            _retry(lambda: self._client.update_run(run_id, status="RUNNING"))
+            existing = run.data.params
+            changed = sorted(k for k, v in flat.items() if k in existing and existing[k] != v)
+            if changed:
+                warnings.warn(f"resumed run {run_id}: params changed and not re-logged: {changed}", stacklevel=2)
+            flat = {k: v for k, v in flat.items() if k not in existing}
+            if tags:
+                self.set_tags(tags)
+        items = [Param(k, v) for k, v in flat.items()]
+        for i in range(0, len(items), _BATCH_PARAMS):
+            chunk = items[i : i + _BATCH_PARAMS]
+            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, params=chunk))
+        return self.run_id
+
+    def has_run(self, run_id: str) -> bool:
+        from mlflow.exceptions import MlflowException
+
+        try:
+            _retry(lambda: self._client.get_run(run_id))
+            return True
+        except MlflowException as e:
+            if e.error_code == "RESOURCE_DOES_NOT_EXIST":
+                return False
+            raise
+
+    def export_to_mirror(self, run_id: str) -> int:
+        """Fill the mirror file from the store's copy of ``run_id`` (a run dir from before mirrors existed)."""
+        return export_mirror(run_id, self._mirror, self._uri)
+
+    def _replay(self) -> int:
+        """Log the mirror file's points into the current run (one value per key and step: the last)."""
+        from mlflow.entities import Metric
+
+        if self._mirror is None:
+            return 0
+        now = int(time.time() * 1000)
+        points = {(k, st): v for st, k, v in read_mirror(self._mirror)}
+        items = [Metric(k, v, now, st) for (k, st), v in sorted(points.items(), key=lambda x: (x[0][1], x[0][0]))]
+        for i in range(0, len(items), _BATCH_METRICS):
+            chunk = items[i : i + _BATCH_METRICS]
+            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, metrics=chunk))
+        return len(items)
+
+    def log_metrics(self, metrics: Mapping[str, float], step: int) -> None:
+        """Log all ``metrics`` at ``step`` in one batched call (chunked at MLflow's 1000 limit)."""
+        from mlflow.entities import Metric
+
+        now = int(time.time() * 1000)
+        if self._mirror is not None:
+            fresh = [(k, v) for k, v in metrics.items() if (k, int(step)) not in self._mirrored]
+            new_file = not self._mirror.exists()
+            with open(self._mirror, "a") as f:
+                f.write("step,key,value\n" if new_file else "")
+                f.writelines(f"{int(step)},{k},{float(v)!r}\n" for k, v in fresh)
+        items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items() if not self._already_logged(k, step)]
+        for i in range(0, len(items), _BATCH_METRICS):
+            chunk = items[i : i + _BATCH_METRICS]
+            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, metrics=chunk))
+
+    def log_artifact(self, path: str | os.PathLike, artifact_path: str | None = None) -> None:
+        """Copy a local file (or directory) into the run's artifact store."""
+        _retry(lambda: self._client.log_artifact(self.run_id, str(path), artifact_path))
+
+    def set_tags(self, tags: Mapping[str, Any]) -> None:
+        """Set (or overwrite) run tags, e.g. ``{"mlflow.parentRunId": parent}`` for nesting."""
+        from mlflow.entities import RunTag
+
+        items = [RunTag(k, str(v)[:_MAX_TAG_LEN]) for k, v in tags.items()]
+        for i in range(0, len(items), _BATCH_PARAMS):
+            chunk = items[i : i + _BATCH_PARAMS]
+            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, tags=chunk))
+
+    def finish(self, status: str = "FINISHED") -> None:
+        """Mark the run terminated with ``status`` (FINISHED, FAILED or KILLED)."""
+        if status not in _STATUSES:
+            raise ValueError(f"status must be one of {_STATUSES}, got {status!r}")
+        _retry(lambda: self._client.set_terminated(self.run_id, status=status))
+
+    def __enter__(self) -> Tracker:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._run_id is not None:
+            self.finish("FINISHED" if exc_type is None else ("KILLED" if exc_type is KeyboardInterrupt else "FAILED"))
+
+
+def parent_run(experiment: str, run_name: str, tags: Mapping[str, Any], uri: str | None = None) -> str:
+    """The id of the parent run of ``experiment`` tagged ``tags`` (plus ``emml.role=parent``), created if missing.
+
+    Create it before fanning out workers (one writer), then pass its id to each child's ``Tracker.start``.
+    A relaunch finds the same parent, so resumed children stay nested under one run.
+    """
+    tags = {**tags, "emml.role": "parent"}
+    found = find_runs(experiment, tags, uri=uri)
+    if found:
+        return min(found, key=lambda r: r["start_time"])["run_id"]
+    tracker = Tracker(uri)
+    return tracker.start(experiment, run_name, tags)
+
+
+def set_run_status(run_id: str, status: str, uri: str | None = None) -> None:
+    """Mark a run (e.g. a parent run once its children are done) FINISHED, FAILED, KILLED or RUNNING."""
+    if status not in (*_STATUSES, "RUNNING"):
+        raise ValueError(f"status must be one of {(*_STATUSES, 'RUNNING')}, got {status!r}")
+    client = _client(uri)
+    if status == "RUNNING":
+        _retry(lambda: client.update_run(run_id, status="RUNNING"))
+    else:
+        _retry(lambda: client.set_terminated(run_id, status=status))
+
+
+def read_mirror(path: str | os.PathLike | None) -> list[tuple[int, str, float]]:
+    """The points of a run's metrics mirror (:meth:`Tracker.mirror_to`) as (step, key, value); [] if absent.
+    A last line cut short by a kill is skipped."""
+    if path is None or not Path(path).exists():
+        return []
+    out = []
+    with open(path) as f:
+        next(f, None)  # header
+        for line in f:
+            parts = line.rstrip("\n").split(",")
+            if len(parts) == 3 and line.endswith("\n"):
+                try:
+                    out.append((int(parts[0]), parts[1], float(parts[2])))
+                except ValueError:
+                    continue
+    return out
+
+
+def export_mirror(run_id: str, path: str | os.PathLike, uri: str | None = None) -> int:
+    """Write a run's whole curve from the store to a mirror file (for run dirs from before the mirror existed);
+    returns the number of points."""
+    client = _client(uri)
+    keys = sorted(_retry(lambda: client.get_run(run_id)).data.metrics)
+    points = sorted((st, k, v) for k in keys for st, v in metric_history(run_id, k, uri))
+    tmp = Path(f"{path}.tmp")
+    with open(tmp, "w") as f:
+        f.write("step,key,value\n")
+        f.writelines(f"{st},{k},{v!r}\n" for st, k, v in points)
+    os.replace(tmp, path)
+    return len(points)
+
+
+def metric_history(run_id: str, key: str, uri: str | None = None) -> list[tuple[int, float]]:
+    """Full curve of metric ``key`` as ``[(step, value), ...]`` sorted by step (then time)."""
+    client = _client(uri)
+    hist = _retry(lambda: client.get_metric_history(run_id, key))
+    return [(m.step, m.value) for m in sorted(hist, key=lambda m: (m.step, m.timestamp))]
+
+
+def _quote(value: Any) -> str:
+    return "'" + str(value).replace("\\", "\\\\").replace("'", "\\'") + "'"
+
+
+def find_runs(experiment: str, filter_tags: Mapping[str, Any] | None = None, uri: str | None = None) -> list[dict]:
+    """Runs of ``experiment`` whose tags equal ``filter_tags`` (all pages).
+
+    Each run is a dict: ``run_id``, ``run_name``, ``status``, ``start_time``
+    (ms), ``tags``, ``params`` and ``metrics`` (latest value of each). Missing
+    experiment -> empty list.
+    """
+    client = _client(uri)
+    exp = _retry(lambda: client.get_experiment_by_name(experiment))
+    if exp is None:
+        return []
+    filt = " and ".join(f"tags.`{k}` = {_quote(v)}" for k, v in (filter_tags or {}).items())
+    runs: list[dict] = []
+    token = None
+    while True:
+        page = _retry(lambda token=token: client.search_runs([exp.experiment_id], filter_string=filt, page_token=token))
+        for r in page:
+            runs.append(
+                {
+                    "run_id": r.info.run_id,
+                    "run_name": r.info.run_name,
+                    "status": r.info.status,
+                    "start_time": r.info.start_time,
+                    "tags": dict(r.data.tags),
+                    "params": dict(r.data.params),
+                    "metrics": dict(r.data.metrics),
+                }
+            )
+        token = page.token
+        if not token:
+            return runs
