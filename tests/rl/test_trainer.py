@@ -65,22 +65,23 @@ def test_finished_run_is_not_retrained_but_can_be_extended(tracking, no_leftover
     assert [s for s, _ in metric_history(first.run_id, "charts/update")] == [64, 128, 192]
 
 
-def _train_and_sigkill(tracking, ready) -> tuple[TrainConfig, dict, int]:
+def _train_and_sigkill(tracking, ready, frames: int = 2048) -> tuple[TrainConfig, dict, int]:
     """`emml train` (smoke, 2,048 frames, a checkpoint every 2 updates) in a subprocess, SIGKILLed as soon as
-    ``ready(checkpoint, logged_steps)`` holds; returns the config and the checkpoint it left."""
-    args = [sys.executable, "-m", "emml.cli", "train", "--profile", "smoke", "--table", "test", "--frames", "2048",
+    ``ready(checkpoint, logged_steps)`` holds (``logged_steps()`` reads MLflow); returns the config, the
+    checkpoint it left and the killed pid."""
+    args = [sys.executable, "-m", "emml.cli", "train", "--profile", "smoke", "--table", "test", "--frames", str(frames),
             "--set", f'run_root="{tracking["run_root"]}"', "--set", "checkpoint_every=2", "--set", "eval_episodes=1",
             "--quiet"]
     env = {**os.environ, "EMML_NO_TCMALLOC": "1"}
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    cfg = smoke(tracking, frames=2048, checkpoint_every=2, eval_episodes=1)
+    cfg = smoke(tracking, frames=frames, checkpoint_every=2, eval_episodes=1)
     path = run_dir(cfg) / CHECKPOINT
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
             if path.exists():
                 ckpt = load_checkpoint(path)
-                if ready(ckpt, [s for s, _ in metric_history(ckpt["run_id"], "charts/update")]):
+                if ready(ckpt, lambda c=ckpt: [s for s, _ in metric_history(c["run_id"], "charts/update")]):
                     break
             time.sleep(0.05)
         else:
@@ -102,29 +103,30 @@ def _one_run_one_value_per_step(cfg, killed, pid, sampler_started: bool = True) 
     assert any(leftover.glob("pymp-*")) or not sampler_started, "the killed learner's multiprocessing dir"
     result = train(cfg, quiet=True)
     assert not leftover.exists()  # swept by the next learner
-    assert result.resumed and result.run_id == killed["run_id"] and result.frames == 2048
+    frames = cfg.frames
+    assert result.resumed and result.run_id == killed["run_id"] and result.frames == frames
     done = load_checkpoint(run_dir(cfg) / CHECKPOINT)
-    assert done["finished"] and done["update"] == 32 and done["frames"] == 2048
+    assert done["finished"] and done["update"] == frames // 64 and done["frames"] == frames
     for key in ("charts/update", "losses/policy", "train/success_sgn"):
         steps = [s for s, _ in metric_history(result.run_id, key)]
         assert len(steps) == len(set(steps)), (key, steps)  # one value per step, even for the redone updates
-    assert [s for s, _ in metric_history(result.run_id, "charts/update")] == list(range(64, 2049, 64))
+    assert [s for s, _ in metric_history(result.run_id, "charts/update")] == list(range(64, frames + 1, 64))
     mirror = read_mirror(run_dir(cfg) / METRICS)  # the run dir's own copy of the curves: the same points
     assert len({(k, st) for st, k, _ in mirror}) == len(mirror)
-    assert [st for st, k, _ in mirror if k == "charts/update"] == list(range(64, 2049, 64))
+    assert [st for st, k, _ in mirror if k == "charts/update"] == list(range(64, frames + 1, 64))
     runs = mlflow.search_runs(experiment_names=["test"], output_format="list")
     assert [(r.info.run_id, r.info.status) for r in runs] == [(result.run_id, "FINISHED")]  # none left RUNNING
 
 
 def test_resume_after_sigkill_between_checkpoints_logs_each_step_once(tracking, no_leftovers):
     # killed after it logged an update that its last checkpoint does not hold: the resumed run redoes that update
-    cfg, killed, pid = _train_and_sigkill(tracking, lambda c, steps: c["update"] >= 4 and max(steps) > c["frames"])
+    cfg, killed, pid = _train_and_sigkill(tracking, lambda c, steps: c["update"] >= 4 and max(steps()) > c["frames"])
     assert not killed["finished"] and 4 <= killed["update"] < 32
     _one_run_one_value_per_step(cfg, killed, pid)
 
 
 def test_a_run_killed_before_its_first_update_is_resumed_not_duplicated(tracking, no_leftovers):
-    cfg, killed, pid = _train_and_sigkill(tracking, lambda c, steps: True)  # the first checkpoint there is
+    cfg, killed, pid = _train_and_sigkill(tracking, lambda c, steps: True, frames=256)  # the first checkpoint
     assert killed["update"] == 0  # the checkpoint written at start: before it, a rerun made a second MLflow run
     _one_run_one_value_per_step(cfg, killed, pid, sampler_started=False)
 
