@@ -50,10 +50,11 @@ table2: setup
 ablations: setup
 	$(EMML) run table3 $(RUN_OPTS)
 
-# placeholders until their own issues land: the CLI says so and exits 0
+# Table 4: SGN-only runs on the training instructions' words, then detectors for 'red' and 'pillar' appended
 transfer: setup
 	$(EMML) run table4 $(RUN_OPTS)
 
+# a placeholder until its own issue lands: the CLI says so and exits 0
 house3d: setup
 	$(EMML) run table5 $(RUN_OPTS)
 

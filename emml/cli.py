@@ -333,6 +333,43 @@ def eval_checkpoint(
 
 
 @app.command()
+def transfer(
+    checkpoint: Path = typer.Argument(
+        ..., help="A checkpoint of an SGN Dual-Attention run that does not know the words"
+    ),
+    words: str = typer.Option("red,pillar", help="New words, comma-separated, in channel order."),
+    episodes: int = typer.Option(100, min=1, help="Greedy episodes per test instruction."),
+    detector: str = typer.Option("labels", help="Detector kind: labels (the engine's label buffer)."),
+    seed: int = 10_000,
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Table 4 on one checkpoint (§5.4): append detectors for new words, score every SGN test instruction that
+    holds one, without fine-tuning; rows as in reproduce/table4.toml."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.registry import load_table
+    from emml.transfer import transfer_checkpoint
+
+    _check_checkpoint(checkpoint)
+    install_signal_handlers()
+    new_words = tuple(w.strip() for w in words.split(",") if w.strip())
+    try:
+        scores = transfer_checkpoint(checkpoint, new_words, episodes=episodes, seed=seed, detector=detector)
+    except ValueError as e:
+        _fail(str(e))
+    table = load_table("table4")
+    rows = {}
+    if new_words == table.transfer.words:  # the paper's words: its rows (and ours below them)
+        rows = {r.label: sum(scores[x] for x in r.instructions) / len(r.instructions) for r in table.rows}
+    width = max(map(len, [*scores, *rows]))
+    text = "\n".join(
+        [f"{k:<{width}}  {v:.2f}" for k, v in rows.items()]
+        + (["", "per instruction:"] if rows else [])
+        + [f"{k:<{width}}  {v:.2f}" for k, v in scores.items()]
+    )
+    _echo({"instructions": scores, "rows": rows, "episodes": episodes, "words": list(new_words)}, as_json, text)
+
+
+@app.command()
 def diagnose(
     checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
     episodes: int = typer.Option(20, min=1, help="Sampled SGN episodes for the attention and detector figures."),

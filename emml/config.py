@@ -60,8 +60,10 @@ class DoomConfig:
     the right and bottom edges, since conv3 has no padding)."""
     max_words: int = 10
     """Token sequence length (padded with 0)."""
-    vocabulary: tuple[str, ...] | None = None
-    """The run's vocabulary (channel order); None builds the default: every word of the dataset."""
+    vocabulary: tuple[str, ...] | str | None = None
+    """The run's vocabulary (channel order); None builds the default, every word of the dataset; a name builds
+    one from the dataset: 'all' (the default) or 'train_instructions' (the training instructions' words only:
+    the transfer experiment, Table 4). The trainer pins it to the word list, saved with the run."""
     aux_words: tuple[str, ...] | None = None
     """Words that get aux labels; None: every word but the superlatives (§3.2; function words get all-zero
     labels). The transfer experiment passes the training words only."""
@@ -76,6 +78,14 @@ class DoomConfig:
         check_choice("tasks", self.tasks, ("both", "sgn", "eqa"))
         check_choice("interpolation", self.interpolation, ("area", "linear", "nearest"))
         check_choice("label_grid", self.label_grid, ("receptive_field", "even"))
+        if isinstance(self.vocabulary, str):
+            from emml.tasks.language import VOCABULARY_SOURCES
+
+            check_choice("vocabulary", self.vocabulary, VOCABULARY_SOURCES)
+        elif self.vocabulary is not None and not all(isinstance(w, str) for w in self.vocabulary):
+            raise ValueError(
+                f"vocabulary={self.vocabulary!r} must be a list of words, or one of 'all', 'train_instructions'"
+            )
         from emml.geometry import conv_output_size
 
         conv_output_size(self.height, self.width)  # raises naming height/width when too small

@@ -25,13 +25,20 @@ def obs_to_torch(obs: dict, device) -> dict[str, torch.Tensor]:
 
 def eval_settings(env_cfg: DoomConfig) -> list[tuple[str, str, tuple[str, ...] | None]]:
     """(task, split, instructions) to evaluate: the tasks the run trains on (a single-task run is scored on its
-    task only, as in Table 3), both splits; a run restricted to some sentences is scored on those only."""
-    tasks = ("sgn", "eqa") if env_cfg.tasks == "both" else (env_cfg.tasks,)
-    if not env_cfg.instructions:
-        return [(t, s, None) for t, s in SETTINGS if t in tasks]
-    from emml.tasks.language import load_dataset
+    task only, as in Table 3), both splits; a run restricted to some sentences is scored on those only. A split
+    with words outside the run's vocabulary is left out (Table 4's runs know the training instructions' words
+    only: their test instructions are scored after the transfer surgery, emml/transfer.py)."""
+    from emml.tasks.language import load_dataset, resolve_vocabulary
 
     ds = load_dataset(env_cfg.dataset)
+    tasks = ("sgn", "eqa") if env_cfg.tasks == "both" else (env_cfg.tasks,)
+    if not env_cfg.instructions:
+        known = set(resolve_vocabulary(env_cfg.vocabulary, ds).words)
+        return [
+            (t, s, None)
+            for t, s in SETTINGS
+            if t in tasks and all(set(x.text.split()) <= known for x in ds.select(t, s))
+        ]
     found = [ds.find(text) for text in env_cfg.instructions]
     out = []
     for task, split in SETTINGS:
@@ -49,8 +56,8 @@ def evaluate(
     was_training = model.training
     model.eval()
     results = {}
-    # the diagnostic controls read the privileged labels; every real model plays without them
-    labels = getattr(getattr(model, "cfg", None), "control", "none") != "none"
+    # the diagnostic controls (and label-fed detectors) read the privileged labels; a real model plays without them
+    labels = bool(getattr(model, "reads_labels", False))
     for task, split, instructions in eval_settings(env_cfg):
         cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
         n_envs = min(batch, episodes)
@@ -65,15 +72,24 @@ def evaluate(
 
 
 def _run(model, envs, episodes: int, seed: int, device) -> float:
-    started, successes, finished = 0, 0, 0
-    obs_list, active = [], []
-    for env in envs:
-        obs_list.append(env.reset(seed=seed + started)[0])
+    return float(np.mean(play(model, envs, [(seed + i, None) for i in range(episodes)], device)))
+
+
+def play(model, envs, plan: list[tuple[int, dict | None]], device) -> list[bool]:
+    """Play the episodes of ``plan`` greedily, (reset seed, reset options) each, on ``envs`` in lockstep (an env
+    takes the next planned episode when its own ends); success per planned episode, in plan order."""
+    outcomes: list[bool] = [False] * len(plan)
+    started, finished = 0, 0
+    obs_list, active, playing = [], [], []
+    for env in envs[: len(plan)]:
+        obs_list.append(env.reset(seed=plan[started][0], options=plan[started][1])[0])
+        playing.append(started)
         started += 1
         active.append(True)
+    envs = envs[: len(plan)]
     state = model.initial_state(len(envs), device=device)
     episode_start = torch.ones(1, len(envs), dtype=torch.bool, device=device)
-    while finished < episodes:
+    while finished < len(plan):
         batch = {k: np.stack([o[k] for o in obs_list]) for k in obs_list[0]}
         out, state = model(obs_to_torch(batch, device), state, episode_start)
         moves = out.logits[0].argmax(-1).cpu().numpy()
@@ -86,15 +102,16 @@ def _run(model, envs, episodes: int, seed: int, device) -> float:
             obs_list[i] = obs
             if terminated or truncated:
                 finished += 1
-                successes += bool(info["success"])
-                if started < episodes:
-                    obs_list[i] = env.reset(seed=seed + started)[0]
+                outcomes[playing[i]] = bool(info["success"])
+                if started < len(plan):
+                    obs_list[i] = env.reset(seed=plan[started][0], options=plan[started][1])[0]
+                    playing[i] = started
                     started += 1
                     starts[i] = True
                 else:
                     active[i] = False
         episode_start = torch.as_tensor(starts, device=device).unsqueeze(0)
-    return successes / episodes
+    return outcomes
 
 
 def load_model(path, device: str = "cpu"):

@@ -79,8 +79,14 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
     for spec in table.runs(profile_seeds(profile)):
         cfg = spec.to_config(profile, **fields)
         if recorded is None:
-            path = results_csv(cfg)
-            recorded = set(read_results(path)["run_name"])
+            results = read_results(results_csv(cfg))
+            if table.transfer is not None:  # a transfer run is recorded once its scores are in the row
+                from emml.transfer import metric_column
+
+                columns = [metric_column(x) for x in spec.instructions]
+                complete = set(columns) <= set(results.columns)
+                results = results[results[columns].notna().all(axis=1)] if complete else results.iloc[:0]
+            recorded = set(results["run_name"])
         rname, rdir = cfg.run_name(), run_dir(cfg)
         done = (rdir / CHECKPOINT).exists() and (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT)
         if rname in recorded:
@@ -115,6 +121,10 @@ def _train_one(spec: RunSpec, profile: str, fields: dict, parent_run_id: str | N
         from emml.rl.trainer import train as train_fn
     cfg = spec.to_config(profile, **fields).validate()
     train_fn(cfg, quiet=True, parent_run_id=parent_run_id)
+    if spec.transfer is not None:  # Table 4: append the detectors and score the test instructions (§5.4)
+        from emml.transfer import record_transfer
+
+        record_transfer(cfg, spec.transfer.words, spec.instructions, spec.transfer.detector)
     return cfg.run_name()
 
 

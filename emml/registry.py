@@ -23,9 +23,30 @@ STATUSES = ("active", "placeholder")
 DIFFICULTIES = ("easy", "hard")
 METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
 """Results columns a cell may read (written by the trainer's greedy evaluation)."""
-TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows")
+TRANSFER_METRICS = ("sgn_transfer",)
+"""What a transfer table's cells read: the mean of their instructions' `sgn_transfer:<instruction>` columns."""
+TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows", "transfer")
 COLUMN_KEYS = ("difficulties", "aux", "metrics")
 ROW_KEYS = ("label", "model", "overrides", "metric_overrides")
+TRANSFER_KEYS = ("model", "overrides", "words", "detector")
+TRANSFER_RUN_ROW = "Training run (before transfer)"
+"""The `RunSpec.row` of a transfer table's runs: one training setting serves every row (its curve's label)."""
+TRANSFER_ROW_KEYS = ("label", "instructions", "extra")
+
+
+@dataclass(frozen=True)
+class Transfer:
+    """A transfer table's one training setting (per difficulty, aux and seed) and what is appended after it
+    (§5.4): every row reads its instructions' scores from those runs (emml/transfer.py)."""
+
+    model: str
+    """Model registry name of the trained policy (Dual-Attention)."""
+    overrides: dict
+    """TrainConfig overrides of the training runs (SGN only, the training instructions' vocabulary)."""
+    words: tuple[str, ...]
+    """The new words, in the order their detector channels are appended."""
+    detector: str
+    """Detector kind (emml.transfer.DETECTORS)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +69,10 @@ class RunSpec:
     """TrainConfig fields by dotted name (e.g. {'env.shaping': False}) applied after the profile."""
     metrics: tuple[str, ...] = ()
     """The results columns this run fills in its row."""
+    transfer: Transfer | None = None
+    """Transfer tables: what to append and score after training (emml/transfer.py); None otherwise."""
+    instructions: tuple[str, ...] = ()
+    """Transfer tables: the instructions scored after training (every row's)."""
 
     def to_config(self, profile: str, **fields) -> TrainConfig:
         """The run's TrainConfig under `profile` (extra `fields`, e.g. run_root, go to TrainConfig)."""
@@ -80,6 +105,10 @@ class Row:
     """Config overrides for every run of the row."""
     metric_overrides: dict = field(default_factory=dict)
     """metric → extra overrides: the row's cells of that metric come from runs with them."""
+    instructions: tuple[str, ...] = ()
+    """Transfer tables: the test instructions the row's cells average over."""
+    extra: bool = False
+    """Transfer tables: a row of ours below the paper's (test instructions its table does not list)."""
 
     def settings(self, metrics: tuple[str, ...]) -> list[tuple[dict, tuple[str, ...]]]:
         """(overrides, metrics filled) for each distinct setting of the row."""
@@ -109,6 +138,8 @@ class Table:
     aux: tuple[bool, ...] = ()
     metrics: dict = field(default_factory=dict)
     """Column label (SGN) → results column (sgn_test), in the paper's order."""
+    transfer: Transfer | None = None
+    """A transfer table (Table 4): rows are instruction types read from one training setting."""
 
     @property
     def placeholder(self) -> bool:
@@ -119,8 +150,31 @@ class Table:
         return [(d, a, m) for d in self.difficulties for a in self.aux for m in self.metrics.values()]
 
     def runs(self, seeds: list[int]) -> list[RunSpec]:
-        """Every run: rows × difficulties × aux × row settings × seeds."""
+        """Every run: rows × difficulties × aux × row settings × seeds (a transfer table: difficulties × aux ×
+        seeds, every row read from them)."""
         out = []
+        if self.transfer is not None:
+            t = self.transfer
+            texts = tuple(x for row in self.rows for x in row.instructions)
+            metrics = tuple(self.metrics.values())
+            for difficulty in self.difficulties:
+                for aux in self.aux:
+                    for seed in seeds:
+                        out.append(
+                            RunSpec(
+                                self.name,
+                                TRANSFER_RUN_ROW,
+                                t.model,
+                                difficulty,
+                                aux,
+                                seed,
+                                t.overrides,
+                                metrics,
+                                t,
+                                texts,
+                            )
+                        )
+            return out
         for row in self.rows:
             for difficulty in self.difficulties:
                 for aux in self.aux:
@@ -133,7 +187,28 @@ class Table:
 
     def cell_runs(self, row: str, difficulty: str, aux: bool, metric: str, runs: list[RunSpec]) -> list[RunSpec]:
         """The runs (one per seed) whose `metric` fills the cell."""
-        return [r for r in runs if r.row == row and r.difficulty == difficulty and r.aux == aux and metric in r.metrics]
+        return [
+            r
+            for r in runs
+            if (r.row == row or self.transfer is not None)
+            and r.difficulty == difficulty
+            and r.aux == aux
+            and metric in r.metrics
+        ]
+
+    def curve_rows(self) -> list[str]:
+        """The `RunSpec.row` values to draw one training curve each for: the rows, or a transfer table's one
+        training setting."""
+        return [TRANSFER_RUN_ROW] if self.transfer is not None else [r.label for r in self.rows]
+
+    def cell_columns(self, row: str, metric: str) -> list[str]:
+        """The results columns whose mean is a run's value for the cell: [metric], or for a transfer table one
+        `sgn_transfer:<instruction>` column per instruction of the row."""
+        if self.transfer is None:
+            return [metric]
+        from emml.transfer import metric_column
+
+        return [metric_column(x) for r in self.rows if r.label == row for x in r.instructions]
 
 
 def table_path(name: str) -> Path:
@@ -196,6 +271,13 @@ def _parse(name: str, path: Path, data: dict) -> Table:
             if key in data:
                 raise _err(path, key, "a placeholder table declares no runs; set status = 'active' to add them")
         return Table(**common)
+    if "transfer" in data:
+        columns = _parse_columns(path, data, TRANSFER_METRICS)
+        transfer = _parse_transfer(path, data)
+        rows = _parse_transfer_rows(path, data, transfer)
+        table = Table(**common, rows=rows, transfer=transfer, **columns)
+        _check_runs(path, table)
+        return table
     columns = _parse_columns(path, data)
     rows = _parse_rows(path, data, tuple(columns["metrics"].values()))
     table = Table(**common, rows=rows, **columns)
@@ -203,7 +285,7 @@ def _parse(name: str, path: Path, data: dict) -> Table:
     return table
 
 
-def _parse_columns(path: Path, data: dict) -> dict:
+def _parse_columns(path: Path, data: dict, allowed: tuple[str, ...] = METRICS) -> dict:
     if "columns" not in data:
         raise _err(path, "columns", "missing: an active table needs [columns] difficulties, aux, metrics")
     cols = _typed(path, "columns", data["columns"], dict, "a table")
@@ -220,8 +302,8 @@ def _parse_columns(path: Path, data: dict) -> dict:
         raise _err(path, "columns.aux", f"must be a non-empty list of booleans, got {aux!r}")
     metrics = _typed(path, "columns.metrics", cols["metrics"], dict, "a table of label = results column")
     for label, key in metrics.items():
-        if key not in METRICS:
-            raise _err(path, f"columns.metrics.{label}", f"{key!r} is not allowed; choose one of {', '.join(METRICS)}")
+        if key not in allowed:
+            raise _err(path, f"columns.metrics.{label}", f"{key!r} is not allowed; choose one of {', '.join(allowed)}")
     if not difficulties or not metrics:
         raise _err(path, "columns", "difficulties and metrics must not be empty")
     return {"difficulties": tuple(difficulties), "aux": tuple(aux), "metrics": dict(metrics)}
@@ -262,6 +344,71 @@ def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, 
             except ValueError as e:
                 raise _err(path, key, str(e)) from e
         rows.append(Row(r["label"], r["model"], dict(overrides), dict(per_metric)))
+    return tuple(rows)
+
+
+def _parse_transfer(path: Path, data: dict) -> Transfer:
+    from emml.models import MODELS
+    from emml.transfer import DETECTORS
+
+    raw = _typed(path, "transfer", data["transfer"], dict, "a table")
+    _check_keys(path, "transfer.", raw, TRANSFER_KEYS)
+    for key in TRANSFER_KEYS:
+        if key not in raw:
+            raise _err(path, f"transfer.{key}", "missing")
+    model = _typed(path, "transfer.model", raw["model"], str, "a string")
+    if model not in MODELS:
+        raise _err(path, "transfer.model", f"unknown model {model!r}; known models: {', '.join(MODELS)}")
+    overrides = _typed(path, "transfer.overrides", raw["overrides"], dict, "a table")
+    try:
+        apply_overrides(TrainConfig(model=model), overrides, source="override").validate()
+    except ValueError as e:
+        raise _err(path, "transfer.overrides", str(e)) from e
+    words = _typed(path, "transfer.words", raw["words"], list, "a list of words")
+    if not words or not all(isinstance(w, str) for w in words) or len(set(words)) != len(words):
+        raise _err(path, "transfer.words", f"must be a non-empty list of distinct words, got {words!r}")
+    detector = _typed(path, "transfer.detector", raw["detector"], str, "a string")
+    if detector not in DETECTORS:
+        raise _err(path, "transfer.detector", f"{detector!r} is not allowed; choose one of {', '.join(DETECTORS)}")
+    return Transfer(model, dict(overrides), tuple(words), detector)
+
+
+def _parse_transfer_rows(path: Path, data: dict, transfer: Transfer) -> tuple[Row, ...]:
+    """Rows of instruction types: every SGN test instruction holding a new word in exactly one row."""
+    from emml.tasks.language import load_dataset
+
+    dataset = apply_overrides(TrainConfig(), transfer.overrides, source="override").env.dataset
+    test = load_dataset(dataset).select("sgn", "test")
+    wanted = {s.text for s in test if set(s.text.split()) & set(transfer.words)}
+    raw = _typed(path, "rows", data.get("rows", []), list, "an array of tables ([[rows]])")
+    rows, seen = [], {}
+    for i, r in enumerate(raw):
+        where = f"rows[{i}]"
+        _check_keys(path, f"{where}.", r, TRANSFER_ROW_KEYS)
+        for key in ("label", "instructions"):
+            if key not in r:
+                raise _err(path, f"{where}.{key}", "missing")
+        label = _typed(path, f"{where}.label", r["label"], str, "a string")
+        if any(row.label == label for row in rows):
+            raise _err(path, f"{where}.label", f"{label!r} appears twice")
+        texts = _typed(path, f"{where}.instructions", r["instructions"], list, "a list of instructions")
+        if not texts:
+            raise _err(path, f"{where}.instructions", "must not be empty")
+        for text in texts:
+            if text not in wanted:
+                raise _err(
+                    path,
+                    f"{where}.instructions",
+                    f"{text!r} is not an SGN test instruction with a new word ({', '.join(transfer.words)})",
+                )
+            if text in seen:
+                raise _err(path, f"{where}.instructions", f"{text!r} is already in row {seen[text]!r}")
+            seen[text] = label
+        extra = _typed(path, f"{where}.extra", r.get("extra", False), bool, "true or false")
+        rows.append(Row(label, transfer.model, dict(transfer.overrides), instructions=tuple(texts), extra=extra))
+    missing = sorted(wanted - set(seen))
+    if missing:
+        raise _err(path, "rows", f"every test instruction with a new word needs a row; missing: {missing}")
     return tuple(rows)
 
 

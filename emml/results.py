@@ -13,7 +13,18 @@ from pathlib import Path
 import pandas as pd
 
 # identity and provenance columns (read as written); every other column is a metric (float)
-TEXT = ("run_name", "table", "model", "difficulty", "profile", "git_sha", "run_id", "tasks")
+TEXT = (
+    "run_name",
+    "table",
+    "model",
+    "difficulty",
+    "profile",
+    "git_sha",
+    "run_id",
+    "tasks",
+    "transfer_words",
+    "transfer_detector",
+)
 INTEGER = ("seed", "frames", "eval_episodes")
 BOOLEAN = ("aux", "shaping")
 _BOOL = {"True": True, "False": False, "true": True, "false": False}

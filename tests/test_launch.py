@@ -100,7 +100,7 @@ def test_slurm_backend_through_submitit_debug_executor(tracking):
 
 
 def test_placeholder_and_bad_arguments(tracking):
-    assert run_table("table4", PROFILE, log=lambda m: None).placeholder
+    assert run_table("table5", PROFILE, log=lambda m: None).placeholder
     with pytest.raises(ValueError, match="backend"):
         run_table("table3", PROFILE, backend="k8s")
     with pytest.raises(ValueError, match="profile"):
@@ -130,12 +130,12 @@ def test_cli_run_list_report(tmp_path, monkeypatch):
     result = runner.invoke(app, ["list", "--profile", "smoke", "--json"])
     assert result.exit_code == 0, result.output
     tables = {t["table"]: t for t in json.loads(result.output)["tables"]}
-    assert tables["table2"]["total"] == 28 and tables["table3"]["total"] == 16 and tables["table4"]["total"] == 0
+    assert tables["table2"]["total"] == 28 and tables["table3"]["total"] == 16 and tables["table4"]["total"] == 2
     result = runner.invoke(
-        app, ["report", "table4", "--profile", "smoke", "--no-curves", "--out", str(tmp_path), "--json"]
+        app, ["report", "table5", "--profile", "smoke", "--no-curves", "--out", str(tmp_path), "--json"]
     )
     assert result.exit_code == 0, result.output
-    assert (tmp_path / "table4-smoke.md").exists() and "PLACEHOLDER" in json.loads(result.output)["caption"]
+    assert (tmp_path / "table5-smoke.md").exists() and "PLACEHOLDER" in json.loads(result.output)["caption"]
 
 
 def test_runs_packed_on_a_gpu_are_capped_by_its_free_memory(monkeypatch):

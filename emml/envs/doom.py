@@ -27,7 +27,7 @@ from emml.envs.objects import ACTORS, iwad_path
 from emml.envs.wad import ROOM, map_name, wad_path
 from emml.geometry import conv_output_size
 from emml.tasks.episodes import Episode, sample_episode
-from emml.tasks.language import Vocabulary, load_dataset
+from emml.tasks.language import load_dataset, normalize, resolve_vocabulary
 
 MOVES = ("forward", "left", "right", "answer")
 FORWARD, LEFT, RIGHT, ANSWER = range(4)
@@ -73,7 +73,7 @@ class DoomEnv(gym.Env):
         self.cfg = cfg.validate()
         self.render_mode = render_mode
         self.dataset = load_dataset(cfg.dataset)
-        self.vocab = Vocabulary(tuple(cfg.vocabulary)) if cfg.vocabulary else Vocabulary.from_dataset(self.dataset)
+        self.vocab = resolve_vocabulary(cfg.vocabulary, self.dataset)
         kinds = TASKS if cfg.tasks == "both" else (cfg.tasks,)
         self.sentences = {k: self.dataset.select(k, cfg.split) for k in kinds}
         if cfg.instructions:
@@ -170,12 +170,21 @@ class DoomEnv(gym.Env):
 
     # --- episode --------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """A new episode. ``options={"sentence": text}`` plays that instruction or question (one of this env's
+        sentences) instead of drawing one; the scene is drawn as usual."""
         super().reset(seed=seed)
         rng = self.np_random
-        kinds = tuple(self.sentences)
-        kind = kinds[int(rng.integers(len(kinds)))]  # 50/50 when both tasks are on
-        pool = self.sentences[kind]
-        sentence = pool[int(rng.integers(len(pool)))]  # uniform in the split
+        unknown = sorted(set(options or {}) - {"sentence"})
+        if unknown:
+            raise ValueError(f"reset options {unknown} are unknown; allowed: 'sentence'")
+        if options and options.get("sentence") is not None:
+            sentence = self._chosen(options["sentence"])
+            kind = sentence.kind
+        else:
+            kinds = tuple(self.sentences)
+            kind = kinds[int(rng.integers(len(kinds)))]  # 50/50 when both tasks are on
+            pool = self.sentences[kind]
+            sentence = pool[int(rng.integers(len(pool)))]  # uniform in the split
         self.episode = sample_episode(sentence, self.dataset, rng)
         if self.cfg.difficulty == "easy":
             ax, ay, angle = EASY_START
@@ -208,6 +217,15 @@ class DoomEnv(gym.Env):
         self._read_state()
         self._dist = self._distances()[self.episode.target]
         return self._obs(), self._info(False)
+
+    def _chosen(self, text: str):
+        """The env's sentence with this text (reset's ``sentence`` option)."""
+        for pool in self.sentences.values():
+            for s in pool:
+                if s.text == normalize(text):
+                    return s
+        allowed = [s.text for pool in self.sentences.values() for s in pool]
+        raise ValueError(f"reset option sentence={text!r} is not one of this env's sentences: {allowed}")
 
     def step(self, action):
         if self._engine is None and self.episode is not None:

@@ -84,12 +84,22 @@ class DualAttention(nn.Module):
         self.uses_sent = ga2
         self.state_dim = height * width if spatial else vocab_size * height * width
 
-    def forward(self, x_image: Tensor, x_bow: Tensor | None, x_sent: Tensor | None) -> FusionOutput:
-        """x_I (N, V, h, w), x_BoW (N, V), x_sent (N, V) -> FusionOutput."""
-        n, _, h, w = x_image.shape
-        x_ga1 = gated_attention(x_image, x_bow) if self.ga1 else x_image  # Eq. 1
+    def forward(
+        self, x_image: Tensor, x_bow: Tensor | None, x_sent: Tensor | None, x_extra: Tensor | None = None
+    ) -> FusionOutput:
+        """x_I (N, V, h, w), x_BoW (N, V), x_sent (N, V) -> FusionOutput.
+
+        ``x_extra`` (N, k, h, w): detections of k new words appended to x_I by the transfer surgery (§5.4,
+        emml/transfer.py), with x_BoW then (N, V + k), word V + j gating channel j. They join the attention
+        scores of Eq. 1-2 only, as a separate sum, so that an instruction without the new words gives bit for
+        bit the scores it gave before; Eq. 3-5 keep the V channels (the new words answer no question)."""
+        n, v, h, w = x_image.shape
+        x_ga1 = gated_attention(x_image, x_bow[:, :v]) if self.ga1 else x_image  # Eq. 1
         if self.spatial:
-            scores = x_ga1.sum(dim=1).reshape(n, h * w)  # Eq. 2: sum over channels
+            scores = x_ga1.sum(dim=1)  # Eq. 2: sum over channels
+            if x_extra is not None and self.ga1:  # §5.4: the appended channels, gated by their words (Eq. 1)
+                scores = scores + gated_attention(x_extra, x_bow[:, v:]).sum(dim=1)
+            scores = scores.reshape(n, h * w)
             x_spat = torch.softmax(scores, dim=1).reshape(n, h, w)  # Eq. 2: softmax over HxW
             x_sa = spatial_attention(x_image, x_spat)  # Eq. 3
             state = x_spat.reshape(n, h * w) * self.state_scale  # x_S = vec(x_spat) (× h·w: mean 1 per cell)

@@ -144,6 +144,15 @@ class EmmlModel(nn.Module):
             task_indicator=cfg.task_indicator,
         )
         self.window = cfg.pacman_frames if isinstance(self.fusion, Pacman) else 0
+        self.detector: nn.Module | None = None
+        """Transfer to new words (§5.4, emml/transfer.py): a module mapping the observation to k extra x_I
+        channels (N, k, h, w) in [0, 1], appended after the V conv3 channels; None under the paper's training."""
+
+    @property
+    def reads_labels(self) -> bool:
+        """Whether acting needs the env's privileged aux labels (a diagnostic control, or detectors that read
+        them); a model under the paper's protocol plays from pixels and words only."""
+        return self.cfg.control != "none" or bool(getattr(self.detector, "reads_labels", False))
 
     def initial_state(self, batch_size: int, device=None) -> dict[str, Tensor]:
         """{"h": (B, hidden) zeros} (+ PACMAN {"frames": (B, K-1, 3, H, W) uint8 zeros})."""
@@ -208,7 +217,10 @@ class EmmlModel(nn.Module):
             x_image = torch.sigmoid(aux) if self.cfg.x_image == "sigmoid" else torch.relu(aux)  # x_I from conv3
             if self.cfg.control == "detectors":  # diagnostic: perfect detectors
                 x_image = obs["aux"].flatten(0, 1).to(x_image.dtype)
-            fused = self.fusion(x_image, x_bow, x_sent)
+            if self.detector is not None:  # §5.4: detections of new words appended as channels of x_I
+                fused = self.fusion(x_image, x_bow, x_sent, x_extra=self.detector(obs).to(x_image.dtype))
+            else:
+                fused = self.fusion(x_image, x_bow, x_sent)
             if self.cfg.control == "target_mask":  # diagnostic: perfect x_S, the referent's cells
                 fused.state = obs["target"].flatten(0, 1).flatten(1).to(fused.state.dtype)
         fused: FusionOutput

@@ -76,7 +76,10 @@ def _mean_band(curves: list[tuple[np.ndarray, np.ndarray]]):
 
 
 def plot_table(
-    name: str, profile: str, results_root: str | Path | None = None, out: str | Path | None = None,
+    name: str,
+    profile: str,
+    results_root: str | Path | None = None,
+    out: str | Path | None = None,
     run_root: str | Path = "runs",
 ) -> tuple[list[Path], list[str]]:
     """Training accuracy vs frames for every row of table `name` under `profile`: a panel per (task, difficulty,
@@ -107,10 +110,10 @@ def plot_table(
     for j, (difficulty, aux) in enumerate(panels):
         for i, (key, task) in enumerate(TRAIN_KEYS):
             ax = axes[i][j]
-            for k, row in enumerate(table.rows):
+            for k, row in enumerate(table.curve_rows()):
                 curves = []
                 for spec in specs:
-                    if spec.row != row.label or spec.difficulty != difficulty or spec.aux != aux:
+                    if spec.row != row or spec.difficulty != difficulty or spec.aux != aux:
                         continue
                     rname = spec.run_name(profile)
                     if rname not in run_ids:
@@ -121,8 +124,9 @@ def plot_table(
                             mirror = read_mirror(project_path(run_root) / name / rname / METRICS)
                             cache[rname] = {k: [(st, v) for st, kk, v in mirror if kk == k] for k, _ in TRAIN_KEYS}
                         if not any(cache[rname].values()):
-                            notes.append(f"{rname}: no curve (MLflow run {run_ids[rname]} not here, no run dir); "
-                                         "skipped")
+                            notes.append(
+                                f"{rname}: no curve (MLflow run {run_ids[rname]} not here, no run dir); skipped"
+                            )
                     hist = cache[rname][key]
                     if hist:
                         steps, values = zip(*hist)
@@ -138,7 +142,7 @@ def plot_table(
                     color=color,
                     lw=1.2,
                     marker="o" if len(grid) == 1 else None,
-                    label=f"{row.label} (n={len(curves)})",
+                    label=f"{row} (n={len(curves)})",
                 )
                 if band is not None:
                     ax.fill_between(grid, band[0], band[1], color=color, alpha=0.2, lw=0)

@@ -17,8 +17,14 @@ def profiles_with_results(results_root: str | Path = "results") -> dict[str, lis
     return out
 
 
-def best_checkpoint(table: str, profile: str, model: str = "dual_attention", aux: bool = True,
-                    results_root: str | Path = "results", run_root: str | Path = "runs") -> tuple[Path, str] | None:
+def best_checkpoint(
+    table: str,
+    profile: str,
+    model: str = "dual_attention",
+    aux: bool = True,
+    results_root: str | Path = "results",
+    run_root: str | Path = "runs",
+) -> tuple[Path, str] | None:
     """The (checkpoint, run name) of the run of ``model`` with the highest mean training accuracy that has its run
     dir here; None if there is none (results committed without their run dirs)."""
     from emml.results import read_results
@@ -61,8 +67,12 @@ def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tup
     return paths
 
 
-def write_reports(out: str | Path | None = None, results_root: str | Path = "results", run_root: str | Path = "runs",
-                  log: Callable[[str], None] = print) -> Path:
+def write_reports(
+    out: str | Path | None = None,
+    results_root: str | Path = "results",
+    run_root: str | Path = "runs",
+    log: Callable[[str], None] = print,
+) -> Path:
     """Regenerate every table and curve per profile with results, the figures of each profile's best
     Dual-Attention checkpoint (when its run dir is here), and reports/index.md. Returns the index path."""
     import matplotlib.pyplot as plt
@@ -92,8 +102,10 @@ def write_reports(out: str | Path | None = None, results_root: str | Path = "res
             lines.append(f"- **{table}** ({runs}): " + ", ".join(f"[{p.name}]({p.name})" for p in paths))
             missing = [n for n in notes if ": no curve (" in n]
             if missing:
-                lines.append(f"  - note: {len(missing)} of {len(df)} runs have no curve here (their MLflow runs and "
-                             "run dirs are on the machine that trained them)")
+                lines.append(
+                    f"  - note: {len(missing)} of {len(df)} runs have no curve here (their MLflow runs and "
+                    "run dirs are on the machine that trained them)"
+                )
             lines += [f"  - note: {n}" for n in notes if n not in missing]
             log(f"{table} [{profile}]: {len(paths)} files")
             best = best_checkpoint(table, profile, results_root=results_root, run_root=run_root)
@@ -102,8 +114,10 @@ def write_reports(out: str | Path | None = None, results_root: str | Path = "res
                 no_aux = project_path(run_root) / table / name.replace("-aux-", "-noaux-") / "checkpoint.pt"
                 figs = figures(ckpt, out, no_aux if no_aux.exists() else None)
                 plt.close("all")
-                lines.append(f"  - figures of the best Dual-Attention run `{name}`: "
-                             + ", ".join(f"[{p.name}]({p.name})" for p in figs))
+                lines.append(
+                    f"  - figures of the best Dual-Attention run `{name}`: "
+                    + ", ".join(f"[{p.name}]({p.name})" for p in figs)
+                )
         lines.append("")
     demo = sorted(out.glob("*-demo.md"))
     if demo:

@@ -24,6 +24,8 @@ N_RESAMPLES = 9999
 CI_SEED = 0
 """The bootstrap's seed: a report is reproducible to the digit."""
 MISSING = "—"
+EXTRA_MARK = "†"
+"""Marks a row of ours that the paper's table does not have (Table 4's other test instructions)."""
 DIFFICULTY_LABELS = {"easy": "Easy", "hard": "Hard", "house3d": "House3D"}
 AUX_LABELS = {False: "No Aux", True: "Aux"}
 METRIC_LABELS = {
@@ -114,10 +116,13 @@ def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.Dat
             cell = Cell(
                 row.label, difficulty, aux, metric, len(specs), paper=lookup.get((row.label, difficulty, aux, metric))
             )
+            columns = table.cell_columns(row.label, metric)  # [metric], or a transfer row's instructions
             for spec in specs:
                 name = spec.run_name(profile)
-                if name in by_name.index and metric in by_name.columns and pd.notna(by_name.at[name, metric]):
-                    cell.values.append(float(by_name.at[name, metric]))
+                if name in by_name.index and set(columns) <= set(by_name.columns):
+                    found = [by_name.at[name, c] for c in columns]
+                    if all(pd.notna(v) for v in found):
+                        cell.values.append(float(np.mean(found)))
             if cell.values:
                 cell.mean, cell.lo, cell.hi = mean_ci(cell.values)
             cells.append(cell)
@@ -153,6 +158,8 @@ def layout(table: Table, cells: list[Cell], tex: bool = False) -> tuple[pd.DataF
         data.setdefault(col, {})[c.row] = f"{ours}{sep}{paper}"
     rows = list(dict.fromkeys(c.row for c in cells))
     df = pd.DataFrame(data, index=rows)
+    extra = {r.label for r in table.rows if r.extra}
+    df.index = [f"{r} {EXTRA_MARK}" if r in extra else r for r in rows]  # rows of ours, not in the paper
     df.index.name = table.row_header
     if len(keep) > 1:
         df.columns = pd.MultiIndex.from_tuples(df.columns)
@@ -189,6 +196,14 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
         f"Each cell: ours, mean over seeds [{CONFIDENCE:.0%} percentile-bootstrap CI, scipy.stats.bootstrap] | "
         f"paper; {MISSING} = run missing (not finished), never zero."
     )
+    if table.transfer is not None:
+        t = table.transfer
+        parts.append(
+            f"Each run: trained with {t.overrides}, then detectors ({t.detector}) for {', '.join(t.words)} appended, "
+            "no fine-tuning (emml/transfer.py); a cell is the mean over the row's test instructions."
+        )
+        if any(r.extra for r in table.rows):
+            parts.append(f"Rows marked {EXTRA_MARK}: the test instructions the paper's rows do not name.")
     if used.empty:
         parts.append(f"Profile '{profile}': no finished runs yet.")
     else:

@@ -74,8 +74,7 @@ def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0,
         start = torch.ones(1, 1, dtype=torch.bool, device=device)
         done, info = False, {}
         while not done:
-            out, state = model(obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, device), state,
-                               start)
+            out, state = model(obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, device), state, start)
             start = torch.zeros_like(start)
             ep.frames.append(np.ascontiguousarray(obs["image"].transpose(1, 2, 0)))
             ep.labels.append(obs["aux"])
@@ -135,7 +134,11 @@ def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure
 
 
 def channels_figure(
-    models: list[tuple[str, object]], env_cfg: DoomConfig, path: str | Path, seed: int = 0, device="cpu",
+    models: list[tuple[str, object]],
+    env_cfg: DoomConfig,
+    path: str | Path,
+    seed: int = 0,
+    device="cpu",
     words: tuple[str, ...] = CHANNEL_WORDS,
 ) -> tuple[plt.Figure, np.ndarray, dict[str, np.ndarray]]:
     """The channel figure on the first frame of an Easy SGN episode: a row per word, with the aux label, each

@@ -83,8 +83,10 @@ def load_checkpoint(
         hint = " (did you mean its checkpoint.pt?)" if (path / "checkpoint.pt").exists() else ""
         raise CheckpointError(f"checkpoint {path}: is a directory, not a checkpoint file{hint}")
     if path.stat().st_size == 0:
-        raise CheckpointError(f"checkpoint {path}: is empty (0 bytes); emml writes checkpoints atomically, so "
-                              "this file is not one of its checkpoints")
+        raise CheckpointError(
+            f"checkpoint {path}: is empty (0 bytes); emml writes checkpoints atomically, so "
+            "this file is not one of its checkpoints"
+        )
     try:
         payload = torch.load(path, map_location=map_location, weights_only=False)
     except Exception as e:  # torch.load raises pickle, zip and EOF errors of many types

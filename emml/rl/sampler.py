@@ -201,8 +201,11 @@ class Sampler:
             for i in np.flatnonzero(done):
                 if dropped[i]:
                     self.dropped_episodes += 1
-                    log.warning("ViZDoom engine of actor %d died: restarted, its episode dropped (%d dropped in this "
-                                "run)", sl.start + i, self.dropped_episodes)
+                    log.warning(
+                        "ViZDoom engine of actor %d died: restarted, its episode dropped (%d dropped in this run)",
+                        sl.start + i,
+                        self.dropped_episodes,
+                    )
                 else:
                     self.recent[int(final["task"][i])].append(float(final["success"][i]))
         self.obs[g] = obs

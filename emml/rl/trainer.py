@@ -33,7 +33,7 @@ from emml.rl.contention import share_cores
 from emml.rl.ppo import make_optimizer, ppo_update
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
-from emml.tasks.language import Vocabulary, load_dataset
+from emml.tasks.language import load_dataset, resolve_vocabulary
 from emml.tracking import Tracker, project_path, project_root
 
 log = logging.getLogger(__name__)
@@ -135,9 +135,9 @@ class Trainer:
         self.tracker = tracker or Tracker()
         self.quiet = quiet
         dataset = load_dataset(cfg.env.dataset)
-        if cfg.env.vocabulary is None:  # the vocabulary is part of the run's config and saved with checkpoints
-            cfg.env.vocabulary = Vocabulary.from_dataset(dataset).words
-        self.vocab = Vocabulary(tuple(cfg.env.vocabulary))
+        # the vocabulary is part of the run's config (pinned to its word list) and saved with checkpoints
+        self.vocab = resolve_vocabulary(cfg.env.vocabulary, dataset)
+        cfg.env.vocabulary = self.vocab.words
         if cfg.env.aux_words is None:
             from emml.envs.labels import default_aux_words
 

@@ -164,6 +164,21 @@ class Vocabulary:
         return ids + [0] * (max_words - len(ids))
 
 
+VOCABULARY_SOURCES = ("all", "train_instructions")
+"""Names a run's `DoomConfig.vocabulary` may give instead of a word list (`Vocabulary.from_dataset`)."""
+
+
+def resolve_vocabulary(spec, dataset: Dataset) -> Vocabulary:
+    """A run's vocabulary from its config: None (every word of the dataset), a source name of
+    `VOCABULARY_SOURCES`, or the word list itself (channel order)."""
+    if spec is None:
+        return Vocabulary.from_dataset(dataset)
+    if isinstance(spec, str):
+        check_choice("vocabulary", spec, VOCABULARY_SOURCES)
+        return Vocabulary.from_dataset(dataset, spec)
+    return Vocabulary(tuple(spec))
+
+
 # --- meaning --------------------------------------------------------------------------------------------------
 
 
