@@ -244,6 +244,16 @@ def _check_keys(path: Path, where: str, data: dict, allowed: tuple[str, ...]) ->
         raise _err(path, f"{where}{unknown[0]}", f"unknown key; allowed keys: {', '.join(allowed)}")
 
 
+def _section(path: Path, name: str, raw, keys: tuple[str, ...]) -> dict:
+    """A TOML table holding exactly ``keys`` (each one required)."""
+    raw = _typed(path, name, raw, dict, "a table")
+    _check_keys(path, f"{name}.", raw, keys)
+    for key in keys:
+        if key not in raw:
+            raise _err(path, f"{name}.{key}", "missing")
+    return raw
+
+
 def _typed(path: Path, key: str, value, kind: type, what: str):
     if not isinstance(value, kind):
         raise _err(path, key, f"must be {what}, got {value!r}")
@@ -288,11 +298,7 @@ def _parse(name: str, path: Path, data: dict) -> Table:
 def _parse_columns(path: Path, data: dict, allowed: tuple[str, ...] = METRICS) -> dict:
     if "columns" not in data:
         raise _err(path, "columns", "missing: an active table needs [columns] difficulties, aux, metrics")
-    cols = _typed(path, "columns", data["columns"], dict, "a table")
-    _check_keys(path, "columns.", cols, COLUMN_KEYS)
-    for key in COLUMN_KEYS:
-        if key not in cols:
-            raise _err(path, f"columns.{key}", "missing")
+    cols = _section(path, "columns", data["columns"], COLUMN_KEYS)
     difficulties = _typed(path, "columns.difficulties", cols["difficulties"], list, "a list")
     for d in difficulties:
         if d not in DIFFICULTIES:
@@ -351,11 +357,7 @@ def _parse_transfer(path: Path, data: dict) -> Transfer:
     from emml.models import MODELS
     from emml.transfer import DETECTORS
 
-    raw = _typed(path, "transfer", data["transfer"], dict, "a table")
-    _check_keys(path, "transfer.", raw, TRANSFER_KEYS)
-    for key in TRANSFER_KEYS:
-        if key not in raw:
-            raise _err(path, f"transfer.{key}", "missing")
+    raw = _section(path, "transfer", data["transfer"], TRANSFER_KEYS)
     model = _typed(path, "transfer.model", raw["model"], str, "a string")
     if model not in MODELS:
         raise _err(path, "transfer.model", f"unknown model {model!r}; known models: {', '.join(MODELS)}")
