@@ -106,6 +106,40 @@ class PolicyModule(nn.Module):
         return self.actor(out), self.critic(out).squeeze(-1), h
 
 
+class TextCache:
+    """The text encoder's outputs for the token batches seen while acting, so that an instruction is encoded once
+    per episode rather than at every step (the GRU over the sentence is ~20% of acting at 84×150).
+
+    Keyed by the batch's token ids; valid for one version of the encoder's parameters (an optimizer step, a
+    load_state_dict or the transfer surgery clears it). A hit returns what the encoder returned for the same
+    tokens and the same weights, so outputs are bit for bit those of the uncached model (tested). Only used
+    without autograd: a training forward always runs the encoder, for its gradients."""
+
+    def __init__(self, size: int = 8) -> None:
+        self.size = size
+        """Token batches kept (the sampler alternates between its env groups, each with its own batch)."""
+        self.entries: dict[bytes, tuple[Tensor, Tensor | None]] = {}
+        self.version: tuple | None = None
+        self.hits = 0
+        self.misses = 0
+
+    def __call__(self, encoder: TextEncoder, tokens: Tensor) -> tuple[Tensor, Tensor | None]:
+        version = (encoder.vocab_size, *((id(p), p._version) for p in encoder.parameters()))
+        if version != self.version:
+            self.entries.clear()
+            self.version = version
+        key = str(tuple(tokens.shape)).encode() + tokens.cpu().numpy().tobytes()
+        if key in self.entries:
+            self.hits += 1
+            return self.entries[key]
+        self.misses += 1
+        out = encoder(tokens)
+        if len(self.entries) >= self.size:
+            self.entries.pop(next(iter(self.entries)))  # the oldest batch
+        self.entries[key] = out
+        return out
+
+
 class EmmlModel(nn.Module):
     """Encoders + fusion unit + policy module; one class for every model.
 
@@ -144,6 +178,8 @@ class EmmlModel(nn.Module):
             task_indicator=cfg.task_indicator,
         )
         self.window = cfg.pacman_frames if isinstance(self.fusion, Pacman) else 0
+        self.text_cache: TextCache | None = TextCache()
+        """Acting-time cache of the instruction's encoding (None: encode at every step)."""
         self.detector: nn.Module | None = None
         """Transfer to new words (§5.4, emml/transfer.py): a module mapping the observation to k extra x_I
         channels (N, k, h, w) in [0, 1], appended after the V conv3 channels; None under the paper's training."""
@@ -208,7 +244,11 @@ class EmmlModel(nn.Module):
         t_len, batch = image.shape[:2]
         if episode_start.shape != (t_len, batch):
             raise ValueError(f"episode_start shape {tuple(episode_start.shape)} != (T, B) = {(t_len, batch)}")
-        x_bow, x_sent = self.text_encoder(obs["tokens"].flatten(0, 1))
+        tokens = obs["tokens"].flatten(0, 1)
+        if self.text_cache is not None and not torch.is_grad_enabled():  # acting: once per instruction
+            x_bow, x_sent = self.text_cache(self.text_encoder, tokens)
+        else:
+            x_bow, x_sent = self.text_encoder(tokens)
         new_state: dict[str, Tensor] = {}
         if self.window:
             fused, aux, new_state["frames"] = self._fuse_pacman(obs, state, episode_start, x_sent)

@@ -309,3 +309,38 @@ def test_relu_reading_of_conv3():
     bow = relu.text_encoder.bag_of_words(obs["tokens"].flatten(0, 1))
     scores = (torch.relu(a.aux_logits.flatten(0, 1)) * bow[:, :, None, None]).sum(1).flatten(1)
     torch.testing.assert_close(a.attention.flatten(0, 1).flatten(1), torch.softmax(scores, 1))
+
+
+@pytest.mark.parametrize("name", ["dual_attention", "ga", "pacman"])
+def test_text_cache_gives_the_uncached_outputs_bit_for_bit(name):
+    """Acting with the instruction cache: the same actions' inputs, step after step, as encoding every step; the
+    encoder runs once per distinct token batch; an optimizer step (new weights) empties the cache."""
+    torch.manual_seed(0)
+    cached = build_model(name, V, H, W, MAX_STEPS)
+    plain = build_model(name, V, H, W, MAX_STEPS)
+    plain.load_state_dict(cached.state_dict())
+    plain.text_cache = None
+    groups = [make_obs(1, 2, seed=s) for s in (1, 2)]  # two env groups, each its own instructions
+    states = {m: [m.initial_state(2) for _ in groups] for m in (cached, plain)}
+
+    def act(step):
+        for g, obs in enumerate(groups):
+            obs = {**obs, "time": torch.full((1, 2), step)}
+            outs = {}
+            with torch.no_grad():
+                for m in (cached, plain):
+                    outs[m], states[m][g] = m(obs, states[m][g], starts(1, 2, first=step == 0))
+            for field in ("logits", "value", "answer_logits"):
+                assert torch.equal(getattr(outs[cached], field), getattr(outs[plain], field)), (step, field)
+
+    for step in range(4):
+        act(step)
+    assert (cached.text_cache.misses, cached.text_cache.hits) == (2, 6)
+    optimizer = torch.optim.SGD(list(cached.parameters()) + list(plain.parameters()), lr=0.1)
+    out, _ = cached(make_obs(2, 2), cached.initial_state(2), starts(2, 2))
+    out2, _ = plain(make_obs(2, 2), plain.initial_state(2), starts(2, 2))
+    (out.value.sum() + out.answer_logits.sum() + out2.value.sum() + out2.answer_logits.sum()).backward()
+    optimizer.step()  # the same update to both: the cached encodings are stale now
+    groups[1]["tokens"][0, 0, 0] = 1 + groups[1]["tokens"][0, 0, 0] % V  # a new instruction in one group
+    act(4)
+    assert cached.text_cache.misses == 4
