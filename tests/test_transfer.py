@@ -2,6 +2,7 @@
 each new word to its own detector channel, and refuses what it cannot transfer; the table's rows cover every
 test instruction; a smoke run is scored end to end."""
 
+import json
 import re
 from pathlib import Path
 
@@ -193,23 +194,22 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, no_leftovers
     def fail(*args, **kwargs):
         raise AssertionError("a recorded transfer run was scored again")
 
-    monkeypatch.setattr(transfer, "transfer_checkpoint", fail)
-    again = run_table("table4", "smoke", jobs=1, train_fn=_small_train, log=lambda m: None, **roots)
-    assert again.skipped and not again.done and not again.failed
-
-
-def test_cli_transfer_refuses_a_run_that_knows_the_words(tracking, no_leftovers):
+    # `emml transfer` on one of the runs: the table's rows and every instruction; words it knows are refused
     from typer.testing import CliRunner
 
     from emml.cli import app
-    from emml.profiles import profile_config
-    from emml.rl.trainer import CHECKPOINT, train
 
-    over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test", "frames": 64}
-    cfg = profile_config("smoke", "easy", {**over, "eval_episodes": 1, "diagnose_episodes": 0}, aux=True)
-    path = train(cfg, quiet=True).run_dir / CHECKPOINT
-    result = CliRunner().invoke(app, ["transfer", str(path), "--episodes", "1"])
-    assert result.exit_code == 2 and "already in the model's vocabulary" in result.output
+    ckpt = next(Path(roots["run_root"]).glob("table4/*easy*/checkpoint.pt"))
+    result = CliRunner().invoke(app, ["transfer", str(ckpt), "--episodes", "1", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert len(data["instructions"]) == 28 and len(data["rows"]) == 15
+    result = CliRunner().invoke(app, ["transfer", str(ckpt), "--words", "red,torch"])
+    assert result.exit_code == 2 and "['torch'] are already in the model's vocabulary" in result.output
+
+    monkeypatch.setattr(transfer, "transfer_checkpoint", fail)
+    again = run_table("table4", "smoke", jobs=1, train_fn=_small_train, log=lambda m: None, **roots)
+    assert again.skipped and not again.done and not again.failed
 
 
 def test_eval_settings_leave_out_splits_with_unknown_words():
