@@ -244,14 +244,31 @@ def _check_keys(path: Path, where: str, data: dict, allowed: tuple[str, ...]) ->
         raise _err(path, f"{where}{unknown[0]}", f"unknown key; allowed keys: {', '.join(allowed)}")
 
 
-def _section(path: Path, name: str, raw, keys: tuple[str, ...]) -> dict:
-    """A TOML table holding exactly ``keys`` (each one required)."""
+def _section(path: Path, name: str, raw, keys: tuple[str, ...], required: tuple[str, ...] | None = None) -> dict:
+    """A TOML table with no key but ``keys``, holding every ``required`` one (default: all of ``keys``)."""
     raw = _typed(path, name, raw, dict, "a table")
     _check_keys(path, f"{name}.", raw, keys)
-    for key in keys:
+    for key in keys if required is None else required:
         if key not in raw:
             raise _err(path, f"{name}.{key}", "missing")
     return raw
+
+
+def _model_name(path: Path, key: str, value) -> str:
+    """A model registry name (`emml models`)."""
+    from emml.models import MODELS
+
+    if value not in MODELS:
+        raise _err(path, key, f"unknown model {value!r}; known models: {', '.join(MODELS)}")
+    return value
+
+
+def _config(path: Path, key: str, model: str, overrides: dict) -> TrainConfig:
+    """The validated TrainConfig that ``overrides`` give ``model``; a bad override fails naming ``key``."""
+    try:
+        return apply_overrides(TrainConfig(model=model), overrides, source="override").validate()
+    except ValueError as e:
+        raise _err(path, key, str(e)) from e
 
 
 def _typed(path: Path, key: str, value, kind: type, what: str):
@@ -283,14 +300,13 @@ def _parse(name: str, path: Path, data: dict) -> Table:
         return Table(**common)
     if "transfer" in data:
         columns = _parse_columns(path, data, TRANSFER_METRICS)
-        transfer = _parse_transfer(path, data)
-        rows = _parse_transfer_rows(path, data, transfer)
+        transfer, dataset = _parse_transfer(path, data)
+        rows = _parse_transfer_rows(path, data, transfer, dataset)
         table = Table(**common, rows=rows, transfer=transfer, **columns)
-        _check_runs(path, table)
-        return table
-    columns = _parse_columns(path, data)
-    rows = _parse_rows(path, data, tuple(columns["metrics"].values()))
-    table = Table(**common, rows=rows, **columns)
+    else:
+        columns = _parse_columns(path, data)
+        rows = _parse_rows(path, data, tuple(columns["metrics"].values()))
+        table = Table(**common, rows=rows, **columns)
     _check_runs(path, table)
     return table
 
@@ -316,24 +332,19 @@ def _parse_columns(path: Path, data: dict, allowed: tuple[str, ...] = METRICS) -
 
 
 def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, ...]:
-    from emml.models import MODELS
-
     raw = _typed(path, "rows", data.get("rows", []), list, "an array of tables ([[rows]])")
     if not raw:
         raise _err(path, "rows", "an active table needs at least one [[rows]]")
     rows, labels = [], set()
     for i, r in enumerate(raw):
         where = f"rows[{i}]"
-        _check_keys(path, f"{where}.", r, ROW_KEYS)
+        r = _section(path, where, r, ROW_KEYS, required=("label", "model"))
         for key in ("label", "model"):
-            if key not in r:
-                raise _err(path, f"{where}.{key}", "missing")
             _typed(path, f"{where}.{key}", r[key], str, "a string")
         if r["label"] in labels:
             raise _err(path, f"{where}.label", f"{r['label']!r} appears twice")
         labels.add(r["label"])
-        if r["model"] not in MODELS:
-            raise _err(path, f"{where}.model", f"unknown model {r['model']!r}; known models: {', '.join(MODELS)}")
+        _model_name(path, f"{where}.model", r["model"])
         overrides = _typed(path, f"{where}.overrides", r.get("overrides", {}), dict, "a table")
         per_metric = _typed(path, f"{where}.metric_overrides", r.get("metric_overrides", {}), dict, "a table")
         for m, extra in per_metric.items():
@@ -345,51 +356,39 @@ def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, 
         for key, ov in [(f"{where}.overrides", overrides)] + [
             (f"{where}.metric_overrides.{m}", {**overrides, **e}) for m, e in per_metric.items()
         ]:
-            try:
-                apply_overrides(TrainConfig(model=r["model"]), ov, source="override").validate()
-            except ValueError as e:
-                raise _err(path, key, str(e)) from e
+            _config(path, key, r["model"], ov)
         rows.append(Row(r["label"], r["model"], dict(overrides), dict(per_metric)))
     return tuple(rows)
 
 
-def _parse_transfer(path: Path, data: dict) -> Transfer:
-    from emml.models import MODELS
+def _parse_transfer(path: Path, data: dict) -> tuple[Transfer, str]:
+    """The [transfer] section, and the dataset its training runs use."""
     from emml.transfer import DETECTORS
 
     raw = _section(path, "transfer", data["transfer"], TRANSFER_KEYS)
-    model = _typed(path, "transfer.model", raw["model"], str, "a string")
-    if model not in MODELS:
-        raise _err(path, "transfer.model", f"unknown model {model!r}; known models: {', '.join(MODELS)}")
+    model = _model_name(path, "transfer.model", _typed(path, "transfer.model", raw["model"], str, "a string"))
     overrides = _typed(path, "transfer.overrides", raw["overrides"], dict, "a table")
-    try:
-        apply_overrides(TrainConfig(model=model), overrides, source="override").validate()
-    except ValueError as e:
-        raise _err(path, "transfer.overrides", str(e)) from e
+    cfg = _config(path, "transfer.overrides", model, overrides)
     words = _typed(path, "transfer.words", raw["words"], list, "a list of words")
     if not words or not all(isinstance(w, str) for w in words) or len(set(words)) != len(words):
         raise _err(path, "transfer.words", f"must be a non-empty list of distinct words, got {words!r}")
     detector = _typed(path, "transfer.detector", raw["detector"], str, "a string")
     if detector not in DETECTORS:
         raise _err(path, "transfer.detector", f"{detector!r} is not allowed; choose one of {', '.join(DETECTORS)}")
-    return Transfer(model, dict(overrides), tuple(words), detector)
+    return Transfer(model, dict(overrides), tuple(words), detector), cfg.env.dataset
 
 
-def _parse_transfer_rows(path: Path, data: dict, transfer: Transfer) -> tuple[Row, ...]:
+def _parse_transfer_rows(path: Path, data: dict, transfer: Transfer, dataset: str) -> tuple[Row, ...]:
     """Rows of instruction types: every SGN test instruction holding a new word in exactly one row."""
     from emml.tasks.language import load_dataset
 
-    dataset = apply_overrides(TrainConfig(), transfer.overrides, source="override").env.dataset
     test = load_dataset(dataset).select("sgn", "test")
     wanted = {s.text for s in test if set(s.text.split()) & set(transfer.words)}
     raw = _typed(path, "rows", data.get("rows", []), list, "an array of tables ([[rows]])")
     rows, seen = [], {}
     for i, r in enumerate(raw):
         where = f"rows[{i}]"
-        _check_keys(path, f"{where}.", r, TRANSFER_ROW_KEYS)
-        for key in ("label", "instructions"):
-            if key not in r:
-                raise _err(path, f"{where}.{key}", "missing")
+        r = _section(path, where, r, TRANSFER_ROW_KEYS, required=("label", "instructions"))
         label = _typed(path, f"{where}.label", r["label"], str, "a string")
         if any(row.label == label for row in rows):
             raise _err(path, f"{where}.label", f"{label!r} appears twice")
