@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields
 
-from emml.tasks.language import check_choice
+from emml.tasks.language import VOCABULARY_SOURCES, check_choice
 
 RESOLUTIONS_16_9 = ((256, 144), (320, 180), (400, 225), (512, 288), (640, 360), (800, 450), (1024, 576))
 """ViZDoom's 16:9 screen resolutions (width, height), the aspect of the paper's 300×168 input."""
@@ -79,12 +79,11 @@ class DoomConfig:
         check_choice("interpolation", self.interpolation, ("area", "linear", "nearest"))
         check_choice("label_grid", self.label_grid, ("receptive_field", "even"))
         if isinstance(self.vocabulary, str):
-            from emml.tasks.language import VOCABULARY_SOURCES
-
             check_choice("vocabulary", self.vocabulary, VOCABULARY_SOURCES)
         elif self.vocabulary is not None and not all(isinstance(w, str) for w in self.vocabulary):
             raise ValueError(
-                f"vocabulary={self.vocabulary!r} must be a list of words, or one of 'all', 'train_instructions'"
+                f"vocabulary={self.vocabulary!r} must be a list of words, or one of "
+                + ", ".join(map(repr, VOCABULARY_SOURCES))
             )
         from emml.geometry import conv_output_size
 

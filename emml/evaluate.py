@@ -79,14 +79,14 @@ def play(model, envs, plan: list[tuple[int, dict | None]], device) -> list[bool]
     """Play the episodes of ``plan`` greedily, (reset seed, reset options) each, on ``envs`` in lockstep (an env
     takes the next planned episode when its own ends); success per planned episode, in plan order."""
     outcomes: list[bool] = [False] * len(plan)
+    envs = envs[: len(plan)]  # more envs than episodes: the rest stay idle
     started, finished = 0, 0
     obs_list, active, playing = [], [], []
-    for env in envs[: len(plan)]:
+    for env in envs:
         obs_list.append(env.reset(seed=plan[started][0], options=plan[started][1])[0])
         playing.append(started)
         started += 1
         active.append(True)
-    envs = envs[: len(plan)]
     state = model.initial_state(len(envs), device=device)
     episode_start = torch.ones(1, len(envs), dtype=torch.bool, device=device)
     while finished < len(plan):

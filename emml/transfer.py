@@ -157,12 +157,10 @@ def transfer_checkpoint(
     """Table 4 on one checkpoint: append detectors for ``words`` and score each SGN test instruction holding a new
     word (or the given ``instructions``) over ``episodes`` greedy episodes, without fine-tuning."""
     from emml.evaluate import load_model
-    from emml.rl.checkpoint import load_checkpoint
     from emml.tasks.language import load_dataset
 
-    ckpt = load_checkpoint(path)
-    vocab = Vocabulary(tuple(ckpt["vocabulary"]))
     model, cfg = load_model(path, device)
+    vocab = Vocabulary(tuple(cfg.env.vocabulary))  # the trainer pins the run's word list in its config
     check_transferable(model, vocab, words)
     extended = vocab.extend(words)
     new_model, _ = append_words(model, vocab, words, make_detector(detector, extended, words), seed=cfg.seed)
@@ -185,7 +183,7 @@ def record_transfer(cfg, words, instructions, detector: str = "labels", seed: in
     there are not recomputed."""
     import json
 
-    from emml.rl.trainer import CHECKPOINT, RESULTS, record_result, run_dir
+    from emml.rl.trainer import CHECKPOINT, RESULTS, record_result, run_dir, save_results
 
     rdir = run_dir(cfg)
     payload = json.loads((rdir / RESULTS).read_text())
@@ -197,8 +195,7 @@ def record_transfer(cfg, words, instructions, detector: str = "labels", seed: in
         )
         metrics.update({metric_column(t): v for t, v in scores.items()})
         payload.update(transfer_words=",".join(words), transfer_detector=detector)  # results CSV provenance
-        tmp = rdir / (RESULTS + ".tmp")
-        tmp.write_text(json.dumps(payload, indent=2))
-        tmp.replace(rdir / RESULTS)
-    record_result(payload, cfg)
+        save_results(rdir, payload, cfg)
+    else:
+        record_result(payload, cfg)  # the row again, as the trainer re-records a finished run
     return {t: metrics[metric_column(t)] for t in instructions}

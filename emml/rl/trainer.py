@@ -329,10 +329,15 @@ class Trainer:
             "eval_episodes": cfg.eval_episodes,
             "metrics": metrics,
         }
-        tmp = self.dir / (RESULTS + ".tmp")
-        tmp.write_text(json.dumps(payload, indent=2))
-        os.replace(tmp, self.dir / RESULTS)
-        record_result(payload, cfg)
+        save_results(self.dir, payload, cfg)
+
+
+def save_results(directory: Path, payload: dict, cfg: TrainConfig) -> None:
+    """Write a run's results.json atomically, then upsert its row in the results CSV (`record_result`)."""
+    tmp = directory / (RESULTS + ".tmp")
+    tmp.write_text(json.dumps(payload, indent=2))
+    os.replace(tmp, directory / RESULTS)
+    record_result(payload, cfg)
 
 
 def results_csv(cfg: TrainConfig) -> Path:
