@@ -10,6 +10,7 @@ time is measured apart (ours: sampling a scene, placing 5 objects; raw: `new_epi
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -132,6 +133,7 @@ def _model_only(cfg, updates: int) -> float:
     from emml.geometry import conv_output_size
     from emml.models import build_model
     from emml.rl.ppo import make_optimizer, ppo_update
+    from emml.rl.precision import autocast, fp32_outputs
     from emml.rl.rollout import RolloutBuffer
     from emml.tasks.language import Vocabulary, load_dataset
 
@@ -157,12 +159,13 @@ def _model_only(cfg, updates: int) -> float:
     mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))), device=device)
 
     def forward(o, s, e):
-        return vars(model(o, s, e)[0])
+        with autocast(cfg.precision, device):
+            return fp32_outputs(model(o, s, e)[0])
 
     def one_update():
         state = model.initial_state(B, device=device)
         buffer.set_initial_state(state)
-        with torch.no_grad():
+        with torch.no_grad(), autocast(cfg.precision, device):
             for t in range(T):  # acting: one batched step at a time, as in a rollout
                 out, state = model(
                     {k: v[t : t + 1] for k, v in buffer.obs.items()}, state, buffer.episode_starts[t : t + 1]
@@ -235,7 +238,11 @@ def simulator_limit(config: DoomConfig, processes: int, steps: int = 5000) -> fl
         return sum(pool.map(_raw_steps, [config] * processes, [steps] * processes))
 
 
-def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000) -> dict:
+PARTS = ("both", "model", "e2e")
+"""What `bench train` measures: model-only and end-to-end (with their ratio), or one of them."""
+
+
+def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000, part: str = "both") -> dict:
     """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
     split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
     N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
@@ -243,11 +250,12 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000) -
     import dataclasses
     import os
 
-    before = _model_only(cfg, updates)
-    e2e, split = _end_to_end(cfg, updates)
-    after = _model_only(cfg, updates)  # measured on both sides of the end-to-end run: this machine's speed drifts
-    model_fps = (before + after) / 2
+    from emml import alloc
+
+    if part not in PARTS:
+        raise ValueError(f"part={part!r}: allowed values are {', '.join(PARTS)}")
     out = {
+        "allocator": alloc.loaded(),
         "model": cfg.model,
         "aux": cfg.aux,
         "height": cfg.env.height,
@@ -256,7 +264,21 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000) -
         "num_steps": cfg.num_steps,
         "env_groups": cfg.env_groups,
         "device": cfg.device,
+        "precision": cfg.precision,
         "updates": updates,
+    }
+    if part == "model":
+        out["model_only_fps"] = round(_model_only(cfg, updates), 1)
+        return out
+    if part == "e2e":
+        e2e, out["time_split"] = _end_to_end(cfg, updates)
+        out["end_to_end_fps"] = round(e2e, 1)
+        return out
+    before = _model_only(cfg, updates)
+    e2e, split = _end_to_end(cfg, updates)
+    after = _model_only(cfg, updates)  # measured on both sides of the end-to-end run: this machine's speed drifts
+    model_fps = (before + after) / 2
+    out |= {
         "model_only_fps": round(model_fps, 1),
         "model_only_before_after": [round(before, 1), round(after, 1)],
         "end_to_end_fps": round(e2e, 1),
@@ -283,3 +305,55 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000) -
             "cores": cores,
         }
     return out
+
+
+def allocator_envs() -> dict[str, dict[str, str]]:
+    """The allocators this machine can run, as environment overrides for a child process: tcmalloc (system
+    package) and mimalloc (the `cmeel-mimalloc` wheel) only where installed, glibc tuned and untuned always."""
+    import sysconfig
+
+    from emml import alloc
+
+    envs = {}
+    if alloc.tcmalloc_path():
+        envs["tcmalloc"] = {"EMML_MALLOC": "tcmalloc"}
+    mimalloc = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "lib" / "libmimalloc.so"
+    if mimalloc.exists():
+        envs["mimalloc"] = {"EMML_MALLOC": "glibc", "LD_PRELOAD": str(mimalloc)}
+    envs["glibc-tuned"] = {"EMML_MALLOC": "glibc-tuned"}
+    envs["glibc"] = {"EMML_MALLOC": "glibc"}
+    return envs
+
+
+def bench_alloc(train_args: list[str], rounds: int = 3, parts: tuple[str, ...] = ("model", "e2e")) -> dict:
+    """`bench train --part P` under each allocator in a child process, interleaved round by round so that the
+    machine's drift falls on all of them alike; the median frames/s per allocator and part, and each one's ratio to
+    the best. ``train_args`` are `bench train` options (profile, updates, --set ...)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    envs = allocator_envs()
+    fps = {name: {part: [] for part in parts} for name in envs}
+    for _ in range(rounds):
+        for name, extra in envs.items():
+            env = {k: v for k, v in os.environ.items() if k != "LD_PRELOAD"} | extra
+            for part in parts:
+                cmd = [sys.executable, "-m", "emml.cli", "bench", "train", "--json", "--part", part, *train_args]
+                proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+                if proc.returncode != 0:
+                    raise RuntimeError(f"bench train under {name} failed:\n{proc.stderr[-2000:]}")
+                r = json.loads(proc.stdout)
+                if r["allocator"] != name:
+                    raise RuntimeError(f"asked for {name}, the child ran on {r['allocator']}")
+                fps[name][part].append(r["model_only_fps" if part == "model" else "end_to_end_fps"])
+    median = {name: {part: float(np.median(v)) for part, v in d.items()} for name, d in fps.items()}
+    best = {part: max(m[part] for m in median.values()) for part in parts}
+    return {
+        "rounds": rounds,
+        "train_args": train_args,
+        "fps": fps,
+        "median_fps": median,
+        "ratio_to_best": {n: {p: round(m[p] / best[p], 3) for p in parts} for n, m in median.items()},
+    }

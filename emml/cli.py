@@ -169,11 +169,12 @@ def bench_train_cmd(
     device: str = "cpu",
     runs: int = typer.Option(0, min=0, help="Also pack N end-to-end runs side by side: aggregate vs simulator limit."),
     sets: list[str] = typer.Option([], "--set", help="Override any config field."),
+    part: str = typer.Option("both", help="both (model-only, end-to-end and their ratio), model or e2e."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
     with --runs N, the aggregate of N packed runs against the raw simulator limit of the machine's cores."""
-    from emml.bench import bench_train
+    from emml.bench import PARTS, bench_train
     from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
 
@@ -181,12 +182,19 @@ def bench_train_cmd(
         cfg = profile_config(profile, "easy", _parse_sets(sets), model=model, aux=aux, device=device).validate()
     except ValueError as e:
         _fail(str(e))
+    if part not in PARTS:
+        _fail(f"--part {part!r}: allowed values are {', '.join(PARTS)}")
     _use_tcmalloc()
     install_signal_handlers()
-    r = bench_train(cfg, updates, runs)
+    r = bench_train(cfg, updates, runs, part=part)
+    if part != "both":
+        fps = r.get("model_only_fps", r.get("end_to_end_fps"))
+        _echo(r, as_json, f"{model} at {r['width']}x{r['height']} on {r['allocator']}: {part} {fps:.0f} frames/s")
+        return
     split = ", ".join(f"{k} {100 * v:.0f}%" for k, v in r["time_split"].items())
     lines = [
-        f"{model} at {r['width']}x{r['height']} on {r['device']}, {r['num_envs']}x{r['num_steps']} per update, "
+        f"{model} at {r['width']}x{r['height']} on {r['device']} ({r['allocator']}), "
+        f"{r['num_envs']}x{r['num_steps']} per update, "
         f"{r['env_groups']} env group(s): model-only {r['model_only_fps']:.0f} frames/s, end-to-end "
         f"{r['end_to_end_fps']:.0f} frames/s (ratio {r['ratio']:.2f}); end-to-end time: {split}"
     ]
@@ -199,6 +207,35 @@ def bench_train_cmd(
             f"{p['runs']} packed runs ({p['threads_per_run']} threads each): {p['aggregate_fps']:.0f} frames/s in all "
             f"{p['per_run_fps']}; raw simulator limit of {p['cores']} cores {p['simulator_limit_fps']:.0f} steps/s "
             f"(fraction {p['fraction_of_limit']:.2f})"
+        )
+    _echo(r, as_json, "\n".join(lines))
+
+
+@bench_app.command("alloc")
+def bench_alloc_cmd(
+    profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
+    updates: int = typer.Option(2, min=1, help="Updates per measurement (after one warm-up update)."),
+    rounds: int = typer.Option(3, min=1, help="Rounds; each runs every allocator once, interleaved."),
+    sets: list[str] = typer.Option([], "--set", help="Override any config field."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Training frames/s (model-only and end-to-end) under each allocator this machine has, interleaved in one
+    run: tcmalloc and mimalloc where installed, glibc tuned in-process (the default without them) and untuned."""
+    from emml.bench import bench_alloc
+    from emml.profiles import profile_config
+
+    try:
+        profile_config(profile, "easy", _parse_sets(sets)).validate()  # bad input fails here, not in a child
+    except ValueError as e:
+        _fail(str(e))
+    args = ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]
+    r = bench_alloc(args, rounds)
+    lines = [f"allocators, median of {rounds} interleaved rounds (frames/s; ratio to the best):"]
+    for name, m in r["median_fps"].items():
+        ratio = r["ratio_to_best"][name]
+        lines.append(
+            f"  {name:<12} model-only {m['model']:6.0f} ({ratio['model']:.2f})   "
+            f"end-to-end {m['e2e']:6.0f} ({ratio['e2e']:.2f})"
         )
     _echo(r, as_json, "\n".join(lines))
 
@@ -221,25 +258,15 @@ def models(
     _echo(rows, as_json, "\n".join(f"{r['name']:<18} {r['parameters']:>10,}  {r.get('description', '')}" for r in rows))
 
 
-TCMALLOC_PATHS = (
-    "/usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4",
-    "/usr/lib/x86_64-linux-gnu/libtcmalloc.so.4",
-    "/usr/lib/aarch64-linux-gnu/libtcmalloc_minimal.so.4",
-)
-
-
 def _use_tcmalloc() -> None:
-    """Re-exec once under tcmalloc when it is installed and not loaded (~2× CPU training speed, notes)."""
-    import os
-    import sys
+    """Re-exec once under tcmalloc when installed, else tune glibc in-process (~2x CPU training speed either way,
+    docs/throughput.md); EMML_MALLOC picks one (emml.alloc.CHOICES)."""
+    from emml.alloc import reexec_under_tcmalloc
 
-    if os.environ.get("EMML_NO_TCMALLOC") or "tcmalloc" in os.environ.get("LD_PRELOAD", ""):
-        return
-    lib = next((p for p in TCMALLOC_PATHS if os.path.exists(p)), None)
-    if lib is None:
-        return
-    env = {**os.environ, "LD_PRELOAD": f"{lib} {os.environ.get('LD_PRELOAD', '')}".strip()}
-    os.execve(sys.executable, [sys.executable, "-m", "emml.cli", *sys.argv[1:]], env)
+    try:
+        reexec_under_tcmalloc()
+    except ValueError as e:
+        _fail(str(e))
 
 
 def _parse_sets(sets: list[str]) -> dict:

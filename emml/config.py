@@ -159,6 +159,9 @@ class TrainConfig:
     is fixed for the episode) or 'answer_steps' (only steps where the agent answered). Paper silent."""
     device: str = "cpu"
     """'cpu' or 'cuda'."""
+    precision: str = "fp32"
+    """'fp32' (the paper's) or 'bf16': autocast of acting and the PPO update, weights and losses in fp32
+    (emml/rl/precision.py). bf16 is refused on a CPU without native bf16 arithmetic, where it runs slower."""
     threads: int = 0
     """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
     asynchronous: bool = True
@@ -227,6 +230,9 @@ class TrainConfig:
 
             if not torch.cuda.is_available():
                 raise ValueError("device='cuda' but torch sees no CUDA device; use device='cpu'")
+        from emml.rl.precision import check_precision
+
+        check_precision(self.precision, self.device)
         return self
 
     @property

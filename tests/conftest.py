@@ -9,7 +9,7 @@ import pytest
 
 # `emml train`/`run` re-exec the process under tcmalloc when it is installed: inside pytest that would replace the
 # test runner itself (CliRunner invokes the commands in this process)
-os.environ["EMML_NO_TCMALLOC"] = "1"
+os.environ["EMML_MALLOC"] = "glibc-tuned"
 
 SMOKE = {"height": 60, "width": 108}
 """The smoke profile's input size: every code path, cheaply (conv3 grid 2×5)."""

@@ -3,6 +3,7 @@
 import math
 import os
 
+from emml import alloc, bench
 from emml.bench import bench_train
 from emml.profiles import profile_config
 
@@ -11,6 +12,7 @@ def test_bench_train_reports_both_throughputs_and_the_split(tmp_path, tracking, 
     cfg = profile_config("smoke", "easy", model="dual_attention", aux=True)
     r = bench_train(cfg, updates=2)
     assert r["model_only_fps"] > 0 and r["end_to_end_fps"] > 0
+    assert r["allocator"] == alloc.loaded()
     assert math.isclose(r["model_only_fps"], sum(r["model_only_before_after"]) / 2, rel_tol=0.01)
     assert math.isclose(r["ratio"], r["end_to_end_fps"] / r["model_only_fps"], rel_tol=0.01)
     assert set(r["time_split"]) == {"simulate", "infer", "learn"}
@@ -27,3 +29,11 @@ def test_bench_train_packs_runs_and_measures_the_simulator_limit(tmp_path, track
     assert math.isclose(packed["aggregate_fps"], sum(packed["per_run_fps"]), rel_tol=0.01)
     assert packed["simulator_limit_fps"] > packed["aggregate_fps"]  # raw engines outrun any training
     assert packed["threads_per_run"] == max(1, (os.cpu_count() or 1) // 2)
+
+
+def test_bench_alloc_runs_each_allocator_in_its_own_process(monkeypatch):
+    envs = {"glibc-tuned": {"EMML_MALLOC": "glibc-tuned"}, "glibc": {"EMML_MALLOC": "glibc"}}
+    monkeypatch.setattr(bench, "allocator_envs", lambda: envs)
+    r = bench.bench_alloc(["--profile", "smoke", "--updates", "1"], rounds=1, parts=("model",))
+    assert set(r["fps"]) == set(envs) and all(len(v["model"]) == 1 for v in r["fps"].values())
+    assert max(v["model"] for v in r["ratio_to_best"].values()) == 1.0  # the child checked it ran on its allocator

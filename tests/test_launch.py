@@ -115,7 +115,7 @@ def test_tracker_nests_a_child_under_its_parent(tracking):
 
 
 def test_cli_run_list_report(tmp_path, monkeypatch):
-    monkeypatch.setenv("EMML_NO_TCMALLOC", "1")  # `emml run` would re-exec this process under tcmalloc
+    monkeypatch.setenv("EMML_MALLOC", "glibc-tuned")  # `emml run` would re-exec this process under tcmalloc
     import json
 
     from typer.testing import CliRunner

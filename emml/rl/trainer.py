@@ -22,6 +22,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from emml import alloc
 from emml.config import TrainConfig
 from emml.diagnose import SCALARS, diagnose, summary_line
 from emml.envs.labels import channel_mask
@@ -31,6 +32,7 @@ from emml.results import upsert_result
 from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.rl.contention import share_cores
 from emml.rl.ppo import make_optimizer, ppo_update
+from emml.rl.precision import autocast, fp32_outputs
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.tasks.language import load_dataset, resolve_vocabulary
@@ -51,16 +53,6 @@ def git_sha() -> str:
         return out.stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
-
-
-def allocator() -> str:
-    """Which malloc this process runs on (tcmalloc roughly doubles CPU training speed: notes/cpu-training.md)."""
-    try:
-        with open("/proc/self/maps") as f:
-            maps = f.read()
-    except OSError:
-        return "unknown"
-    return "tcmalloc" if "tcmalloc" in maps else "jemalloc" if "jemalloc" in maps else "glibc"
 
 
 def run_dir(cfg: TrainConfig) -> Path:
@@ -105,11 +97,13 @@ def _check_same_config(saved: dict, current: dict, path: Path) -> None:
         "run_root",
         "results_root",
     }
+    # a field added since the checkpoint was written reads as its default: the run it describes is unchanged
+    defaults = TrainConfig().to_dict()
     diffs = []
     for key in sorted(set(saved) | set(current)):
         if key in ignore:
             continue
-        a, b = saved.get(key), current.get(key)
+        a, b = saved.get(key, defaults.get(key)), current.get(key)
         if isinstance(a, dict) and isinstance(b, dict):
             diffs += [f"{key}.{k}" for k in sorted(set(a) | set(b)) if _norm(a.get(k)) != _norm(b.get(k))]
         elif _norm(a) != _norm(b):
@@ -158,6 +152,7 @@ class Trainer:
                 results = json.loads((self.dir / RESULTS).read_text())
                 record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
                 return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
+        alloc.tune_glibc()  # PPO reuses its large buffers from the heap (no-op under tcmalloc): docs/throughput.md
         threads, warning = share_cores(cfg.threads)
         if warning:
             log.warning(warning)
@@ -183,7 +178,7 @@ class Trainer:
             "seed": cfg.seed,
             "profile": cfg.profile,
             "git_sha": self.git_sha,
-            "allocator": allocator(),
+            "allocator": alloc.loaded(),
             "tasks": env_cfg.tasks,
             "shaping": env_cfg.shaping,
             "checkpoint": str(self.dir / CHECKPOINT),
@@ -240,12 +235,15 @@ class Trainer:
             log_mark = (time.perf_counter(), frames)
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
-                sampler.collect(model, buffer)
-                t_learn = time.perf_counter()
-                buffer.compute_returns(sampler.last_value(model), cfg.ppo.gamma, cfg.ppo.gae_lambda)
+                with autocast(cfg.precision, self.device):
+                    sampler.collect(model, buffer)
+                    t_learn = time.perf_counter()
+                    last_value = sampler.last_value(model).float()
+                buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
 
                 def forward(o, s, e):
-                    return vars(model(o, s, e)[0])
+                    with autocast(cfg.precision, self.device):
+                        return fp32_outputs(model(o, s, e)[0])
 
                 stats = ppo_update(forward, optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux)
                 update += 1

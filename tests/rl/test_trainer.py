@@ -16,7 +16,7 @@ from emml.evaluate import evaluate_checkpoint
 from emml.models import MODELS
 from emml.profiles import profile_config
 from emml.rl.checkpoint import load_checkpoint
-from emml.rl.trainer import CHECKPOINT, METRICS, RESULTS, run_dir, train
+from emml.rl.trainer import CHECKPOINT, METRICS, RESULTS, ConfigMismatch, _check_same_config, run_dir, train
 from emml.tracking import metric_history, read_mirror
 
 
@@ -72,7 +72,7 @@ def _train_and_sigkill(tracking, ready, frames: int = 2048) -> tuple[TrainConfig
     args = [sys.executable, "-m", "emml.cli", "train", "--profile", "smoke", "--table", "test", "--frames", str(frames),
             "--set", f'run_root="{tracking["run_root"]}"', "--set", "checkpoint_every=2", "--set", "eval_episodes=1",
             "--quiet"]
-    env = {**os.environ, "EMML_NO_TCMALLOC": "1"}
+    env = {**os.environ, "EMML_MALLOC": "glibc-tuned"}
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     cfg = smoke(tracking, frames=frames, checkpoint_every=2, eval_episodes=1)
     path = run_dir(cfg) / CHECKPOINT
@@ -197,6 +197,14 @@ def test_resume_refuses_a_different_config(tracking, no_leftovers):
     train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
     with pytest.raises(ValueError, match="ppo.lr"):
         train(smoke(tracking, frames=64, eval_episodes=1, **{"ppo.lr": 1e-3}), quiet=True)
+
+
+def test_a_field_added_after_a_checkpoint_reads_as_its_default(tracking):
+    current = smoke(tracking).to_dict()
+    older = {k: v for k, v in current.items() if k != "precision"}  # written before the field existed
+    _check_same_config(older, current, Path("checkpoint.pt"))
+    with pytest.raises(ConfigMismatch, match="precision"):
+        _check_same_config(older, smoke(tracking, precision="bf16").to_dict(), Path("checkpoint.pt"))
 
 
 LEARNING_QUESTIONS = ["what color is the pillar", "what color is the tall pillar", "what color is the short pillar"]

@@ -1,0 +1,90 @@
+"""The bf16 option: refused (by name, before compute) on a CPU without native bf16, untouched fp32, and a bf16 run
+whose convolutions really run in bf16 while PPO's losses stay fp32."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from emml.cli import app
+from emml.models import build_model
+from emml.profiles import profile_config
+from emml.rl import precision
+from emml.rl.trainer import METRICS, Trainer
+from emml.tracking import read_mirror
+from tests.conftest import SMOKE
+
+
+@pytest.fixture
+def no_native_bf16(monkeypatch):
+    monkeypatch.setattr(precision, "cpu_flags", lambda: {"fpu", "avx2", "fma"})
+
+
+@pytest.fixture
+def native_bf16(monkeypatch):
+    monkeypatch.setattr(precision, "cpu_flags", lambda: {"avx2", "avx512f", "avx512_bf16"})
+
+
+def test_bf16_is_refused_on_a_cpu_without_native_bf16(no_native_bf16, tmp_path):
+    cfg = profile_config("smoke", "easy", {"precision": "bf16"})
+    with pytest.raises(ValueError, match=r"precision='bf16'.*no native bf16.*avx512_bf16, amx_bf16.*precision='fp32'"):
+        cfg.validate()
+    result = CliRunner().invoke(
+        app, ["train", "--profile", "smoke", "--set", 'precision="bf16"', "--set", f'run_root="{tmp_path}"']
+    )
+    assert result.exit_code == 2 and "no native bf16" in result.output
+    assert not any(tmp_path.iterdir())  # refused before anything was written
+
+
+def test_unknown_precision_names_the_allowed_values():
+    with pytest.raises(ValueError, match=r"precision='fp16': allowed values are fp32, bf16"):
+        profile_config("smoke", "easy", {"precision": "fp16"}).validate()
+
+
+def _model_and_batch():
+    torch.manual_seed(0)
+    h, w = SMOKE["height"], SMOKE["width"]
+    model = build_model("dual_attention", 20, h, w, 30)
+    obs = {
+        "image": torch.randint(0, 256, (1, 4, 3, h, w), dtype=torch.uint8),
+        "tokens": torch.randint(1, 20, (1, 4, 6)),
+        "task": torch.tensor([[0, 1, 0, 1]]),
+        "time": torch.tensor([[0, 3, 5, 7]]),
+    }
+    return model, obs, model.initial_state(4), torch.ones(1, 4, dtype=torch.bool)
+
+
+def test_fp32_runs_exactly_as_without_the_option():
+    model, obs, state, start = _model_and_batch()
+    plain = model(obs, state, start)[0]
+    with precision.autocast("fp32", "cpu"):
+        wrapped = precision.fp32_outputs(model(obs, state, start)[0])
+    for key, value in vars(plain).items():
+        if torch.is_tensor(value):
+            assert torch.equal(value, wrapped[key]), key
+
+
+def test_bf16_runs_the_convolutions_in_bf16_and_hands_ppo_fp32(native_bf16):
+    model, obs, state, start = _model_and_batch()
+    dtypes = []
+    for module in model.modules():
+        if isinstance(module, torch.nn.Conv2d):
+            module.register_forward_hook(lambda m, i, o: dtypes.append(o.dtype))
+    plain = model(obs, state, start)[0]
+    with precision.autocast("bf16", "cpu"):
+        out = precision.fp32_outputs(model(obs, state, start)[0])
+    assert dtypes and set(dtypes[len(dtypes) // 2 :]) == {torch.bfloat16}
+    assert out["logits"].dtype == torch.float32 and out["value"].dtype == torch.float32
+    assert torch.allclose(out["logits"], plain.logits, atol=0.1)  # bf16 keeps ~3 significant digits
+
+
+def test_a_bf16_run_trains_with_finite_losses(native_bf16, tracking, no_leftovers):
+    roots = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test"}
+    cfg = profile_config("smoke", "easy", {**roots, "precision": "bf16", "frames": 64, "eval_episodes": 1})
+    result = Trainer(cfg, quiet=True).train()
+    assert result.frames >= 64
+    losses = [v for _, key, v in read_mirror(result.run_dir / METRICS) if key.startswith("losses/")]
+    assert losses and all(math.isfinite(v) for v in losses)
