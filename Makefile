@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 TORCH_SPEC ?= torch==2.13.0
 PROFILE ?= quick
 BACKEND ?= local
-# tcmalloc roughly doubles CPU training throughput here (notes/cpu-training.md); used when present, never required
+# tcmalloc when present (never required): without it `emml` tunes glibc malloc in-process (docs/throughput.md)
 TCMALLOC := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib/x86_64-linux-gnu/libtcmalloc.so.4))
 EMML := $(if $(TCMALLOC),LD_PRELOAD=$(TCMALLOC) )$(VENV)/bin/emml
 
@@ -41,7 +41,9 @@ ui: setup
 PARTITION ?=
 TIME_MIN ?= 1440
 GPUS ?= 0
-RUN_OPTS = --profile $(PROFILE) --backend $(BACKEND) $(if $(PARTITION),--partition $(PARTITION)) --time-min $(TIME_MIN) --gpus $(GPUS)
+# ONLY="difficulty=easy seed=0" trains a subset of a table's runs (emml run --only)
+ONLY ?=
+RUN_OPTS = --profile $(PROFILE) --backend $(BACKEND) $(if $(PARTITION),--partition $(PARTITION)) --time-min $(TIME_MIN) --gpus $(GPUS) $(foreach o,$(ONLY),--only $(o))
 TABLES := table2 table3 table4 table5
 
 table2: setup

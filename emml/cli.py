@@ -575,6 +575,9 @@ def run_table(
     gpus: int = typer.Option(0, help="GPUs per Slurm job."),
     cpus: int = typer.Option(8, help="CPUs per Slurm job."),
     wait: bool = typer.Option(False, help="Slurm: wait for the jobs to end."),
+    only: list[str] = typer.Option(
+        [], "--only", help="Only the runs whose FIELD=VALUE (row, model, difficulty, aux, seed), e.g. difficulty=easy."
+    ),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Train every run of a table (skips finished runs, resumes interrupted ones); a placeholder table exits 0."""
@@ -583,6 +586,12 @@ def run_table(
     from emml.launch import run_table as launch
     from emml.registry import load_table
 
+    selection = {}
+    for item in only:
+        key, sep, value = item.partition("=")
+        if not sep:
+            _fail(f"--only {item!r}: expected FIELD=VALUE, e.g. --only difficulty=easy")
+        selection[key.strip()] = value.strip()
     try:
         placeholder = load_table(table).placeholder
     except ValueError as e:
@@ -602,6 +611,7 @@ def run_table(
             cpus=cpus,
             wait=wait,
             log=(lambda m: None) if as_json else typer.echo,
+            only=selection,
         )
     except ValueError as e:
         _fail(str(e))

@@ -99,6 +99,27 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
     return out
 
 
+ONLY_FIELDS = ("row", "model", "difficulty", "aux", "seed")
+"""RunSpec fields `emml run --only FIELD=VALUE` can select on."""
+
+
+def select_runs(states: dict, only: dict[str, str]) -> dict:
+    """The runs of `states` whose fields equal every `only` value (compared as lower-case text). An unknown field,
+    or a value no run has, fails by name with the allowed fields or the values present."""
+    for key, value in only.items():
+        if key not in ONLY_FIELDS:
+            allowed = ", ".join(ONLY_FIELDS)
+            raise ValueError(f"--only {key}={value}: unknown field {key!r}; allowed fields are {allowed}")
+        present = sorted({str(getattr(spec, key)).lower() for spec, _ in states.values()})
+        if str(value).lower() not in present:
+            raise ValueError(f"--only {key}={value}: no run has it; the values present are {', '.join(present)}")
+    return {
+        rname: (spec, state)
+        for rname, (spec, state) in states.items()
+        if all(str(getattr(spec, k)).lower() == str(v).lower() for k, v in only.items())
+    }
+
+
 def _finished(path: Path) -> bool:
     from emml.rl.checkpoint import load_checkpoint
 
@@ -144,8 +165,10 @@ def run_table(
     wait: bool = False,
     train_fn: Callable | None = None,
     log: Callable[[str], None] = print,
+    only: dict[str, str] | None = None,
 ) -> LaunchReport:
-    """Train every unfinished run of table `name` under `profile`.
+    """Train every unfinished run of table `name` under `profile` (`only`: those whose RunSpec fields match, e.g.
+    {'difficulty': 'easy', 'seed': '0'}: a table's Easy column on a machine that cannot afford Hard).
 
     backend 'local': `jobs` concurrent runs (default: half the cores) in a forkserver process pool, each with
     cores // jobs torch threads; jobs=1 runs in this process. backend 'slurm': one submitit job per run on
@@ -168,7 +191,7 @@ def run_table(
     jobs = jobs or default_jobs(device)
     if jobs < 1:
         raise ValueError(f"jobs={jobs} must be >= 1")
-    states = run_states(name, profile, run_root, results_root)
+    states = select_runs(run_states(name, profile, run_root, results_root), only or {})
     report.total = len(states)
     todo = [spec for spec, state in states.values() if state != "finished"]
     report.skipped = [rname for rname, (_, state) in states.items() if state == "finished"]

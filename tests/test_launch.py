@@ -107,6 +107,17 @@ def test_placeholder_and_bad_arguments(tracking):
         run_table("table3", "huge")
 
 
+def test_only_trains_the_selected_runs_and_names_bad_selections(tracking):
+    report = launch(tracking, jobs=1, only={"difficulty": "easy", "aux": "False"})
+    assert report.total == 8 and len(report.done) == 8 and {c[0] for c in calls(tracking)} == set(report.done)
+    assert all("-easy-noaux-" in c[0] for c in calls(tracking))
+    with pytest.raises(ValueError, match=r"unknown field 'difficuly'; allowed fields are row, model, difficulty"):
+        launch(tracking, only={"difficuly": "easy"})
+    with pytest.raises(ValueError, match=r"difficulty=medium: no run has it; the values present are easy$"):
+        launch(tracking, only={"difficulty": "medium"})
+    assert len(calls(tracking)) == 8  # refused before any run started
+
+
 def test_tracker_nests_a_child_under_its_parent(tracking):
     parent = Tracker().start("nest", "parent")
     child = Tracker().start("nest", "child", parent_run_id=parent)
