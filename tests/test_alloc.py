@@ -45,6 +45,35 @@ def test_tuned_glibc_reuses_large_buffers_without_page_faults():
     assert tuned["faults"] < pages // 100  # kept in the heap: reused without faults
 
 
+TRAIN_CHILD = """
+import hashlib, torch
+from emml import alloc
+alloc.tune_glibc()
+from emml.models import build_model
+torch.manual_seed(0)
+model = build_model("dual_attention", 20, 60, 108, 30)
+opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+obs = {"image": torch.randint(0, 256, (4, 8, 3, 60, 108), dtype=torch.uint8), "tokens": torch.randint(1, 20, (4, 8, 6)),
+       "task": torch.randint(0, 2, (4, 8)), "time": torch.randint(0, 30, (4, 8))}
+for _ in range(3):
+    out = model(obs, model.initial_state(8), torch.zeros(4, 8, dtype=torch.bool))[0]
+    loss = out.logits.logsumexp(-1).mean() + out.value.pow(2).mean() + out.answer_logits.logsumexp(-1).mean()
+    opt.zero_grad(); loss.backward(); opt.step()
+params = b"".join(p.detach().numpy().tobytes() for p in model.parameters())
+print(alloc.loaded(), hashlib.sha256(params).hexdigest())
+"""
+
+
+def test_the_allocator_changes_no_number():
+    runs = []
+    for malloc in ("glibc", "glibc-tuned"):
+        env = {k: v for k, v in os.environ.items() if k != "LD_PRELOAD"} | {"EMML_MALLOC": malloc}
+        out = subprocess.run([sys.executable, "-c", TRAIN_CHILD], env=env, capture_output=True, text=True, check=True)
+        runs.append(out.stdout.split())
+    assert [r[0] for r in runs] == ["glibc", "glibc-tuned"]
+    assert runs[0][1] == runs[1][1]  # the same parameters, bit for bit, after three Adam steps
+
+
 def test_bad_choice_names_the_variable_and_the_values(monkeypatch):
     monkeypatch.setenv("EMML_MALLOC", "jemalloc")
     with pytest.raises(ValueError, match=r"EMML_MALLOC='jemalloc'.*auto, tcmalloc, glibc-tuned, glibc"):
