@@ -170,6 +170,9 @@ class TrainConfig:
     """Actors are stepped in this many groups, in turn: one group simulates while the policy acts for the next
     (double-buffered sampling; same algorithm, see emml/rl/sampler.py). 1: all actors in lockstep. Must divide
     num_envs."""
+    envs_per_worker: int = 1
+    """Envs hosted by each env worker process, stepped in turn (`emml.envs.vector.GroupedDoomVectorEnv`): the
+    same envs and seeds, fewer processes to wake at every step. Must divide num_envs / env_groups."""
     acting_threads: int = 1
     """torch threads while acting (batches of num_envs/env_groups, one step): one is about as fast as two for
     such small batches and leaves the other cores to the env workers; 0: as many as the learner."""
@@ -212,6 +215,10 @@ class TrainConfig:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
         if self.env_groups < 1 or self.num_envs % self.env_groups:
             raise ValueError(f"env_groups={self.env_groups!r} must be a positive divisor of num_envs={self.num_envs}")
+        group = self.num_envs // self.env_groups
+        if self.envs_per_worker < 1 or group % self.envs_per_worker:
+            k = self.envs_per_worker
+            raise ValueError(f"envs_per_worker={k!r} must be a positive divisor of num_envs / env_groups = {group}")
         control = self.model_options.get("control", "none")
         if control != "none" and not self.aux:
             raise ValueError(f"model_options.control={control!r} reads the aux labels: it needs aux=True")

@@ -151,16 +151,106 @@ class SyncDoomVectorEnv(_Closing, SyncVectorEnv):
     pass
 
 
-class _EnvFactory:
-    """Picklable env constructor (lambdas don't survive forkserver)."""
+class EnvBatch(gym.Env):
+    """k envs hosted by one worker process, stepped in turn (same-step autoreset each), seen by gymnasium's
+    AsyncVectorEnv as one env with batched spaces: its observation is (k, ...), its action (k, 2). So that the
+    worker's own autoreset never fires, ``terminated``/``truncated`` are False and the per-env flags travel in the
+    info (``terminated``, ``truncated``), with ``final_info`` as k-long arrays (zeros where no episode ended).
+    `GroupedDoomVectorEnv` undoes the batching."""
 
-    def __init__(self, config: DoomConfig, max_restarts: int, window: int):
+    def __init__(self, venv: SyncVectorEnv):
+        self.venv = venv
+        self.observation_space = venv.observation_space
+        self.action_space = venv.action_space
+
+    def reset(self, *, seed=None, options=None):
+        obs, info = self.venv.reset(seed=None if seed is None else list(seed), options=options)
+        return obs, _unmasked(info)
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.venv.step(action)
+        out = _unmasked(info)
+        out["terminated"], out["truncated"] = terminated, truncated
+        return obs, reward, False, False, out
+
+    def close(self):
+        self.venv.close()
+
+
+def _unmasked(info: dict) -> dict:
+    """A vector env's info without gymnasium's ``_key`` masks (the outer vector env adds its own) or final_obs."""
+    return {k: _unmasked(v) if isinstance(v, dict) else v for k, v in info.items() if k[0] != "_" and k != "final_obs"}
+
+
+class GroupedDoomVectorEnv(_Closing, gym.vector.VectorEnv):
+    """N = W·k envs in W worker processes of k envs each (`EnvBatch`): the same envs, seeds and same-step
+    autoreset as one worker per env, with W instead of N processes to wake at every step — on few cores the
+    wake-ups and context switches of N workers cost more than stepping k engines in turn (docs/throughput.md)."""
+
+    def __init__(self, workers: AsyncDoomVectorEnv, envs_per_worker: int, single_env: gym.Env):
+        """``single_env``: an env of the same config, for its spaces (a DoomEnv starts no engine until reset)."""
+        self.workers, self.k = workers, envs_per_worker
+        self.num_envs = workers.num_envs * envs_per_worker
+        self.single_observation_space = single_env.observation_space
+        self.single_action_space = single_env.action_space
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
+
+    def _flat(self, tree):
+        """(W, k, ...) leaves → (W·k, ...), views where the input is contiguous; the outer ``_key`` masks dropped."""
+        if isinstance(tree, dict):
+            return {key: self._flat(v) for key, v in tree.items() if key[0] != "_"}
+        return tree.reshape(self.num_envs, *tree.shape[2:])
+
+    def reset(self, *, seed=None, options=None):
+        if isinstance(seed, int):
+            seed = [seed + i for i in range(self.num_envs)]
+        if seed is not None:
+            seed = [tuple(seed[w * self.k : (w + 1) * self.k]) for w in range(self.workers.num_envs)]
+        obs, info = self.workers.reset(seed=seed, options=options)
+        return self._flat(obs), self._flat(info)
+
+    def step_async(self, actions) -> None:
+        self.workers.step_async(np.asarray(actions).reshape(self.workers.num_envs, self.k, -1))
+
+    def step_wait(self, **kwargs):
+        obs, reward, _, _, info = self.workers.step_wait(**kwargs)
+        info = self._flat(info)
+        terminated, truncated = info.pop("terminated"), info.pop("truncated")
+        return self._flat(obs), reward.reshape(-1), terminated, truncated, info
+
+    def step(self, actions):
+        self.step_async(actions)
+        return self.step_wait()
+
+    def close(self, **kwargs) -> None:
+        self.workers.close(**kwargs)
+
+    def abort(self) -> None:
+        self.workers.abort()
+
+    @property
+    def processes(self):
+        return self.workers.processes
+
+
+class _EnvFactory:
+    """Picklable env constructor (lambdas don't survive forkserver); with ``k`` > 1 an `EnvBatch` of k envs."""
+
+    def __init__(self, config: DoomConfig, max_restarts: int, window: int, k: int = 1):
         self.config = asdict(config)
         self.max_restarts = max_restarts
         self.window = window
+        self.k = k
+
+    def _one(self):
+        return _make_env(self.config, self.max_restarts, self.window)
 
     def __call__(self):
-        return _make_env(self.config, self.max_restarts, self.window)
+        if self.k == 1:
+            return self._one()
+        fns = [self._one] * self.k
+        return EnvBatch(SyncDoomVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP, copy=False))
 
 
 def make_vector_env(
@@ -170,18 +260,24 @@ def make_vector_env(
     copy: bool = True,
     max_restarts: int = 3,
     restart_window: int = 1000,
+    envs_per_worker: int = 1,
 ):
-    """``num_envs`` copies of the env. Asynchronous: one worker process each (forkserver: workers don't inherit
-    the learner's torch threads or open files). Use it as a context manager, or call ``close()``.
+    """``num_envs`` copies of the env. Asynchronous: one worker process per ``envs_per_worker`` envs (forkserver:
+    workers don't inherit the learner's torch threads or open files). Use it as a context manager, or call
+    ``close()``.
 
     ``copy=False`` returns observations as views of the shared buffers (no copy): valid until the next step of
     this vector env. ``max_restarts``/``restart_window``: see `RestartingEnv`."""
     config.validate()
-    fns = [_EnvFactory(config, max_restarts, restart_window) for _ in range(num_envs)]
+    k = envs_per_worker
+    if k < 1 or num_envs % k:
+        raise ValueError(f"envs_per_worker={k!r} must be a positive divisor of num_envs={num_envs}")
     if not asynchronous:
+        fns = [_EnvFactory(config, max_restarts, restart_window) for _ in range(num_envs)]
         return SyncDoomVectorEnv(fns, autoreset_mode=AutoresetMode.SAME_STEP, copy=copy)
     private_mp_tempdir()
-    return AsyncDoomVectorEnv(
+    fns = [_EnvFactory(config, max_restarts, restart_window, k) for _ in range(num_envs // k)]
+    workers = AsyncDoomVectorEnv(
         fns,
         copy=copy,
         shared_memory=True,
@@ -189,3 +285,8 @@ def make_vector_env(
         daemon=True,
         autoreset_mode=AutoresetMode.SAME_STEP,
     )
+    if k == 1:
+        return workers
+    from emml.envs.doom import DoomEnv
+
+    return GroupedDoomVectorEnv(workers, k, DoomEnv(config))

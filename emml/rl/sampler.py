@@ -73,6 +73,7 @@ class Sampler:
             copy=False,
             max_restarts=cfg.max_engine_restarts,
             restart_window=cfg.engine_restart_window,
+            envs_per_worker=cfg.envs_per_worker,
         )
 
     # --- lifecycle --------------------------------------------------------------------------------------------

@@ -90,6 +90,7 @@ def _check_same_config(saved: dict, current: dict, path: Path) -> None:
         "threads",
         "asynchronous",
         "env_groups",  # how the actors are stepped, not what they do
+        "envs_per_worker",
         "acting_threads",
         "max_engine_restarts",
         "engine_restart_window",

@@ -49,7 +49,7 @@ SCRIPT = textwrap.dedent(
     from emml.envs.vector import make_vector_env
     install_signal_handlers()
     cfg = DoomConfig(height=60, width=108)
-    with make_vector_env(cfg, 2) as venv:
+    with make_vector_env(cfg, 2, envs_per_worker=int(sys.argv[2])) as venv:
         venv.reset(seed=0)
         if sys.argv[1] == "raise":
             raise RuntimeError("boom")
@@ -61,15 +61,18 @@ SCRIPT = textwrap.dedent(
 )
 
 
-@pytest.mark.parametrize("how", ["sigterm", "sigint", "sigkill", "raise"])
-def test_worker_parent_ending_leaves_no_engine(how, no_leftovers, tmp_path):
-    """The parent of the workers ends by SIGTERM, Ctrl-C, SIGKILL or an exception: no engine or shm file stays."""
+@pytest.mark.parametrize(
+    "how,k", [("sigterm", 1), ("sigint", 1), ("sigkill", 1), ("raise", 1), ("sigterm", 2), ("sigkill", 2)]
+)
+def test_worker_parent_ending_leaves_no_engine(how, k, no_leftovers, tmp_path):
+    """The parent of the workers ends by SIGTERM, Ctrl-C, SIGKILL or an exception: no engine or shm file stays
+    (with one worker per env, and with one worker hosting both, k = 2)."""
     import os
     import signal
 
     before = engine_pids()
     proc = subprocess.Popen(
-        [sys.executable, "-c", SCRIPT, "raise" if how == "raise" else "run"],
+        [sys.executable, "-c", SCRIPT, "raise" if how == "raise" else "run", str(k)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -95,14 +98,42 @@ def test_worker_parent_ending_leaves_no_engine(how, no_leftovers, tmp_path):
     assert engine_pids() - before == set()
 
 
-def test_a_dead_worker_is_reported_not_waited_on(no_leftovers):
+@pytest.mark.parametrize("k", [1, 2])
+def test_a_dead_worker_is_reported_not_waited_on(k, no_leftovers):
     from emml.envs.engine import WorkerDied
 
-    with make_vector_env(DoomConfig(**SMOKE), 2) as venv:
+    with make_vector_env(DoomConfig(**SMOKE), 2, envs_per_worker=k) as venv:
         venv.reset(seed=0)
-        os.kill(venv.processes[0].pid, signal.SIGKILL)  # its engine lives on and holds the pipe open
+        os.kill(venv.processes[0].pid, signal.SIGKILL)  # its engines live on and hold the pipe open
         t0 = time.monotonic()
         with pytest.raises(WorkerDied, match="env worker 0 .* died"):
             venv.step(np.array([[0, 0], [0, 0]]))
         assert time.monotonic() - t0 < 5
         venv.abort()  # ends the orphaned engine too (no_leftovers checks)
+
+
+def test_workers_hosting_several_envs_give_the_same_envs(no_leftovers):
+    """4 envs in 2 workers of 2 (`GroupedDoomVectorEnv`) against 4 workers of 1, same seeds and random actions,
+    over episode ends: the same observations, rewards, ends, final infos and infos, in the same order."""
+    cfg = DoomConfig(aux_labels=True, max_steps=12, **SMOKE)
+    rng = np.random.default_rng(0)
+    with make_vector_env(cfg, 4, copy=False) as one, make_vector_env(cfg, 4, copy=False, envs_per_worker=2) as two:
+        assert len(two.processes) == 2 and two.single_observation_space == one.single_observation_space
+        a, a_info = one.reset(seed=[5, 6, 7, 8])
+        b, b_info = two.reset(seed=[5, 6, 7, 8])
+        assert all(np.array_equal(a[key], b[key]) for key in a)
+        assert list(a_info["text"]) == list(b_info["text"])
+        ends = 0
+        for _ in range(30):
+            actions = np.stack([rng.integers(0, 4, 4), rng.integers(0, 3, 4)], axis=1)
+            a, ra, ta, ua, a_info = one.step(actions)
+            b, rb, tb, ub, b_info = two.step(actions)
+            assert all(np.array_equal(a[key], b[key]) for key in a)
+            assert np.array_equal(ra, rb) and np.array_equal(ta, tb) and np.array_equal(ua, ub)
+            assert np.array_equal(a_info["task"], b_info["task"]) and np.array_equal(a_info["answer"], b_info["answer"])
+            done = ta | ua
+            if done.any():
+                ends += int(done.sum())
+                for key in ("task", "success", "engine_restart"):
+                    assert np.array_equal(a_info["final_info"][key][done], b_info["final_info"][key][done]), key
+        assert ends >= 4

@@ -166,6 +166,7 @@ def test_eval_of_a_checkpoint_reproduces_its_numbers(tracking, no_leftovers):
         ({"env.label_grid": "odd"}, "label_grid"),
         ({"model_options": {"control": "detectors"}}, "control"),  # a control reads the aux labels: needs aux
         ({"model_options": {"control": "oracle"}}, "control"),
+        ({"envs_per_worker": 3}, "envs_per_worker=3 must be a positive divisor"),
     ],
 )
 def test_bad_config_fails_before_any_compute(over, field, tracking, no_leftovers):
@@ -287,3 +288,16 @@ def test_double_buffered_sampling_trains_exactly_like_lockstep(tracking, no_left
         params[groups] = torch.load(result.run_dir / "checkpoint.pt", weights_only=False)["model"]
     assert params[1].keys() == params[2].keys()
     assert all(torch.allclose(params[1][k], params[2][k], rtol=0, atol=1e-5) for k in params[1])
+
+
+def test_workers_hosting_several_envs_train_exactly_alike(tracking, no_leftovers):
+    """envs_per_worker changes which process steps an env, not what it does: same parameters, bit for bit."""
+    import torch
+
+    params = {}
+    for k in (1, 2):
+        cfg = smoke(tracking, aux=True, frames=512, num_envs=4, num_steps=64, eval_episodes=1, envs_per_worker=k)
+        cfg.table = f"per_worker{k}"
+        result = train(cfg, quiet=True)
+        params[k] = torch.load(result.run_dir / "checkpoint.pt", weights_only=False)["model"]
+    assert all(torch.equal(params[1][key], params[2][key]) for key in params[1])
