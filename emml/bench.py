@@ -325,35 +325,55 @@ def allocator_envs() -> dict[str, dict[str, str]]:
     return envs
 
 
-def bench_alloc(train_args: list[str], rounds: int = 3, parts: tuple[str, ...] = ("model", "e2e")) -> dict:
-    """`bench train --part P` under each allocator in a child process, interleaved round by round so that the
-    machine's drift falls on all of them alike; the median frames/s per allocator and part, and each one's ratio to
-    the best. ``train_args`` are `bench train` options (profile, updates, --set ...)."""
+def bench_variants(
+    variants: dict[str, tuple[dict[str, str], list[str]]],
+    train_args: list[str],
+    rounds: int = 3,
+    parts: tuple[str, ...] = ("model", "e2e"),
+) -> dict:
+    """`bench train --part P` for each variant (name → (environment overrides, extra `bench train` options)) in a
+    child process, interleaved round by round so that the machine's drift falls on all of them alike; the median
+    frames/s per variant and part, and each one's ratio to the best."""
     import json
     import os
     import subprocess
     import sys
 
-    envs = allocator_envs()
-    fps = {name: {part: [] for part in parts} for name in envs}
+    fps = {name: {part: [] for part in parts} for name in variants}
+    children = {}
     for _ in range(rounds):
-        for name, extra in envs.items():
-            env = {k: v for k, v in os.environ.items() if k != "LD_PRELOAD"} | extra
+        for name, (extra_env, extra_args) in variants.items():
+            env = {k: v for k, v in os.environ.items() if k != "LD_PRELOAD"} | extra_env
             for part in parts:
-                cmd = [sys.executable, "-m", "emml.cli", "bench", "train", "--json", "--part", part, *train_args]
-                proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+                cmd = [sys.executable, "-m", "emml.cli", "bench", "train", "--json", "--part", part]
+                proc = subprocess.run([*cmd, *train_args, *extra_args], env=env, capture_output=True, text=True)
                 if proc.returncode != 0:
-                    raise RuntimeError(f"bench train under {name} failed:\n{proc.stderr[-2000:]}")
-                r = json.loads(proc.stdout)
-                if r["allocator"] != name:
-                    raise RuntimeError(f"asked for {name}, the child ran on {r['allocator']}")
+                    raise RuntimeError(f"bench train ({name}) failed:\n{proc.stderr[-2000:]}")
+                r = children[name] = json.loads(proc.stdout)
                 fps[name][part].append(r["model_only_fps" if part == "model" else "end_to_end_fps"])
     median = {name: {part: float(np.median(v)) for part, v in d.items()} for name, d in fps.items()}
     best = {part: max(m[part] for m in median.values()) for part in parts}
     return {
         "rounds": rounds,
         "train_args": train_args,
+        "allocators": {name: r["allocator"] for name, r in children.items()},
         "fps": fps,
         "median_fps": median,
         "ratio_to_best": {n: {p: round(m[p] / best[p], 3) for p in parts} for n, m in median.items()},
     }
+
+
+def bench_alloc(train_args: list[str], rounds: int = 3, parts: tuple[str, ...] = ("model", "e2e")) -> dict:
+    """`bench_variants` over the allocators this machine has (`allocator_envs`); fails if a child did not run on
+    the allocator it was given."""
+    r = bench_variants({name: (env, []) for name, env in allocator_envs().items()}, train_args, rounds, parts)
+    wrong = {name: ran for name, ran in r["allocators"].items() if ran != name}
+    if wrong:
+        raise RuntimeError(f"children ran on other allocators than asked: {wrong}")
+    return r
+
+
+def bench_workers(train_args: list[str], per_worker: list[int], rounds: int = 3) -> dict:
+    """End-to-end frames/s with each number of envs per worker process (`envs_per_worker`), interleaved."""
+    variants = {f"{k} per worker": ({}, ["--set", f"envs_per_worker={k}"]) for k in per_worker}
+    return bench_variants(variants, train_args, rounds, parts=("e2e",))

@@ -240,6 +240,32 @@ def bench_alloc_cmd(
     _echo(r, as_json, "\n".join(lines))
 
 
+@bench_app.command("workers")
+def bench_workers_cmd(
+    profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
+    per_worker: list[int] = typer.Option([1, 4], "--per-worker", help="Envs per worker process to compare."),
+    updates: int = typer.Option(2, min=1, help="Updates per measurement (after one warm-up update)."),
+    rounds: int = typer.Option(3, min=1, help="Rounds; each runs every setting once, interleaved."),
+    sets: list[str] = typer.Option([], "--set", help="Override any config field."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """End-to-end training frames/s with each number of envs per worker process, interleaved in one run."""
+    from emml.bench import bench_workers
+    from emml.profiles import profile_config
+
+    for k in per_worker:
+        try:
+            profile_config(profile, "easy", {**_parse_sets(sets), "envs_per_worker": k}).validate()
+        except ValueError as e:
+            _fail(str(e))
+    args = ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]
+    r = bench_workers(args, per_worker, rounds)
+    lines = [f"envs per worker, median of {rounds} interleaved rounds (end-to-end frames/s; ratio to the best):"]
+    for name, m in r["median_fps"].items():
+        lines.append(f"  {name:<14} {m['e2e']:6.0f} ({r['ratio_to_best'][name]['e2e']:.2f})")
+    _echo(r, as_json, "\n".join(lines))
+
+
 @app.command()
 def models(
     height: int = 168,

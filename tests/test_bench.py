@@ -37,3 +37,9 @@ def test_bench_alloc_runs_each_allocator_in_its_own_process(monkeypatch):
     r = bench.bench_alloc(["--profile", "smoke", "--updates", "1"], rounds=1, parts=("model",))
     assert set(r["fps"]) == set(envs) and all(len(v["model"]) == 1 for v in r["fps"].values())
     assert max(v["model"] for v in r["ratio_to_best"].values()) == 1.0  # the child checked it ran on its allocator
+
+
+def test_bench_workers_compares_envs_per_worker_end_to_end(no_leftovers):
+    r = bench.bench_workers(["--profile", "smoke", "--updates", "1", "--set", "num_envs=4"], [1, 2], rounds=1)
+    assert set(r["median_fps"]) == {"1 per worker", "2 per worker"}
+    assert all(v["e2e"] > 0 for v in r["median_fps"].values())
