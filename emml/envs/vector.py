@@ -229,6 +229,9 @@ class GroupedDoomVectorEnv(_Closing, gym.vector.VectorEnv):
     def abort(self) -> None:
         self.workers.abort()
 
+    def __exit__(self, exc_type, exc, tb):
+        return self.workers.__exit__(exc_type, exc, tb)  # an exception aborts the workers: see abort
+
     @property
     def processes(self):
         return self.workers.processes
