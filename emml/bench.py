@@ -252,6 +252,7 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000, p
 
     from emml import alloc
 
+    alloc.tune_glibc()  # as the trainer does: model-only and end-to-end measured on the same allocator
     if part not in PARTS:
         raise ValueError(f"part={part!r}: allowed values are {', '.join(PARTS)}")
     out = {

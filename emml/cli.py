@@ -211,6 +211,19 @@ def bench_train_cmd(
     _echo(r, as_json, "\n".join(lines))
 
 
+def _child_bench_args(profile: str, updates: int, sets: list[str], variants: list[dict] = ({},)) -> list[str]:
+    """`bench train` options for child processes, after validating the config of every variant here: bad input
+    fails before any child starts."""
+    from emml.profiles import profile_config
+
+    for extra in variants:
+        try:
+            profile_config(profile, "easy", {**_parse_sets(sets), **extra}).validate()
+        except ValueError as e:
+            _fail(str(e))
+    return ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]
+
+
 @bench_app.command("alloc")
 def bench_alloc_cmd(
     profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
@@ -222,14 +235,8 @@ def bench_alloc_cmd(
     """Training frames/s (model-only and end-to-end) under each allocator this machine has, interleaved in one
     run: tcmalloc and mimalloc where installed, glibc tuned in-process (the default without them) and untuned."""
     from emml.bench import bench_alloc
-    from emml.profiles import profile_config
 
-    try:
-        profile_config(profile, "easy", _parse_sets(sets)).validate()  # bad input fails here, not in a child
-    except ValueError as e:
-        _fail(str(e))
-    args = ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]
-    r = bench_alloc(args, rounds)
+    r = bench_alloc(_child_bench_args(profile, updates, sets), rounds)
     lines = [f"allocators, median of {rounds} interleaved rounds (frames/s; ratio to the best):"]
     for name, m in r["median_fps"].items():
         ratio = r["ratio_to_best"][name]
@@ -251,15 +258,10 @@ def bench_workers_cmd(
 ):
     """End-to-end training frames/s with each number of envs per worker process, interleaved in one run."""
     from emml.bench import bench_workers
-    from emml.profiles import profile_config
 
-    for k in per_worker:
-        try:
-            profile_config(profile, "easy", {**_parse_sets(sets), "envs_per_worker": k}).validate()
-        except ValueError as e:
-            _fail(str(e))
-    args = ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]
-    r = bench_workers(args, per_worker, rounds)
+    r = bench_workers(
+        _child_bench_args(profile, updates, sets, [{"envs_per_worker": k} for k in per_worker]), per_worker, rounds
+    )
     lines = [f"envs per worker, median of {rounds} interleaved rounds (end-to-end frames/s; ratio to the best):"]
     for name, m in r["median_fps"].items():
         lines.append(f"  {name:<14} {m['e2e']:6.0f} ({r['ratio_to_best'][name]['e2e']:.2f})")

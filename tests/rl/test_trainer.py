@@ -273,6 +273,16 @@ def test_sgn_learning_beats_chance(tracking, no_leftovers):
     assert metric_history(result.run_id, "diag/actor_sensitivity")[-1][1] >= 0.2  # it turns towards the target
 
 
+def _params_after_512_frames(tracking, name: str, **over) -> dict:
+    """The parameters a 512-frame smoke run (4 actors × 64 steps, aux) ends with, under the fields ``over``."""
+    import torch
+
+    cfg = smoke(tracking, aux=True, frames=512, num_envs=4, num_steps=64, eval_episodes=1, **over)
+    cfg.table = name
+    result = train(cfg, quiet=True)
+    return torch.load(result.run_dir / "checkpoint.pt", weights_only=False)["model"]
+
+
 def test_double_buffered_sampling_trains_exactly_like_lockstep(tracking, no_leftovers):
     """Double buffering changes when actors step, not what the learner sees: on CPU, under one seed, both loops
     take the same actions and end with the same parameters up to float rounding (the policy's matrix products
@@ -280,12 +290,7 @@ def test_double_buffered_sampling_trains_exactly_like_lockstep(tracking, no_left
     identical success curves and final accuracies over 204,800 frames."""
     import torch
 
-    params = {}
-    for groups in (1, 2):
-        cfg = smoke(tracking, aux=True, frames=512, num_envs=4, num_steps=64, eval_episodes=1, env_groups=groups)
-        cfg.table = f"groups{groups}"
-        result = train(cfg, quiet=True)
-        params[groups] = torch.load(result.run_dir / "checkpoint.pt", weights_only=False)["model"]
+    params = {g: _params_after_512_frames(tracking, f"groups{g}", env_groups=g) for g in (1, 2)}
     assert params[1].keys() == params[2].keys()
     assert all(torch.allclose(params[1][k], params[2][k], rtol=0, atol=1e-5) for k in params[1])
 
@@ -294,10 +299,5 @@ def test_workers_hosting_several_envs_train_exactly_alike(tracking, no_leftovers
     """envs_per_worker changes which process steps an env, not what it does: same parameters, bit for bit."""
     import torch
 
-    params = {}
-    for k in (1, 2):
-        cfg = smoke(tracking, aux=True, frames=512, num_envs=4, num_steps=64, eval_episodes=1, envs_per_worker=k)
-        cfg.table = f"per_worker{k}"
-        result = train(cfg, quiet=True)
-        params[k] = torch.load(result.run_dir / "checkpoint.pt", weights_only=False)["model"]
+    params = {k: _params_after_512_frames(tracking, f"per_worker{k}", envs_per_worker=k) for k in (1, 2)}
     assert all(torch.equal(params[1][key], params[2][key]) for key in params[1])
