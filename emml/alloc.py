@@ -33,12 +33,10 @@ _tuned = False
 
 
 def choice() -> str:
-    """EMML_MALLOC, validated (the legacy EMML_NO_TCMALLOC=1 means glibc-tuned: no re-exec)."""
+    """EMML_MALLOC, validated."""
     value = os.environ.get("EMML_MALLOC", "auto").strip() or "auto"
     if value not in CHOICES:
         raise ValueError(f"EMML_MALLOC={value!r}: allowed values are {', '.join(CHOICES)}")
-    if value == "auto" and os.environ.get("EMML_NO_TCMALLOC"):
-        return "glibc-tuned"
     return value
 
 

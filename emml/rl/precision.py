@@ -20,29 +20,26 @@ NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16", "bf16")
 """CPU flags (/proc/cpuinfo) that mean native bf16 arithmetic: x86 AVX-512 BF16, AMX, Arm BF16."""
 
 
-def cpu_flags() -> set[str]:
-    """The CPU's feature flags (x86 'flags', Arm 'Features'); empty where /proc/cpuinfo is unreadable."""
+def _cpuinfo(*keys: str) -> str | None:
+    """The first value of /proc/cpuinfo under one of ``keys``; None where absent or unreadable."""
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
                 key, _, value = line.partition(":")
-                if key.strip() in ("flags", "Features"):
-                    return set(value.split())
-    except OSError:
-        pass
-    return set()
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                key, _, value = line.partition(":")
-                if key.strip() == "model name":
+                if key.strip() in keys:
                     return value.strip()
     except OSError:
         pass
-    return "this CPU"
+    return None
+
+
+def cpu_flags() -> set[str]:
+    """The CPU's feature flags (x86 'flags', Arm 'Features'); empty where /proc/cpuinfo is unreadable."""
+    return set((_cpuinfo("flags", "Features") or "").split())
+
+
+def cpu_model() -> str:
+    return _cpuinfo("model name") or "this CPU"
 
 
 def check_precision(precision: str, device: str) -> None:
