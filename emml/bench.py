@@ -16,7 +16,7 @@ import numpy as np
 
 from emml.config import DoomConfig
 from emml.envs.doom import DoomEnv
-from emml.envs.vector import make_vector_env
+from emml.envs.vector import make_env, make_vector_env
 
 
 def _raw(env: DoomEnv, steps: int, rng) -> tuple[float, float]:
@@ -69,12 +69,14 @@ def _vector(config: DoomConfig, workers: int, steps: int) -> float:
 
 
 def bench_env(config: DoomConfig, steps: int = 2000, vector_steps: int = 2000) -> dict:
-    """Steps/s of raw engine vs our env (labels off and on), and of the vector env with 1 and 2 workers."""
+    """Steps/s of raw engine vs our env (labels off and on), and of the vector env with 1 and 2 workers. A
+    HouseConfig measures the House env (Appendix C) the same way."""
     rng = np.random.default_rng(0)
     out: dict = {"height": config.height, "width": config.width, "render": "x".join(map(str, config.render_size()))}
+    out["env"] = "house" if config.difficulty == "house" else "doom"
     for aux in (False, True):
-        cfg = DoomConfig(**{**config.to_dict(), "aux_labels": aux})
-        env = DoomEnv(cfg)
+        cfg = type(config)(**{**config.to_dict(), "aux_labels": aux})
+        env = make_env(cfg)
         try:
             raw_sps, raw_reset = _raw(env, steps, rng)
             ours_sps, ours_reset = _ours(env, steps, rng)

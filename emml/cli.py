@@ -61,7 +61,7 @@ def _echo(data, as_json: bool, text: str) -> None:
 
 @tasks_app.command("show")
 def tasks_show(
-    dataset: str = typer.Argument("doom", help="doom (house: not built yet)"),
+    dataset: str = typer.Argument("doom", help="doom (Table 7) | house (Table 8)"),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """List a dataset's instructions and questions by task and split."""
@@ -88,7 +88,8 @@ def tasks_show(
 
 @app.command()
 def oracle(
-    difficulty: str = typer.Option("easy", help="easy | hard"),
+    env_name: str = typer.Option("doom", "--env", help="doom | house (the House domain, Appendix C)"),
+    difficulty: str = typer.Option("easy", help="easy | hard (doom only)"),
     task: str = typer.Option("sgn", help="sgn | eqa | both"),
     split: str = typer.Option("train", help="train | test"),
     episodes: int = typer.Option(100, min=1),
@@ -105,16 +106,27 @@ def oracle(
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()
+    if env_name not in ("doom", "house"):
+        _fail(f"--env={env_name!r} is not allowed; choose one of 'doom', 'house'")
+    if env_name == "house":
+        if video is not None:
+            _fail("--video records Doom episodes only; leave it out with --env house")
+        from emml.config import HouseConfig
+        from emml.envs.house import HouseEnv
+
+        difficulty, make, config_cls = "house", HouseEnv, HouseConfig
+    else:
+        make, config_cls = DoomEnv, DoomConfig
     try:
-        cfg = DoomConfig(difficulty=difficulty, tasks=task, split=split, height=height, width=width).validate()
+        cfg = config_cls(difficulty=difficulty, tasks=task, split=split, height=height, width=width).validate()
     except ValueError as e:
         _fail(str(e))
-    env = DoomEnv(cfg)
+    env = make(cfg)
     try:
         result = run_oracle(env, episodes, seed)
     finally:
         env.close()
-    result = {"difficulty": difficulty, "task": task, "split": split, **result}
+    result = {"env": env_name, "difficulty": difficulty, "task": task, "split": split, **result}
     if video is not None:
         from emml.report.oracle_video import oracle_demo
 
@@ -129,9 +141,10 @@ def oracle(
 
 @bench_app.command("env")
 def bench_env(
+    env_name: str = typer.Option("doom", "--env", help="doom | house (the House domain, Appendix C)"),
     height: int = 168,
     width: int = 300,
-    difficulty: str = "easy",
+    difficulty: str = typer.Option("easy", help="easy | hard (doom only)"),
     interpolation: str = typer.Option("linear", help="linear | area | nearest"),
     steps: int = typer.Option(2000, min=100),
     as_json: bool = typer.Option(False, "--json"),
@@ -142,12 +155,20 @@ def bench_env(
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()
+    if env_name not in ("doom", "house"):
+        _fail(f"--env={env_name!r} is not allowed; choose one of 'doom', 'house'")
+    if env_name == "house":
+        from emml.config import HouseConfig
+
+        config_cls, difficulty = HouseConfig, "house"
+    else:
+        config_cls = DoomConfig
     try:
-        cfg = DoomConfig(height=height, width=width, difficulty=difficulty, interpolation=interpolation).validate()
+        cfg = config_cls(height=height, width=width, difficulty=difficulty, interpolation=interpolation).validate()
     except ValueError as e:
         _fail(str(e))
     result = run(cfg, steps=steps, vector_steps=steps)
-    text = [f"env bench at {width}x{height} (render {result['render']}):"]
+    text = [f"{env_name} env bench at {width}x{height} (render {result['render']}):"]
     for key in ("labels_off", "labels_on"):
         r = result[key]
         text.append(

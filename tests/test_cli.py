@@ -114,3 +114,18 @@ def test_train_over_a_bad_or_foreign_checkpoint_fails_by_name_and_keeps_it(track
     import mlflow
 
     assert mlflow.search_runs(search_all_experiments=True).empty  # nothing started, nothing recorded
+
+
+def test_house_tasks_and_oracle_json(no_leftovers):
+    result = runner.invoke(app, ["tasks", "show", "house", "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert len(data["sgn_train"]) == 22 and len(data["sgn_test"]) == 11
+    assert len(data["eqa_train"]) == 8 and len(data["eqa_test"]) == 2 and len(data["actors"]) == 24
+    args = ["oracle", "--env", "house", "--task", "sgn", "--episodes", "3", "--height", "60", "--width", "108"]
+    result = runner.invoke(app, [*args, "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["env"] == "house" and data["accuracy"] == 1.0
+    result = runner.invoke(app, ["oracle", "--env", "attic"])
+    assert result.exit_code == 2 and "--env='attic'" in result.output

@@ -94,8 +94,16 @@ class Oracle:
 
 
 def run_oracle(env: DoomEnv, episodes: int, seed: int = 0) -> dict:
-    """Accuracy of the oracle over ``episodes`` episodes: fraction ending in success, and mean steps."""
-    oracle = Oracle(env)
+    """Accuracy of the oracle over ``episodes`` episodes: fraction ending in success, and mean steps. A HouseEnv
+    gets the house's path-planning oracle (emml/agents/house_oracle.py)."""
+    from emml.envs.house import HouseEnv
+
+    if isinstance(env, HouseEnv):
+        from emml.agents.house_oracle import HouseOracle
+
+        oracle = HouseOracle(env)
+    else:
+        oracle = Oracle(env)
     successes, steps, failures = 0, [], []
     for i in range(episodes):
         env.reset(seed=seed + i)

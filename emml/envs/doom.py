@@ -132,14 +132,19 @@ class DoomEnv(gym.Env):
         self.episode: Episode | None = None
 
     # --- engine -------------------------------------------------------------------------------------------
+    def _scenario(self):
+        """The WAD the engine loads and the map it starts on (the House env gives its own)."""
+        return wad_path(), map_name(0)
+
     def _game(self):
         if self._engine is None:
             import vizdoom as vzd
 
             g = vzd.DoomGame()
+            scenario, first_map = self._scenario()
             g.set_doom_game_path(str(iwad_path()))
-            g.set_doom_scenario_path(str(wad_path()))
-            g.set_doom_map(map_name(0))
+            g.set_doom_scenario_path(str(scenario))
+            g.set_doom_map(first_map)
             w, h = self.render_wh
             g.set_screen_resolution(getattr(vzd.ScreenResolution, f"RES_{w}X{h}"))
             g.set_screen_format(vzd.ScreenFormat.CRCGCB)  # planar 3×H×W: no transpose needed

@@ -33,8 +33,12 @@ def channel_mask(vocab: Vocabulary, aux_words: tuple[str, ...]) -> np.ndarray:
 class LabelGrid:
     """Turns one frame's label buffer into the V×h×w grid, for a fixed render size and grid size."""
 
-    def __init__(self, vocab: Vocabulary, dataset: Dataset, aux_words, render_hw, grid_hw, observed_hw=None):
+    def __init__(
+        self, vocab: Vocabulary, dataset: Dataset, aux_words, render_hw, grid_hw, observed_hw=None, class_to_actor=None
+    ):
         self.shape = (len(vocab), *grid_hw)
+        self.class_to_actor = CLASS_TO_ACTOR if class_to_actor is None else class_to_actor
+        """Engine class name (as the label buffer reports it) → the dataset's actor name (House: furniture.py)."""
         aux = set(aux_words)
         self.channels = {
             name: np.array([vocab.index(w) for w in words.words() if w in aux], dtype=np.int64)
@@ -59,7 +63,7 @@ class LabelGrid:
     def __call__(self, labels_buffer: np.ndarray, labels) -> np.ndarray:
         grid = np.zeros(self.shape, dtype=np.uint8)
         for label in labels:
-            actor = CLASS_TO_ACTOR.get(label.object_name)
+            actor = self.class_to_actor.get(label.object_name)
             if actor is None:
                 continue
             chans = self.channels[actor]
@@ -74,6 +78,6 @@ class LabelGrid:
         attention-on-target diagnostic read it. Word-independent, so unlabelled words do not matter."""
         grid = np.zeros(self.shape[1:], dtype=np.uint8)
         for label in labels:
-            if CLASS_TO_ACTOR.get(label.object_name) == actor:
+            if self.class_to_actor.get(label.object_name) == actor:
                 grid.flat[self._cells(labels_buffer, label)] = 1
         return grid

@@ -74,15 +74,27 @@ class RestartingEnv(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def _make_env(config: dict, max_restarts: int, window: int):
+def make_env(config: DoomConfig | dict) -> gym.Env:
+    """The env a config describes: a HouseEnv for difficulty 'house' (HouseConfig), else a DoomEnv."""
+    values = asdict(config) if not isinstance(config, dict) else config
+    if values.get("difficulty") == "house":
+        from emml.config import HouseConfig
+        from emml.envs.house import HouseEnv
+
+        return HouseEnv(HouseConfig(**values))
     from emml.envs.doom import DoomEnv
+
+    return DoomEnv(DoomConfig(**values))
+
+
+def _make_env(config: dict, max_restarts: int, window: int):
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()  # in the worker: SIGTERM → SystemExit → the worker's finally closes the env
     import cv2
 
     cv2.setNumThreads(1)  # parallelism comes from one process per env: a resize thread pool per worker only thrashes
-    return RestartingEnv(DoomEnv(DoomConfig(**config)), max_restarts, window)
+    return RestartingEnv(make_env(config), max_restarts, window)
 
 
 class _Closing:
@@ -290,6 +302,4 @@ def make_vector_env(
     )
     if k == 1:
         return workers
-    from emml.envs.doom import DoomEnv
-
-    return GroupedDoomVectorEnv(workers, k, DoomEnv(config))
+    return GroupedDoomVectorEnv(workers, k, make_env(config))

@@ -3,7 +3,8 @@
 SGN: exactly one actor satisfies the instruction; the other four are drawn from actors that do not (for a
 superlative, actors that match its other words only if the target beats them by the margin). EQA: the same
 construction around the question's referent, so the question has exactly one referent and so one answer word.
-The referent's place in the scene is uniform (the env puts scene[i] at slot i).
+The referent's place in the scene is uniform (the env puts scene[i] at slot i). The House domain keeps its furniture
+at fixed slots and draws only their colours (`sample_colours`).
 """
 
 from __future__ import annotations
@@ -59,3 +60,28 @@ def sample_episode(sentence: Sentence, dataset: Dataset, rng: np.random.Generato
     assert found == [slot], (sentence.text, scene_t, found)  # the construction guarantees uniqueness
     ans = answer(sentence, scene_t, dataset) if sentence.kind == "eqa" else None
     return Episode(sentence, scene_t, slot, ans)
+
+
+def sample_colours(
+    sentence: Sentence, dataset: Dataset, slot_objects: tuple[str, ...], rng: np.random.Generator, tries: int = 10_000
+) -> Episode:
+    """House (Appendix C: 'randomize the colors of each object at the start of each episode'): the classes stand at
+    fixed slots (``slot_objects[i]`` at slot i); each slot's colour is uniform over the assignments under which an
+    instruction has exactly one referent and a question exactly one answer (rejection sampling).
+
+    A question may have two referents that share the answer: 'what color is the sofa' with both sofas in one
+    colour. ``target`` is then the first of them (the env shapes towards the nearer one)."""
+    colors = dataset.word_groups["colors"]
+    by_words = {(a.object, a.color): n for n, a in sorted(dataset.actors.items())}
+    for _ in range(tries):
+        picks = rng.integers(len(colors), size=len(slot_objects))
+        scene = tuple(by_words[(obj, colors[k])] for obj, k in zip(slot_objects, picks))
+        found = referents(sentence, scene, dataset)
+        if sentence.kind == "sgn":
+            if len(found) == 1:
+                return Episode(sentence, scene, found[0], None)
+        elif found:
+            answers = {getattr(dataset.actors[scene[i]], sentence.answer_attribute) for i in found}
+            if len(answers) == 1:
+                return Episode(sentence, scene, found[0], answers.pop())
+    raise ValueError(f"no colouring of {slot_objects} gives {sentence.text!r} a unique referent/answer")

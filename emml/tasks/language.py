@@ -1,9 +1,9 @@
 """The language side of the tasks as data: datasets, vocabulary, tokens, and what a sentence means in a scene.
 
-Datasets are read from ``<name>.toml`` beside this file (Doom: Table 7 of Chaplot et al., 2019). A sentence's
-meaning is a `Description` (object type, colour, size, superlative); `satisfies` and `answer` evaluate it on a
-scene, a tuple of actor names. Nothing here assumes one global vocabulary: a `Vocabulary` is a value that a run's
-config carries and its checkpoints save.
+Datasets are read from ``<name>.toml`` beside this file (Doom: Table 7 of Chaplot et al., 2019; House: Table 8).
+A sentence's meaning is a `Description` (object type, colour, size, superlative); `satisfies` and `answer` evaluate
+it on a scene, a tuple of actor names. Nothing here assumes one global vocabulary: a `Vocabulary` is a value that a
+run's config carries and its checkpoints save.
 """
 
 from __future__ import annotations
@@ -111,7 +111,10 @@ def load_dataset(name: str = "doom") -> Dataset:
                     sentences.append(Sentence(text, kind, split, row["template"], row.get("answer")))
     actors_raw = dict(raw["actors"])
     margin = actors_raw.pop("superlative_margin")
-    from emml.envs.objects import sprite_areas  # areas are measured from the engine's sprites
+    if actors_raw.pop("sprites", "iwad") == "furniture":  # House (Table 8): sprites the project draws itself
+        from emml.envs.furniture import sprite_areas
+    else:
+        from emml.envs.objects import sprite_areas  # areas are measured from the engine's sprites
 
     areas = sprite_areas()
     actors = {n: ActorWords(a["object"], a["color"], a.get("size"), areas[n]) for n, a in actors_raw.items()}
