@@ -56,9 +56,10 @@ ablations: setup
 transfer: setup
 	$(EMML) run table4 $(RUN_OPTS)
 
-# a placeholder until its own issue lands: the CLI says so and exits 0
+# Table 5: all 7 models in the House (Appendix C; emml/House-v0, our ViZDoom substitute for House3D), no aux
 house3d: setup
 	$(EMML) run table5 $(RUN_OPTS)
+	$(EMML) visualize house --out reports
 
 # every profile with results: reports/tableN-PROFILE.{md,tex}, -curves.{png,pdf}, the best Dual-Attention run's
 # figures (when its run dir is here) and reports/index.md linking them all

@@ -219,7 +219,7 @@ def _end_to_end(cfg, updates: int) -> tuple[float, dict]:
 
 def _raw_steps(config: DoomConfig, steps: int) -> float:
     """Raw engine steps/s of one process (the simulator alone, as in `bench env`)."""
-    env = DoomEnv(config)
+    env = make_env(config)
     try:
         return _raw(env, steps, np.random.default_rng(0))[0]
     finally:

@@ -337,7 +337,7 @@ def _parse_sets(sets: list[str]) -> dict:
 @app.command()
 def train(
     model: str = typer.Option("dual_attention", help="Model registry name (emml models)."),
-    difficulty: str = typer.Option("easy", help="easy | hard"),
+    difficulty: str = typer.Option("easy", help="easy | hard | house (the House domain, Appendix C)"),
     aux: bool = typer.Option(False, "--aux/--no-aux", help="Train with the auxiliary task."),
     profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
     seed: int = 0,
@@ -528,6 +528,20 @@ def visualize_attention(
     path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
     attention_figure(ep, path, rows)
     typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'} in {len(ep.frames)} steps)")
+
+
+@visualize_app.command("house")
+def visualize_house(
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+):
+    """Three first-person views of the House with furniture in the episode's colours (Appendix C's example views)."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.report.house_views import house_views
+
+    install_signal_handlers()
+    path = house_views(_out(out) / "house-views.png", seed=seed)
+    typer.echo(f"wrote {path}")
 
 
 @app.command()

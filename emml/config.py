@@ -139,6 +139,30 @@ class HouseConfig(DoomConfig):
     DIFFICULTIES: ClassVar[tuple[str, ...]] = ("house",)
 
 
+ENV_DIFFICULTIES = ("easy", "hard", "house")
+"""Where a run trains: Doom Easy, Doom Hard (§4), or the House (Appendix C, emml/House-v0)."""
+
+
+def env_config_class(difficulty: str) -> type[DoomConfig]:
+    """The environment config a difficulty needs: HouseConfig for 'house' (Appendix C), DoomConfig otherwise."""
+    return HouseConfig if difficulty == "house" else DoomConfig
+
+
+def match_env_class(env: DoomConfig) -> DoomConfig:
+    """``env`` in the config class its difficulty needs (a run switched to 'house' by a profile or --set gets a
+    HouseConfig); fields left at the old class's defaults take the new class's (the House's 420 steps, Table 8)."""
+    cls = env_config_class(env.difficulty)
+    if type(env) is cls:
+        return env
+    old, new = type(env)(), cls()
+    values = {}
+    for f in fields(cls):
+        value = getattr(env, f.name)
+        values[f.name] = getattr(new, f.name) if value == getattr(old, f.name) else value
+    values["difficulty"] = env.difficulty
+    return cls(**values)
+
+
 def config_from_dict(cls, values: dict):
     """Build a config dataclass from a dict, rejecting unknown keys by name (tuples restored from lists)."""
     known = {f.name for f in fields(cls)}
@@ -216,7 +240,7 @@ class TrainConfig:
     """Where finished runs are recorded as rows of `<table>/<profile>.csv` (small, committed), relative to the
     project root unless absolute."""
     env: DoomConfig = field(default_factory=DoomConfig)
-    """The environment (its aux_labels follows `aux`)."""
+    """The environment (its aux_labels follows `aux`): a HouseConfig when its difficulty is 'house'."""
     ppo: object = None
     """PPOConfig (emml/rl/ppo.py); None: the paper's defaults."""
     model_options: dict = field(default_factory=dict)
@@ -233,6 +257,7 @@ class TrainConfig:
         from emml.models import model_config
 
         model_config(self.model, **self.model_options)  # names the model and any unknown option
+        check_choice("env.difficulty", self.env.difficulty, ENV_DIFFICULTIES)
         self.env.validate()
         self.ppo.validate()
         check_choice("answer_supervision", self.answer_supervision, ("eqa_steps", "answer_steps"))
@@ -299,7 +324,8 @@ class TrainConfig:
         from emml.rl.ppo import PPOConfig
 
         values = dict(values)
-        env = config_from_dict(DoomConfig, values.pop("env", {}))
+        env_values = values.pop("env", {})
+        env = config_from_dict(env_config_class(env_values.get("difficulty", "easy")), env_values)
         ppo = config_from_dict(PPOConfig, values.pop("ppo", {}) or {})
         cfg = config_from_dict(cls, {k: v for k, v in values.items()})
         cfg.env, cfg.ppo = env, ppo
@@ -321,6 +347,7 @@ def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") ->
         if name not in known:
             raise ValueError(f"{source} {key!r}: unknown field; known: {', '.join(known)}")
         setattr(target, name, _typed(value, getattr(target, name), f"{source} {key!r}"))
+    cfg.env = match_env_class(cfg.env)
     cfg.env.aux_labels = cfg.aux
     return cfg
 

@@ -25,6 +25,7 @@ import torch
 
 from emml.config import DoomConfig
 from emml.envs.doom import DoomEnv
+from emml.envs.vector import make_env
 from emml.evaluate import eval_settings, obs_to_torch
 
 
@@ -78,14 +79,14 @@ def diagnose(
     """The three diagnostics on SGN train episodes of ``env_cfg``'s difficulty (see the module docstring).
 
     ``episodes`` sampled episodes (at most ``max_frames`` frames) give the attention and detector figures;
-    ``step0_episodes`` resets give the actor's sensitivity (Easy only; None in Hard)."""
+    ``step0_episodes`` resets give the actor's sensitivity (Easy and House, where the spawn is fixed; None in Hard)."""
     was_training = model.training
     model.eval()
     # a run restricted to some instructions is diagnosed on its SGN training ones (all of them if it has none)
     chosen = {(task, split): sents for task, split, sents in eval_settings(env_cfg)}.get(("sgn", "train"))
     cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=chosen)
     gen = torch.Generator().manual_seed(seed)
-    env = DoomEnv(cfg)
+    env = make_env(cfg)
     probs, labels, attn, target = [], [], [], []
     try:
         for i in range(episodes):
@@ -105,7 +106,7 @@ def diagnose(
                 done = terminated or truncated
         aux_mask = env.aux_mask
         words = env.vocab.words
-        easy = env_cfg.difficulty == "easy" and step0_episodes
+        easy = env_cfg.difficulty in ("easy", "house") and step0_episodes  # a fixed spawn: slots are comparable
         step0 = _step0(model, env, step0_episodes, seed + episodes, device) if easy else None
     finally:
         env.close()

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from emml.config import DoomConfig
-from emml.envs.doom import DoomEnv
+from emml.envs.vector import make_env
 
 SETTINGS = (("sgn", "train"), ("sgn", "test"), ("eqa", "train"), ("eqa", "test"))
 
@@ -61,7 +61,7 @@ def evaluate(
     for task, split, instructions in eval_settings(env_cfg):
         cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
         n_envs = min(batch, episodes)
-        envs = [DoomEnv(cfg) for _ in range(n_envs)]
+        envs = [make_env(cfg) for _ in range(n_envs)]
         try:
             results[f"{task}_{split}"] = _run(model, envs, episodes, seed, device)
         finally:

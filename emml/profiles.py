@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import tomllib
 
-from emml.config import TrainConfig, apply_overrides
+from emml.config import TrainConfig, apply_overrides, match_env_class
 
 PROFILES_FILE = Path(__file__).resolve().parent.parent / "reproduce" / "profiles.toml"
 
@@ -51,10 +52,10 @@ def profile_config(profile: str, difficulty: str = "easy", overrides: dict | Non
     values = dict(profiles[profile])
     values.pop("seeds", None)
     hard_frames = values.pop("frames_hard", values.get("frames"))
-    if difficulty == "hard":
+    if difficulty in ("hard", "house"):  # §5.1: 50M frames in Hard; Appendix C: 50M in the House
         values["frames"] = hard_frames
     cfg = TrainConfig(profile=profile, **fields)
-    cfg.env.difficulty = difficulty
+    cfg.env = match_env_class(dataclasses.replace(cfg.env, difficulty=difficulty))
     apply_overrides(cfg, values, source=f"{PROFILES_FILE} [{profile}]")
     apply_overrides(cfg, overrides or {})
     return cfg

@@ -20,7 +20,8 @@ from emml.config import TrainConfig, apply_overrides
 REPRODUCE_DIR = Path(__file__).resolve().parent.parent / "reproduce"
 """reproduce/: profiles.toml, table*.toml and paper/table*.csv."""
 STATUSES = ("active", "placeholder")
-DIFFICULTIES = ("easy", "hard")
+DIFFICULTIES = ("easy", "hard", "house")
+"""Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C)."""
 METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
 """Results columns a cell may read (written by the trainer's greedy evaluation)."""
 TRANSFER_METRICS = ("sgn_transfer",)

@@ -93,3 +93,29 @@ def tracking(tmp_path, monkeypatch):
     uri = f"sqlite:///{tmp_path}/mlflow.db"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
     return {"uri": uri, "run_root": str(tmp_path / "runs"), "results_root": str(tmp_path / "results")}
+
+
+@pytest.fixture
+def placeholder_table(tmp_path, monkeypatch):
+    """A placeholder table 'table9' (a paper table whose runs are not declared yet: the CLI and reports show the
+    paper's numbers only), made from Table 5's paper numbers; returns its name."""
+    import shutil
+
+    import emml.registry
+    import emml.report.tables
+
+    folder = tmp_path / "reproduce"
+    (folder / "paper").mkdir(parents=True)
+    (folder / "table9.toml").write_text(
+        'title = "A table still to build"\npaper_label = "tab:results_h3d"\nstatus = "placeholder"\n'
+        'row_header = "Model"\n'
+    )
+    shutil.copy(emml.registry.REPRODUCE_DIR / "paper" / "table5.csv", folder / "paper" / "table9.csv")
+    real_path, real_numbers = emml.registry.table_path, emml.report.tables.paper_numbers
+    monkeypatch.setattr(emml.registry, "table_path", lambda n: folder / f"{n}.toml" if n == "table9" else real_path(n))
+    monkeypatch.setattr(
+        emml.report.tables,
+        "paper_numbers",
+        lambda n, directory=None: real_numbers(n, folder / "paper") if n == "table9" else real_numbers(n),
+    )
+    return "table9"

@@ -43,3 +43,16 @@ def test_bench_workers_compares_envs_per_worker_end_to_end(no_leftovers):
     r = bench.bench_workers(["--profile", "smoke", "--updates", "1", "--set", "num_envs=4"], [1, 2], rounds=1)
     assert set(r["median_fps"]) == {"1 per worker", "2 per worker"}
     assert all(v["e2e"] > 0 for v in r["median_fps"].values())
+
+
+def test_bench_env_measures_the_doom_room_and_the_house(no_leftovers):
+    from emml.config import DoomConfig, HouseConfig
+
+    for cfg, name in ((DoomConfig(height=60, width=108), "doom"), (HouseConfig(height=60, width=108), "house")):
+        result = bench.bench_env(cfg, steps=100, vector_steps=100)
+        assert result["env"] == name
+        figures = [
+            result[k][m] for k in ("labels_off", "labels_on") for m in result[k] if isinstance(result[k][m], float)
+        ]
+        figures += [result[f"vector_{w}_workers_steps_per_s"] for w in (1, 2)]
+        assert len(figures) == 12 and all(math.isfinite(x) and x > 0 for x in figures)

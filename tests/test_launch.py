@@ -99,8 +99,8 @@ def test_slurm_backend_through_submitit_debug_executor(tracking):
     assert (Path(tracking["run_root"]) / "slurm" / "table3-smoke").is_dir()
 
 
-def test_placeholder_and_bad_arguments(tracking):
-    assert run_table("table5", PROFILE, log=lambda m: None).placeholder
+def test_placeholder_and_bad_arguments(tracking, placeholder_table):
+    assert run_table(placeholder_table, PROFILE, log=lambda m: None).placeholder
     with pytest.raises(ValueError, match="backend"):
         run_table("table3", PROFILE, backend="k8s")
     with pytest.raises(ValueError, match="profile"):
@@ -125,7 +125,7 @@ def test_tracker_nests_a_child_under_its_parent(tracking):
     assert runs[child]["tags"]["mlflow.parentRunId"] == parent
 
 
-def test_cli_run_list_report(tmp_path, monkeypatch):
+def test_cli_run_list_report(tmp_path, monkeypatch, placeholder_table):
     monkeypatch.setenv("EMML_MALLOC", "glibc-tuned")  # `emml run` would re-exec this process under tcmalloc
     import json
 
@@ -134,7 +134,7 @@ def test_cli_run_list_report(tmp_path, monkeypatch):
     from emml.cli import app
 
     runner = CliRunner()
-    result = runner.invoke(app, ["run", "table5", "--profile", "smoke"])
+    result = runner.invoke(app, ["run", placeholder_table, "--profile", "smoke"])
     assert result.exit_code == 0 and "placeholder" in result.output
     result = runner.invoke(app, ["run", "table2", "--profile", "huge"])
     assert result.exit_code == 2 and "profile" in result.output
@@ -142,11 +142,13 @@ def test_cli_run_list_report(tmp_path, monkeypatch):
     assert result.exit_code == 0, result.output
     tables = {t["table"]: t for t in json.loads(result.output)["tables"]}
     assert tables["table2"]["total"] == 28 and tables["table3"]["total"] == 16 and tables["table4"]["total"] == 2
+    assert tables["table5"]["total"] == 7  # the House (Appendix C): 7 models, no aux, one seed under smoke
     result = runner.invoke(
-        app, ["report", "table5", "--profile", "smoke", "--no-curves", "--out", str(tmp_path), "--json"]
+        app, ["report", placeholder_table, "--profile", "smoke", "--no-curves", "--out", str(tmp_path), "--json"]
     )
     assert result.exit_code == 0, result.output
-    assert (tmp_path / "table5-smoke.md").exists() and "PLACEHOLDER" in json.loads(result.output)["caption"]
+    assert (tmp_path / f"{placeholder_table}-smoke.md").exists()
+    assert "PLACEHOLDER" in json.loads(result.output)["caption"]
 
 
 def test_runs_packed_on_a_gpu_are_capped_by_its_free_memory(monkeypatch):

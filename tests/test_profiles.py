@@ -19,12 +19,12 @@ def test_the_committed_profiles_load_and_keep_their_types():
     "text, message",
     [
         ("[smoke\nframes = 1", "not valid TOML"),
-        ("[smoke]\nframes = \"lots\"", "[smoke] 'frames': expected an integer, got 'lots'"),
+        ('[smoke]\nframes = "lots"', "[smoke] 'frames': expected an integer, got 'lots'"),
         ("[smoke]\nfraems = 512", "[smoke] 'fraems': unknown field; known: model, aux"),
-        ("[smoke]\n\"env.heigth\" = 60", "[smoke] 'env.heigth': unknown field; known: difficulty"),
-        ("[smoke]\n\"ppo.lr\" = \"fast\"", "[smoke] 'ppo.lr': expected a number, got 'fast'"),
-        ("[smoke]\n\"env.shaping\" = 1", "[smoke] 'env.shaping': expected true or false, got 1"),
-        ("[smoke]\nseeds = [0, \"1\"]", "[smoke]: 'seeds' must be a non-empty list of integers"),
+        ('[smoke]\n"env.heigth" = 60', "[smoke] 'env.heigth': unknown field; known: difficulty"),
+        ('[smoke]\n"ppo.lr" = "fast"', "[smoke] 'ppo.lr': expected a number, got 'fast'"),
+        ('[smoke]\n"env.shaping" = 1', "[smoke] 'env.shaping': expected true or false, got 1"),
+        ('[smoke]\nseeds = [0, "1"]', "[smoke]: 'seeds' must be a non-empty list of integers"),
         ("[smoke]\nframes_hard = 1.5", "[smoke]: 'frames_hard' must be an integer"),
         ("smoke = 3", "[smoke]: a profile is a table of TrainConfig fields"),
     ],
@@ -50,14 +50,34 @@ def test_a_missing_profiles_file_is_named(tmp_path):
 @pytest.mark.parametrize(
     "option, message",
     [
-        ("frames=\"lots\"", "--set 'frames': expected an integer, got 'lots'"),
+        ('frames="lots"', "--set 'frames': expected an integer, got 'lots'"),
         ("env.shaping=1", "--set 'env.shaping': expected true or false, got 1"),
         ("fraems=5", "--set 'fraems': unknown field"),
     ],
 )
 def test_a_wrong_set_override_is_named_as_such(option, message, tmp_path):
-    result = CliRunner().invoke(app, ["train", "--profile", "smoke", "--set", option,
-                                      "--set", f"run_root=\"{tmp_path}\""])
+    result = CliRunner().invoke(
+        app, ["train", "--profile", "smoke", "--set", option, "--set", f'run_root="{tmp_path}"']
+    )
     assert result.exit_code == 2 and message in result.output, result.output
     assert list(tmp_path.iterdir()) == []
     assert str(PROFILES_FILE) not in result.output  # the option is blamed, not the profile
+
+
+def test_the_house_gets_its_own_env_config_from_a_profile_a_set_and_a_saved_run():
+    from emml.config import HouseConfig, TrainConfig, apply_overrides
+
+    profiles = load_profiles()
+    cfg = profile_config("quick", "house")  # Appendix C: 50M frames at the paper profile, as in Hard
+    assert isinstance(cfg.env, HouseConfig) and cfg.frames == profiles["quick"]["frames_hard"]
+    assert cfg.env.max_steps == 420 and cfg.env.dataset == "house" and cfg.env.height == 84
+    assert cfg.run_name() == "dual_attention-house-noaux-s0-quick"
+    back = TrainConfig.from_dict(cfg.to_dict())
+    assert isinstance(back.env, HouseConfig) and back.to_dict() == cfg.to_dict()
+    # --set env.difficulty switches the class; fields set away from their defaults survive, the rest are the House's
+    cfg = apply_overrides(TrainConfig(), {"env.width": 108, "env.difficulty": "house"})
+    assert isinstance(cfg.env, HouseConfig) and cfg.env.width == 108 and cfg.env.max_steps == 420
+    cfg = apply_overrides(cfg, {"env.difficulty": "easy"})
+    assert type(cfg.env).__name__ == "DoomConfig" and cfg.env.max_steps == TrainConfig().env.max_steps
+    with pytest.raises(ValueError, match=r"env.difficulty='attic' is not allowed.*'easy', 'hard', 'house'"):
+        apply_overrides(TrainConfig(), {"env.difficulty": "attic"}).validate()

@@ -76,12 +76,14 @@ class RestartingEnv(gym.Wrapper):
 
 def make_env(config: DoomConfig | dict) -> gym.Env:
     """The env a config describes: a HouseEnv for difficulty 'house' (HouseConfig), else a DoomEnv."""
+    from emml.config import env_config_class
+
     values = asdict(config) if not isinstance(config, dict) else config
-    if values.get("difficulty") == "house":
-        from emml.config import HouseConfig
+    cls = env_config_class(values.get("difficulty", "easy"))
+    if cls is not DoomConfig:
         from emml.envs.house import HouseEnv
 
-        return HouseEnv(HouseConfig(**values))
+        return HouseEnv(cls(**values))
     from emml.envs.doom import DoomEnv
 
     return DoomEnv(DoomConfig(**values))

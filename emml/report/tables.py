@@ -26,7 +26,7 @@ CI_SEED = 0
 MISSING = "—"
 EXTRA_MARK = "†"
 """Marks a row of ours that the paper's table does not have (Table 4's other test instructions)."""
-DIFFICULTY_LABELS = {"easy": "Easy", "hard": "Hard", "house3d": "House3D"}
+DIFFICULTY_LABELS = {"easy": "Easy", "hard": "Hard", "house": "House"}
 AUX_LABELS = {False: "No Aux", True: "Aux"}
 METRIC_LABELS = {
     "sgn_test": "SGN test",

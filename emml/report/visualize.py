@@ -20,7 +20,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from emml.config import DoomConfig  # noqa: E402
-from emml.envs.doom import MOVES, DoomEnv  # noqa: E402
+from emml.envs.doom import MOVES  # noqa: E402
+from emml.envs.vector import make_env  # noqa: E402
 from emml.evaluate import obs_to_torch  # noqa: E402
 
 CHANNEL_WORDS = ("red", "green", "torch", "pillar", "smallest", "tall", "armor")
@@ -59,7 +60,7 @@ def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0,
     was_training = model.training
     model.eval()
     cfg = dataclasses.replace(env_cfg, tasks=task, split="train", aux_labels=True, instructions=None)
-    env = DoomEnv(cfg)
+    env = make_env(cfg)
     try:
         obs, _ = env.reset(seed=seed)
         _, x_sent = model.text_encoder(torch.as_tensor(obs["tokens"])[None].to(device))

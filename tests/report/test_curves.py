@@ -39,8 +39,8 @@ def test_plot_table_skips_runs_without_history(tracking, tmp_path):
     assert any("da_no_sa-easy-aux-s0-quick" in n and "no curve (MLflow run" in n for n in notes)
 
 
-def test_plot_table_placeholder(tracking, tmp_path):
-    paths, notes = plot_table("table5", "quick", results_root=tmp_path, out=tmp_path)
+def test_plot_table_placeholder(tracking, tmp_path, placeholder_table):
+    paths, notes = plot_table(placeholder_table, "quick", results_root=tmp_path, out=tmp_path)
     assert paths == [] and "placeholder" in notes[0]
 
 

@@ -112,10 +112,10 @@ def test_no_results_at_all(tmp_path):
     assert all(c["n"] == 0 for c in rep["cells"]) and "no finished runs yet" in rep["caption"]
 
 
-def test_placeholder_shows_the_papers_numbers(tmp_path):
-    rep = report_table("table5", PROFILE, results_root=tmp_path, out=tmp_path / "reports")
+def test_placeholder_shows_the_papers_numbers(tmp_path, placeholder_table):
+    rep = report_table(placeholder_table, PROFILE, results_root=tmp_path, out=tmp_path / "reports")
     assert len(rep["cells"]) == 28 and "PLACEHOLDER" in rep["caption"]
-    md = (tmp_path / "reports" / "table5-quick.md").read_text()
+    md = (tmp_path / "reports" / f"{placeholder_table}-quick.md").read_text()
     assert f"{MISSING} \\| 0.47" in md
     tex = tmp_path / "reports" / "table4-quick.tex"
     report_table("table4", PROFILE, results_root=tmp_path, out=tmp_path / "reports")

@@ -69,9 +69,25 @@ def _train_and_sigkill(tracking, ready, frames: int = 2048) -> tuple[TrainConfig
     """`emml train` (smoke, 2,048 frames, a checkpoint every 2 updates) in a subprocess, SIGKILLed as soon as
     ``ready(checkpoint, logged_steps)`` holds (``logged_steps()`` reads MLflow); returns the config, the
     checkpoint it left and the killed pid."""
-    args = [sys.executable, "-m", "emml.cli", "train", "--profile", "smoke", "--table", "test", "--frames", str(frames),
-            "--set", f'run_root="{tracking["run_root"]}"', "--set", "checkpoint_every=2", "--set", "eval_episodes=1",
-            "--quiet"]
+    args = [
+        sys.executable,
+        "-m",
+        "emml.cli",
+        "train",
+        "--profile",
+        "smoke",
+        "--table",
+        "test",
+        "--frames",
+        str(frames),
+        "--set",
+        f'run_root="{tracking["run_root"]}"',
+        "--set",
+        "checkpoint_every=2",
+        "--set",
+        "eval_episodes=1",
+        "--quiet",
+    ]
     env = {**os.environ, "EMML_MALLOC": "glibc-tuned"}
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     cfg = smoke(tracking, frames=frames, checkpoint_every=2, eval_episodes=1)
@@ -185,6 +201,23 @@ def test_every_evaluation_logs_the_diagnostics(tracking, no_leftovers):
         for key in ("detector_ap", "actor_sensitivity"):
             assert [s for s, _ in metric_history(run_id, f"diag/{key}")] == [64, 128]
         assert bool(metric_history(run_id, "diag/attention_on_target")) == has_attention
+
+
+def test_a_house_run_trains_evaluates_diagnoses_and_reloads(tracking, no_leftovers):
+    """Table 5's runs go through the same trainer: the House's env in the workers, the evaluation and the
+    diagnostics (its spawn is fixed, so the actor's sensitivity is defined as in Easy), and a checkpoint that reloads
+    with its HouseConfig."""
+    from emml.config import HouseConfig
+    from emml.evaluate import load_model
+
+    cfg = smoke(tracking, frames=128, eval_episodes=2, seed=2, **{"env.difficulty": "house", "eval_every": 128})
+    cfg.diagnose_episodes = 1
+    result = train(cfg, quiet=True)
+    assert cfg.run_name() == "dual_attention-house-noaux-s2-smoke"
+    assert set(result.metrics) == {"sgn_train", "sgn_test", "eqa_train", "eqa_test"}
+    assert [s for s, _ in metric_history(result.run_id, "diag/actor_sensitivity")] == [128]
+    _, saved = load_model(result.run_dir / CHECKPOINT)
+    assert isinstance(saved.env, HouseConfig) and saved.env.max_steps == 420
 
 
 def test_unknown_override_is_named():
