@@ -9,7 +9,7 @@ BACKEND ?= local
 TCMALLOC := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib/x86_64-linux-gnu/libtcmalloc.so.4))
 EMML := $(if $(TCMALLOC),LD_PRELOAD=$(TCMALLOC) )$(VENV)/bin/emml
 
-.PHONY: setup demo test lint bench ui table2 ablations transfer house3d reports list
+.PHONY: setup demo test test-slow lint bench ui table2 ablations transfer house3d reports list
 
 setup: $(VENV)/.installed
 
@@ -26,6 +26,10 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest -q
+
+# the learning checks too long for CI (tests marked slow: the end-to-end SGN test on learned detectors, ~8 min)
+test-slow: setup
+	$(PY) -m pytest -q -m slow
 
 lint: setup
 	$(VENV)/bin/ruff check emml tests
