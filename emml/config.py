@@ -311,6 +311,8 @@ class TrainConfig:
             parts.append(f"{self.env.tasks}only")
         if not self.env.shaping:
             parts.append("noshaping")
+        if self.model_options.get("state_temperature") is not None:  # opt-in: the policy reads a sharper map
+            parts.append(f"xs{self.model_options['state_temperature']:g}")
         return "-".join([*parts, f"s{self.seed}", self.profile])
 
     def to_dict(self) -> dict:
@@ -334,14 +336,23 @@ class TrainConfig:
 
 
 def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") -> TrainConfig:
-    """Set fields by dotted name ('frames', 'env.height', 'ppo.lr'); an unknown name or a value of the wrong type
-    fails naming ``source`` (the --set option, or the profile it came from), the field and what it accepts."""
+    """Set fields by dotted name ('frames', 'env.height', 'ppo.lr', 'model_options.state_temperature'); an unknown
+    name or a value of the wrong type fails naming ``source`` (the --set option, or the profile it came from), the
+    field and what it accepts. Model options are checked by name here and by value in `validate()`."""
     for key, value in overrides.items():
         target, name = cfg, key
         if "." in key:
             section, name = key.split(".", 1)
-            if section not in ("env", "ppo"):
-                raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo'")
+            if section not in ("env", "ppo", "model_options"):
+                raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo', 'model_options'")
+            if section == "model_options":
+                from emml.models.config import ModelConfig
+
+                known = list(ModelConfig.__dataclass_fields__)
+                if name not in known:
+                    raise ValueError(f"{source} {key!r}: unknown model option; known: {', '.join(known)}")
+                cfg.model_options = {**cfg.model_options, name: value}
+                continue
             target = getattr(cfg, section)
         known = [f.name for f in fields(target)]
         if name not in known:

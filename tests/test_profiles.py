@@ -53,6 +53,8 @@ def test_a_missing_profiles_file_is_named(tmp_path):
         ('frames="lots"', "--set 'frames': expected an integer, got 'lots'"),
         ("env.shaping=1", "--set 'env.shaping': expected true or false, got 1"),
         ("fraems=5", "--set 'fraems': unknown field"),
+        ("model_options.state_temprature=0.25", "--set 'model_options.state_temprature': unknown model option"),
+        ("model_options.state_temperature=-1", "ModelConfig.state_temperature=-1 must be None (off) or a number > 0"),
     ],
 )
 def test_a_wrong_set_override_is_named_as_such(option, message, tmp_path):
@@ -81,3 +83,13 @@ def test_the_house_gets_its_own_env_config_from_a_profile_a_set_and_a_saved_run(
     assert type(cfg.env).__name__ == "DoomConfig" and cfg.env.max_steps == TrainConfig().env.max_steps
     with pytest.raises(ValueError, match=r"env.difficulty='attic' is not allowed.*'easy', 'hard', 'house'"):
         apply_overrides(TrainConfig(), {"env.difficulty": "attic"}).validate()
+
+
+def test_a_model_option_is_set_from_the_command_line_and_recorded():
+    from emml.config import TrainConfig, apply_overrides
+
+    cfg = apply_overrides(TrainConfig(), {"model_options.state_temperature": 0.25}).validate()
+    assert cfg.model_options == {"state_temperature": 0.25}
+    assert TrainConfig.from_dict(cfg.to_dict()).model_options == {"state_temperature": 0.25}  # saved with the run
+    assert cfg.run_name() == "dual_attention-easy-noaux-xs0.25-s0-paper"  # beside the default run, not over it
+    assert TrainConfig().run_name() == "dual_attention-easy-noaux-s0-paper"

@@ -51,6 +51,12 @@ class ModelConfig:
     state_scale: bool = True
     """Dual-Attention: hand the policy x_S = h·w · vec(x_spat) (mean 1 per cell) instead of vec(x_spat) (entries
     ~1/(h·w)). Paper silent on input scaling; measured in docs/fidelity.md."""
+    state_temperature: float | None = None
+    """Dual-Attention, opt-in: hand the policy x_S = h·w · softmax(scores / state_temperature) with the gradient
+    stopped, a sharper copy of x_spat (Eq. 2); x_spat itself, Eq. 3-5 and every loss's gradient into the detectors
+    stay as they are. None (the default): x_S = h·w · vec(x_spat). The paper is silent on how the policy reads the
+    map: at temperature 1 a detector that ranks the target first but scores it 0.6 against 0.2 gives it 1.5x a
+    background cell, too faint for the actor; measured in docs/fidelity.md."""
     x_image: str = "sigmoid"
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
@@ -68,6 +74,15 @@ class ModelConfig:
             value = getattr(self, field)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"ModelConfig.{field}={value!r} must be a positive integer (>= 1)")
+        t = self.state_temperature
+        if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float)) or not t > 0):
+            raise ValueError(f"ModelConfig.state_temperature={t!r} must be None (off) or a number > 0")
+        if t is not None and not (self.name == "dual_attention" and self.spatial_attention):
+            raise ValueError(
+                f"ModelConfig.state_temperature={t!r} sharpens the spatial attention map: only for "
+                f"name='dual_attention' with spatial_attention=True (got name={self.name!r}, "
+                f"spatial_attention={self.spatial_attention}); allowed there: None or a number > 0"
+            )
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
         if self.control not in CONTROLS:

@@ -76,9 +76,11 @@ class DualAttention(nn.Module):
         ga2: bool = True,
         spatial: bool = True,
         state_scale: bool = False,
+        state_temperature: float | None = None,
     ) -> None:
         super().__init__()
         self.ga1, self.ga2, self.spatial = ga1, ga2, spatial
+        self.state_temperature = state_temperature
         self.state_scale = float(height * width) if state_scale and spatial else 1.0
         self.uses_bow = ga1
         self.uses_sent = ga2
@@ -102,7 +104,10 @@ class DualAttention(nn.Module):
             scores = scores.reshape(n, h * w)
             x_spat = torch.softmax(scores, dim=1).reshape(n, h, w)  # Eq. 2: softmax over HxW
             x_sa = spatial_attention(x_image, x_spat)  # Eq. 3
-            state = x_spat.reshape(n, h * w) * self.state_scale  # x_S = vec(x_spat) (× h·w: mean 1 per cell)
+            if self.state_temperature is None:
+                state = x_spat.reshape(n, h * w) * self.state_scale  # x_S = vec(x_spat) (× h·w: mean 1 per cell)
+            else:  # opt-in: the policy reads a sharper copy of Eq. 2's map, with no gradient back into the scores
+                state = torch.softmax(scores.detach() / self.state_temperature, dim=1) * self.state_scale
         else:
             x_spat = None
             x_sa = x_image  # w/o SA: Eq. 2-3 removed
@@ -269,6 +274,7 @@ def build_fusion(cfg, vocab_size: int, height: int, width: int) -> nn.Module:
             ga2=cfg.ga2,
             spatial=cfg.spatial_attention,
             state_scale=cfg.state_scale,
+            state_temperature=cfg.state_temperature,
         )
     if cfg.name in BASELINES:
         return BASELINES[cfg.name](vocab_size, height, width)

@@ -177,3 +177,20 @@ def test_state_scale_gives_the_policy_a_mean_one_map():
     torch.testing.assert_close(scaled.state.mean(1), torch.ones(3))
     torch.testing.assert_close(scaled.attention, plain.attention)  # Eq. 2-5 unchanged
     torch.testing.assert_close(scaled.answer_logits, plain.answer_logits)
+
+
+def test_state_temperature_hands_the_policy_a_sharper_map_without_gradient():
+    """Opt-in `state_temperature`: x_S = h·w · softmax(scores / t) with the gradient stopped; x_spat, the answer and
+    the gradients every other output sends into the detectors are those of the default model."""
+    torch.manual_seed(0)
+    x_i = torch.rand(3, 4, 2, 5, requires_grad=True)
+    bow, sent = torch.ones(3, 4), torch.ones(3, 4)
+    plain = DualAttention(4, 2, 5, state_scale=True)(x_i, bow, sent)
+    sharp = DualAttention(4, 2, 5, state_scale=True, state_temperature=0.25)(x_i, bow, sent)
+    scores = x_i.detach().sum(1).reshape(3, 10)  # Eq. 1-2 with every word in the BoW
+    torch.testing.assert_close(sharp.state, torch.softmax(scores / 0.25, dim=1) * 10)
+    assert (sharp.state.max(1).values > plain.state.max(1).values).all()  # sharper: the top cell gains
+    torch.testing.assert_close(sharp.attention, plain.attention)  # Eq. 2-5 unchanged
+    torch.testing.assert_close(sharp.answer_logits, plain.answer_logits)
+    assert not sharp.state.requires_grad  # no policy or value gradient reaches the detectors through x_S
+    assert plain.state.requires_grad

@@ -234,6 +234,10 @@ def test_unknown_model_name_lists_known_names():
         ({"control": "oracle"}, "control"),
         ({"x_image": "tanh"}, "x_image"),
         ({"state_scale": 1}, "state_scale"),
+        ({"state_temperature": 0}, "state_temperature"),
+        ({"state_temperature": "sharp"}, "state_temperature"),
+        ({"name": "ga", "state_temperature": 0.25}, "state_temperature"),
+        ({"spatial_attention": False, "state_temperature": 0.25}, "state_temperature"),
     ],
 )
 def test_config_validate_names_field(kwargs, field):
