@@ -164,9 +164,11 @@ def plot_table(
     out = Path(out) if out is not None else project_root() / "reports"
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}-{profile}-curves.png", out / f"{name}-{profile}-curves.pdf"]
-    if not plotted and any(p.exists() for p in paths):
+    if not plotted:  # never an empty figure: keep what an earlier machine drew, or draw nothing
         plt.close(fig)
-        return paths, notes + [f"no run of {name} [{profile}] has a curve here: kept the existing figures"]
+        kept = [p for p in paths if p.exists()]
+        what = "kept the existing figures" if kept else "no figure written"
+        return kept, notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
     for p in paths:
         fig.savefig(p, dpi=120)
     plt.close(fig)

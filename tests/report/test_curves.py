@@ -61,3 +61,15 @@ def test_curves_come_from_the_run_dir_when_mlflow_lacks_the_run_and_are_never_bl
     (run / "metrics.csv").write_text("step,key,value\n1024,train/success_sgn,0.25\n2048,train/success_sgn,0.5\n")
     paths, notes = plot_table("table3", "quick", **kw)  # the run dir's mirror gives the curve
     assert not any(name in n for n in notes) and (out / "table3-quick-curves.png").stat().st_size > 1000
+
+
+def test_no_curve_and_no_earlier_figure_writes_no_empty_figure(tracking, tmp_path):
+    csv = tmp_path / "results" / "table3" / "quick.csv"
+    csv.parent.mkdir(parents=True)
+    pd.DataFrame(
+        [{"run_name": "dual_attention-easy-aux-s0-quick", "run_id": "elsewhere", "seed": 0, "frames": 64}]
+    ).to_csv(csv)
+    out = tmp_path / "reports"
+    paths, notes = plot_table("table3", "quick", results_root=tmp_path / "results", out=out, run_root=tmp_path / "runs")
+    assert paths == [] and not list(out.glob("*curves*"))  # an empty figure would read as "nothing learned"
+    assert any("no figure written" in n for n in notes)
