@@ -311,8 +311,8 @@ class TrainConfig:
             parts.append(f"{self.env.tasks}only")
         if not self.env.shaping:
             parts.append("noshaping")
-        if self.model_options.get("state_temperature") is not None:  # opt-in: the policy reads a sharper map
-            parts.append(f"xs{self.model_options['state_temperature']:g}")
+        if (t := self.model_options.get("state_temperature")) is not None:  # opt-in: the policy reads a sharper map
+            parts.append(f"xs{t:g}")
         return "-".join([*parts, f"s{self.seed}", self.profile])
 
     def to_dict(self) -> dict:
@@ -348,7 +348,7 @@ def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") ->
             if section == "model_options":
                 from emml.models.config import ModelConfig
 
-                known = list(ModelConfig.__dataclass_fields__)
+                known = [f.name for f in fields(ModelConfig)]
                 if name not in known:
                     raise ValueError(f"{source} {key!r}: unknown model option; known: {', '.join(known)}")
                 cfg.model_options = {**cfg.model_options, name: value}

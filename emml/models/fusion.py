@@ -104,10 +104,11 @@ class DualAttention(nn.Module):
             scores = scores.reshape(n, h * w)
             x_spat = torch.softmax(scores, dim=1).reshape(n, h, w)  # Eq. 2: softmax over HxW
             x_sa = spatial_attention(x_image, x_spat)  # Eq. 3
-            if self.state_temperature is None:
-                state = x_spat.reshape(n, h * w) * self.state_scale  # x_S = vec(x_spat) (× h·w: mean 1 per cell)
-            else:  # opt-in: the policy reads a sharper copy of Eq. 2's map, with no gradient back into the scores
-                state = torch.softmax(scores.detach() / self.state_temperature, dim=1) * self.state_scale
+            # x_S = vec(x_spat) (× h·w: mean 1 per cell); opt-in, the policy reads a sharper copy of Eq. 2's map
+            # instead, with no gradient back into the scores
+            t = self.state_temperature
+            read = x_spat.reshape(n, h * w) if t is None else torch.softmax(scores.detach() / t, dim=1)
+            state = read * self.state_scale
         else:
             x_spat = None
             x_sa = x_image  # w/o SA: Eq. 2-3 removed

@@ -194,3 +194,6 @@ def test_state_temperature_hands_the_policy_a_sharper_map_without_gradient():
     torch.testing.assert_close(sharp.answer_logits, plain.answer_logits)
     assert not sharp.state.requires_grad  # no policy or value gradient reaches the detectors through x_S
     assert plain.state.requires_grad
+    (grad_plain,) = torch.autograd.grad(plain.answer_logits.sum(), x_i)
+    (grad_sharp,) = torch.autograd.grad(sharp.answer_logits.sum(), x_i)
+    torch.testing.assert_close(grad_sharp, grad_plain)  # the answer's gradient into the detectors is unchanged

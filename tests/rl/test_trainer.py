@@ -267,10 +267,9 @@ def test_learning_beats_chance(tracking, no_leftovers):
     assert metric_history(result.run_id, "train/success_eqa")[-1][1] >= 0.7
 
 
-def demo_sgn(tracking, frames: int, seed: int, **over) -> TrainConfig:
+def demo_sgn(tracking, frames: int, seed: int, model_options: dict | None = None, **over) -> TrainConfig:
     """Easy SGN only at the demo scale (60×108, 4 actors × 64 steps), aux on, scored once at the end (40 greedy
     episodes, 20 diagnosed): the config of the SGN learning tests, with ``over`` as further dotted overrides."""
-    model_options = over.pop("model_options", {})
     fields = {
         "run_root": tracking["run_root"],
         "results_root": tracking["results_root"],
@@ -283,7 +282,7 @@ def demo_sgn(tracking, frames: int, seed: int, **over) -> TrainConfig:
         "env.tasks": "sgn",
         **over,
     }
-    return profile_config("demo", "easy", fields, aux=True, seed=seed, model_options=model_options)
+    return profile_config("demo", "easy", fields, aux=True, seed=seed, model_options=model_options or {})
 
 
 GROUNDED_INSTRUCTIONS = ("go to the green object", "go to the blue object", "go to the yellow object")
