@@ -69,3 +69,27 @@ def test_sentence_uses_last_non_pad_step():
     torch.testing.assert_close(sent[2], torch.relu(enc.linear.bias))
     sent.sum().backward()
     assert torch.isfinite(enc.gru.weight_ih_l0.grad).all()
+
+
+def test_channels_last_gives_the_plain_layout_results_forward_and_backward():
+    """The encoder runs NHWC (channels_last, issue 14); outputs and gradients equal the plain NCHW convolutions
+    on contiguous copies of the same weights within float tolerance, and the output is an ordinary NCHW tensor."""
+    import torch.nn.functional as F
+
+    torch.manual_seed(0)
+    enc = ImageEncoder(vocab_size=7)
+    assert enc.conv1.weight.is_contiguous(memory_format=torch.channels_last)
+    img = torch.randint(0, 256, (3, 3, 84, 150), dtype=torch.uint8)
+    out = enc(img)
+    assert out.is_contiguous() and out.shape == (3, 7, 4, 8)
+    weights = [(c.weight.detach().contiguous().requires_grad_(), c.bias, c.stride) for c in (enc.conv1, enc.conv2)]
+    x = img.float() / 255
+    for w, b, s in weights:
+        x = torch.relu(F.conv2d(x, w, b.detach(), s))
+    w3 = enc.conv3.weight.detach().contiguous().requires_grad_()
+    ref = F.conv2d(x, w3, enc.conv3.bias.detach(), enc.conv3.stride)
+    torch.testing.assert_close(out, ref, rtol=1e-5, atol=1e-5)
+    out.square().sum().backward()
+    ref.square().sum().backward()
+    torch.testing.assert_close(enc.conv3.weight.grad, w3.grad, rtol=1e-4, atol=1e-5)
+    torch.testing.assert_close(enc.conv1.weight.grad, weights[0][0].grad, rtol=1e-4, atol=1e-5)
