@@ -149,6 +149,7 @@ def channels_figure(
     first = next(iter(episodes.values()))
     labels, frame = first.labels[0], first.frames[0]
     channels = {name: ep.channels[0] for name, ep in episodes.items()}
+    words = tuple(w for w in words if w in first.words)  # a run on the training vocabulary (Table 4) lacks some
     cols = 2 + len(models)
     fig, axes = plt.subplots(len(words), cols, figsize=(2.6 * cols, 1.5 * len(words)), squeeze=False)
     h, w = frame.shape[:2]
