@@ -71,6 +71,14 @@ def test_the_channel_figure_compares_aux_and_no_aux_channels(checkpoints, tmp_pa
     assert not np.array_equal(channels["aux"], channels["no aux"])  # two models, two columns
 
 
+def test_the_channel_figure_leaves_out_words_the_run_does_not_know(checkpoints, tmp_path, no_leftovers):
+    """A run on the training vocabulary (Table 4) has no 'red' or 'pillar' channel: those rows are left out, not
+    an error (`make reports` failed on the Table 4 quick run)."""
+    model, cfg = load_model(checkpoints[True])
+    fig, _, _ = channels_figure([("aux", model)], cfg.env, tmp_path / "c.png", words=("red", "unseenword"))
+    assert [ax.get_ylabel() for ax in np.array(fig.axes).reshape(-1, 3)[:, 0]] == ["red"]
+
+
 def test_cli_figures_and_videos(checkpoints, tmp_path, no_leftovers):
     runner = CliRunner()
     ck = str(checkpoints[True])
