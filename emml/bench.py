@@ -127,13 +127,15 @@ class MemoryTracker:
         return 0
 
 
-def _model_only(cfg, updates: int) -> float:
-    """Frames/s of acting (T batched forward steps) + one PPO update on synthetic observations of the real shapes."""
+def _model_only(cfg, updates: int, stack: int = 1) -> float:
+    """Frames/s of acting (T batched forward steps) + one PPO update on synthetic observations of the real shapes;
+    with ``stack`` N > 1, of N runs stacked in one model (emml/rl/packed.py), all their frames counted."""
     import torch
 
     from emml.envs.labels import channel_mask, default_aux_words
     from emml.geometry import conv_output_size
     from emml.models import build_model
+    from emml.rl.packed import StackedModels, packed_ppo_update
     from emml.rl.ppo import make_optimizer, ppo_update
     from emml.rl.precision import autocast, fp32_outputs
     from emml.rl.rollout import RolloutBuffer
@@ -141,9 +143,12 @@ def _model_only(cfg, updates: int) -> float:
 
     env, device = cfg.env, torch.device(cfg.device)
     vocab = Vocabulary.from_dataset(load_dataset(env.dataset))
-    V, (h, w), B, T = len(vocab), conv_output_size(env.height, env.width), cfg.num_envs, cfg.num_steps
-    model = build_model(cfg.model, V, env.height, env.width, env.max_steps).to(device)
-    optimizer = make_optimizer(model.parameters(), cfg.ppo)
+    V, (h, w), T = len(vocab), conv_output_size(env.height, env.width), cfg.num_steps
+    B = cfg.num_envs * stack
+    models = [build_model(cfg.model, V, env.height, env.width, env.max_steps) for _ in range(stack)]
+    model = (StackedModels(models) if stack > 1 else models[0]).to(device)
+    params = model.parameters_in_order() if stack > 1 else list(model.parameters())
+    optimizer = make_optimizer(params, cfg.ppo)
     shapes = {
         "image": ((3, env.height, env.width), torch.uint8),
         "tokens": ((env.max_words,), torch.int64),
@@ -174,7 +179,11 @@ def _model_only(cfg, updates: int) -> float:
                 )
                 buffer.values[t] = out.value[0]
         buffer.compute_returns(torch.zeros(B, device=device), cfg.ppo.gamma, cfg.ppo.gae_lambda)
-        ppo_update(forward, optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux)
+        if stack > 1:
+            with autocast(cfg.precision, device):
+                packed_ppo_update(model, optimizer, buffer, cfg.ppo, mask, use_aux=cfg.aux)
+        else:
+            ppo_update(forward, optimizer, params, buffer, cfg.ppo, mask, use_aux=cfg.aux)
 
     def sync():
         if device.type == "cuda":
@@ -244,11 +253,14 @@ PARTS = ("both", "model", "e2e")
 """What `bench train` measures: model-only and end-to-end (with their ratio), or one of them."""
 
 
-def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000, part: str = "both") -> dict:
+def bench_train(
+    cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000, part: str = "both", stack: int = 1
+) -> dict:
     """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
     split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
     N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
-    the raw simulator limit of all cores."""
+    the raw simulator limit of all cores. With ``stack`` N > 1, model-only only: N runs stacked in one model
+    (emml/rl/packed.py), their aggregate frames/s beside one plain run's, measured in turn."""
     import dataclasses
     import os
 
@@ -270,6 +282,13 @@ def bench_train(cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000, p
         "precision": cfg.precision,
         "updates": updates,
     }
+    if stack > 1:
+        if part != "model":
+            raise ValueError(f"stack={stack} measures the model-only loop: use part='model'")
+        single, stacked = _model_only(cfg, updates), _model_only(cfg, updates, stack)
+        out |= {"model_only_fps": round(single, 1), "stack": stack, "stacked_model_only_fps": round(stacked, 1)}
+        out["stacked_gain"] = round(stacked / single, 3)
+        return out
     if part == "model":
         out["model_only_fps"] = round(_model_only(cfg, updates), 1)
         return out

@@ -191,6 +191,7 @@ def bench_train_cmd(
     runs: int = typer.Option(0, min=0, help="Also pack N end-to-end runs side by side: aggregate vs simulator limit."),
     sets: list[str] = typer.Option([], "--set", help="Override any config field."),
     part: str = typer.Option("both", help="both (model-only, end-to-end and their ratio), model or e2e."),
+    stack: int = typer.Option(1, min=1, help="With --part model: N runs stacked in one model (vmap), vs one run."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
@@ -205,9 +206,19 @@ def bench_train_cmd(
         _fail(str(e))
     if part not in PARTS:
         _fail(f"--part {part!r}: allowed values are {', '.join(PARTS)}")
+    if stack > 1 and part != "model":
+        _fail(f"--stack {stack} measures the model-only loop: add --part model")
     _use_tcmalloc()
     install_signal_handlers()
-    r = bench_train(cfg, updates, runs, part=part)
+    r = bench_train(cfg, updates, runs, part=part, stack=stack)
+    if stack > 1:
+        _echo(
+            r,
+            as_json,
+            f"{model} at {r['width']}x{r['height']} on {r['device']}: one run {r['model_only_fps']:.0f} frames/s, "
+            f"{stack} stacked runs {r['stacked_model_only_fps']:.0f} frames/s in all (×{r['stacked_gain']})",
+        )
+        return
     if part != "both":
         fps = r.get("model_only_fps", r.get("end_to_end_fps"))
         _echo(r, as_json, f"{model} at {r['width']}x{r['height']} on {r['allocator']}: {part} {fps:.0f} frames/s")

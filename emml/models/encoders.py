@@ -16,6 +16,7 @@ from torch import Tensor, nn
 
 from emml.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv geometry
 from emml.geometry import MIN_INPUT_SIZE, conv_output_size  # noqa: F401  (re-exported)
+from emml.models.gru import gru_scan
 
 
 class ImageEncoder(nn.Module):
@@ -34,12 +35,16 @@ class ImageEncoder(nn.Module):
         # channels_last (NHWC) weights and activations: oneDNN's convolutions run faster on them (issue 14; conv
         # stack forward + backward 0.61x the time at 84x150, 0.82x at 168x300; docs/throughput.md); same values.
         self.to(memory_format=torch.channels_last)
+        self.channels_last = True
+        """Convert the input to channels_last (off under `torch.func.vmap`, which cannot query memory formats)."""
 
     def forward(self, image: Tensor) -> Tensor:
         """uint8 image (N, 3, H, W) -> conv3 logits (N, V, h, w), contiguous (NCHW) like any other tensor."""
         if image.dtype != torch.uint8:
             raise TypeError(f"ImageEncoder expects a uint8 image, got {image.dtype}")
-        x = image.contiguous(memory_format=torch.channels_last).float().div_(255.0)
+        if self.channels_last:
+            image = image.contiguous(memory_format=torch.channels_last)
+        x = image.float().div(255.0)
         x = torch.relu(self.conv1(x))
         x = torch.relu(self.conv2(x))
         return self.conv3(x).contiguous()
@@ -59,6 +64,9 @@ class TextEncoder(nn.Module):
         super().__init__()
         self.vocab_size = vocab_size
         self.sentence = sentence
+        self.unrolled = False
+        """Run the GRU as its equations in linear ops (`gru_scan`) rather than the fused `nn.GRU` kernel: what
+        `torch.func.vmap` can batch over stacked runs (emml/rl/packed.py). Same values within float tolerance."""
         if sentence:
             self.embedding = nn.Embedding(vocab_size + 1, embed_dim, padding_idx=0)
             self.gru = nn.GRU(embed_dim, gru, batch_first=True)
@@ -66,14 +74,15 @@ class TextEncoder(nn.Module):
 
     def bag_of_words(self, tokens: Tensor) -> Tensor:
         """x_BoW[n, i] = 1 iff word i (token id i + 1) occurs in row n."""
-        bow = tokens.new_zeros(tokens.shape[0], self.vocab_size + 1, dtype=torch.float32)
-        bow.scatter_(1, tokens, 1.0)
-        return bow[:, 1:]
+        # a comparison, not scatter_: exactly the same 0/1 values, and vmap batches it (scatter_ has no batching rule)
+        words = torch.arange(1, self.vocab_size + 1, device=tokens.device)
+        return (tokens.unsqueeze(-1) == words).any(dim=-2).to(torch.float32)
 
     def sentence_embedding(self, tokens: Tensor) -> Tensor:
         """x_sent = ReLU(Linear(GRU(Embedding(tokens))[last non-pad step]))."""
         n, length = tokens.shape
-        out, _ = self.gru(self.embedding(tokens))  # (N, L, gru)
+        embedded = self.embedding(tokens)
+        out = gru_scan(self.gru, embedded) if self.unrolled else self.gru(embedded)[0]  # (N, L, gru)
         positions = torch.arange(1, length + 1, device=tokens.device)
         last = ((tokens != 0).long() * positions).amax(dim=1)  # 1-based; 0 = all pad
         index = (last - 1).clamp(min=0).view(n, 1, 1).expand(n, 1, out.shape[-1])

@@ -18,6 +18,7 @@ from torch import Tensor, nn
 from emml.models.config import ModelConfig
 from emml.models.encoders import ImageEncoder, TextEncoder, conv_output_size
 from emml.models.fusion import FusionOutput, Pacman, build_fusion
+from emml.models.gru import gru_cell
 
 NUM_ACTIONS = 4
 """Navigation actions (the harness's action set size)."""
@@ -73,6 +74,8 @@ class PolicyModule(nn.Module):
         in_dim = state_dim + vocab_size + time_dim + (NUM_TASKS if task_indicator else 0)
         self.linear = nn.Linear(in_dim, hidden)
         self.gru = nn.GRUCell(hidden, hidden)
+        self.unrolled = False
+        """Run the GRU cell as its equations in linear ops (`emml.models.gru`), for `torch.func.vmap`."""
         self.actor = _layer_init(nn.Linear(hidden, NUM_ACTIONS), std=0.01)
         self.critic = _layer_init(nn.Linear(hidden, 1), std=1.0)
 
@@ -95,12 +98,14 @@ class PolicyModule(nn.Module):
         t_len, batch = time.shape
         parts = [state, answer_probs, self.time_embedding(time.clamp(0, self.max_steps))]
         if self.task_indicator:
-            parts.append(nn.functional.one_hot(task, NUM_TASKS).to(state.dtype))
+            # one-hot by comparison: F.one_hot checks its input's range on the host, which vmap cannot batch
+            parts.append((task.unsqueeze(-1) == torch.arange(NUM_TASKS, device=task.device)).to(state.dtype))
         x = torch.relu(self.linear(torch.cat(parts, dim=-1)))  # batched over T*B
         keep = (~episode_start.bool()).to(x.dtype).unsqueeze(-1)  # (T, B, 1)
         outs = []
+        cell = (lambda x_t, h_t: gru_cell(self.gru, x_t, h_t)) if self.unrolled else self.gru
         for t in range(t_len):
-            h = self.gru(x[t], h * keep[t])
+            h = cell(x[t], h * keep[t])
             outs.append(h)
         out = torch.stack(outs)  # (T, B, hidden)
         return self.actor(out), self.critic(out).squeeze(-1), h
@@ -183,6 +188,16 @@ class EmmlModel(nn.Module):
         self.detector: nn.Module | None = None
         """Transfer to new words (§5.4, emml/transfer.py): a module mapping the observation to k extra x_I
         channels (N, k, h, w) in [0, 1], appended after the V conv3 channels; None under the paper's training."""
+
+    def vmappable(self) -> EmmlModel:
+        """Switch this model to the ops `torch.func.vmap` can batch over stacked copies (emml/rl/packed.py): the
+        instruction GRU from linear ops, no acting cache (it keys on host values), the default memory format.
+        The outputs stay those of the plain model within float tolerance (tests/rl/test_packed.py)."""
+        self.text_cache = None
+        self.text_encoder.unrolled = True
+        self.policy.unrolled = True
+        self.image_encoder.channels_last = False
+        return self
 
     @property
     def reads_labels(self) -> bool:
