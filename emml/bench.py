@@ -135,6 +135,7 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     from emml.envs.labels import channel_mask, default_aux_words
     from emml.geometry import conv_output_size
     from emml.models import build_model
+    from emml.rl.compiled import compile_model, wants_compile
     from emml.rl.packed import StackedModels, packed_ppo_update
     from emml.rl.ppo import make_optimizer, ppo_update
     from emml.rl.precision import autocast, fp32_outputs
@@ -147,6 +148,8 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     B = cfg.num_envs * stack
     models = [build_model(cfg.model, V, env.height, env.width, env.max_steps) for _ in range(stack)]
     model = (StackedModels(models) if stack > 1 else models[0]).to(device)
+    if wants_compile(cfg.compile, device) and stack == 1:
+        compile_model(model)
     params = model.parameters_in_order() if stack > 1 else list(model.parameters())
     optimizer = make_optimizer(params, cfg.ppo)
     shapes = {
@@ -265,6 +268,7 @@ def bench_train(
     import os
 
     from emml import alloc
+    from emml.rl.compiled import wants_compile
 
     alloc.tune_glibc()  # as the trainer does: model-only and end-to-end measured on the same allocator
     if part not in PARTS:
@@ -280,6 +284,7 @@ def bench_train(
         "env_groups": cfg.env_groups,
         "device": cfg.device,
         "precision": cfg.precision,
+        "compiled": wants_compile(cfg.compile, cfg.device),
         "updates": updates,
     }
     if stack > 1:

@@ -10,9 +10,23 @@ from emml.results import read_results, upsert_result
 
 
 def _row(name: str, sha: str, **extra) -> dict:
-    row = dict(run_name=name, table="t", model="dual_attention", difficulty="easy", aux=True, seed=0,
-               profile="smoke", frames=512, git_sha=sha, run_id="1234", eval_episodes=3, tasks="both",
-               shaping=True, sgn_train=0.5, sgn_test=0.25)
+    row = dict(
+        run_name=name,
+        table="t",
+        model="dual_attention",
+        difficulty="easy",
+        aux=True,
+        seed=0,
+        profile="smoke",
+        frames=512,
+        git_sha=sha,
+        run_id="1234",
+        eval_episodes=3,
+        tasks="both",
+        shaping=True,
+        sgn_train=0.5,
+        sgn_test=0.25,
+    )
     row.update(extra)
     return row
 

@@ -34,17 +34,30 @@ def other_learners(proc: Path = Path("/proc")) -> list[int]:
             continue
         try:
             argv = (entry / "cmdline").read_bytes().decode(errors="replace").split("\0")
-            if _is_learner([a for a in argv if a]):
+            if _is_learner([a for a in argv if a]) and _stat(entry)[0] not in STOPPED:
                 found[pid] = _parent(entry)
         except OSError:
             continue
     return sorted(p for p, parent in found.items() if parent not in found)  # a forked worker is its learner's
 
 
+STOPPED = ("T", "t")
+"""/proc states of a process that uses no CPU until continued (SIGSTOP, Ctrl-Z; traced): not a competitor. (Counting
+a paused training halved the learner threads of every benchmark taken beside it.)"""
+
+
+def _stat(entry: Path) -> list[str]:
+    """The fields of /proc/PID/stat after the command name: state, ppid, ... (empty where unreadable)."""
+    try:
+        return (entry / "stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return []
+
+
 def _parent(entry: Path) -> int:
     try:
-        return int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-    except (OSError, ValueError, IndexError):
+        return int(_stat(entry)[1])
+    except (ValueError, IndexError):
         return 0
 
 

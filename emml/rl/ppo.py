@@ -148,13 +148,15 @@ def answer_loss(answer_logits: torch.Tensor, targets: torch.Tensor) -> torch.Ten
     ``answer_logits`` (..., V), ``targets`` (...) int64 with -1 = no supervision.
     With no supervised entry the result is an exact 0 still connected to the graph
     (so ``backward`` works and gives zero gradients).
+
+    A weighted mean over every entry, not a selection of the supervised ones: the same value, with no shape that
+    depends on the data, so the update never waits on the device to learn it (a GPU update can be captured).
     """
     flat_logits = answer_logits.reshape(-1, answer_logits.shape[-1])
     flat_targets = targets.reshape(-1).long()
-    keep = flat_targets >= 0
-    if not bool(keep.any()):
-        return flat_logits.sum() * 0.0
-    return F.cross_entropy(flat_logits[keep], flat_targets[keep])
+    keep = (flat_targets >= 0).to(flat_logits.dtype)
+    ce = F.cross_entropy(flat_logits, flat_targets.clamp(min=0), reduction="none")
+    return (ce * keep).sum() / keep.sum().clamp(min=1.0)
 
 
 def aux_loss(aux_logits: torch.Tensor, labels: torch.Tensor, channel_mask: torch.Tensor) -> torch.Tensor:
@@ -164,18 +166,16 @@ def aux_loss(aux_logits: torch.Tensor, labels: torch.Tensor, channel_mask: torch
     0/1 (any dtype, e.g. uint8), ``channel_mask`` bool (V,): words with an
     auxiliary label (the paper gives none for e.g. 'smallest'/'largest').
     Masked-out channels contribute neither loss nor gradient. Zero (graph kept)
-    if no channel is supervised.
+    if no channel is supervised. As in `answer_loss`, a weighted mean (no data-dependent shape).
     """
     if aux_logits.shape != labels.shape:
         raise ValueError(f"aux_logits {tuple(aux_logits.shape)} vs labels {tuple(labels.shape)}")
-    channel_mask = channel_mask.to(device=aux_logits.device, dtype=torch.bool)
-    if channel_mask.shape != (aux_logits.shape[-3],):
+    if tuple(channel_mask.shape) != (aux_logits.shape[-3],):
         raise ValueError(f"channel_mask must be ({aux_logits.shape[-3]},), got {tuple(channel_mask.shape)}")
-    if not bool(channel_mask.any()):
-        return aux_logits.sum() * 0.0
-    logits = aux_logits[..., channel_mask, :, :]
-    target = labels[..., channel_mask, :, :].to(logits.dtype)
-    return F.binary_cross_entropy_with_logits(logits, target)
+    weight = channel_mask.to(device=aux_logits.device, dtype=aux_logits.dtype)[:, None, None]  # (V, 1, 1)
+    bce = F.binary_cross_entropy_with_logits(aux_logits, labels.to(aux_logits.dtype), reduction="none")
+    per_channel = aux_logits[..., :1, :, :].numel()  # entries of one channel
+    return (bce * weight).sum() / (weight.sum() * per_channel).clamp(min=1.0)
 
 
 def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
@@ -274,7 +274,7 @@ def ppo_update(
         raise ValueError(f"PPOConfig.minibatches={cfg.minibatches} must divide num_envs={num_envs}")
     per_mb = num_envs // cfg.minibatches
     labels_all = buffer.obs.get("aux") if use_aux else None
-    sums: dict[str, float] = {}
+    sums: dict[str, torch.Tensor] = {}
     count = 0
     for _ in range(cfg.epochs):
         if cfg.minibatches == 1:
@@ -305,10 +305,10 @@ def ppo_update(
             terms["total"].backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
             optimizer.step()
-            for k, v in terms.items():
-                sums[k] = sums.get(k, 0.0) + float(v.detach())
-            sums["grad_norm"] = sums.get("grad_norm", 0.0) + float(grad_norm)
+            for k, v in terms.items():  # summed on the device: read once, after the last step
+                sums[k] = sums.get(k, 0.0) + v.detach()
+            sums["grad_norm"] = sums.get("grad_norm", 0.0) + grad_norm.detach()
             count += 1
-    stats = {k: v / count for k, v in sums.items()}
+    stats = {k: float(v) / count for k, v in sums.items()}
     stats["explained_variance"] = explained_variance(buffer.values, buffer.returns)
     return stats

@@ -30,6 +30,7 @@ from emml.evaluate import evaluate
 from emml.models import build_model
 from emml.results import upsert_result
 from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
 from emml.rl.ppo import make_optimizer, ppo_update
 from emml.rl.precision import autocast, fp32_outputs
@@ -95,6 +96,7 @@ def _check_same_config(saved: dict, current: dict, path: Path) -> None:
         "max_engine_restarts",
         "engine_restart_window",
         "device",
+        "compile",
         "run_root",
         "results_root",
     }
@@ -171,6 +173,8 @@ class Trainer:
             optimizer.load_state_dict(saved["optimizer"])
             set_rng_state(saved["rng"])
             update, frames = saved["update"], saved["frames"]
+        if wants_compile(cfg.compile, self.device):
+            compile_model(model)
         tags = {
             "table": cfg.table,
             "model": cfg.model,

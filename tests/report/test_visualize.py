@@ -22,8 +22,15 @@ def checkpoints(tmp_path_factory):
     os.environ["MLFLOW_TRACKING_URI"] = f"sqlite:///{root}/mlflow.db"
     out = {}
     for aux in (True, False):
-        over = {"run_root": str(root / "runs"), "results_root": str(root / "results"), "table": "vis", "frames": 64,
-                "eval_episodes": 1, "diagnose_episodes": 0, "env.max_steps": 12}
+        over = {
+            "run_root": str(root / "runs"),
+            "results_root": str(root / "results"),
+            "table": "vis",
+            "frames": 64,
+            "eval_episodes": 1,
+            "diagnose_episodes": 0,
+            "env.max_steps": 12,
+        }
         out[aux] = train(profile_config("smoke", "easy", over, aux=aux), quiet=True).run_dir / CHECKPOINT
     del os.environ["MLFLOW_TRACKING_URI"]
     return out
@@ -37,11 +44,13 @@ def test_the_recorded_episode_is_the_models_own_output(checkpoints, no_leftovers
     state = model.initial_state(1)
     for t, frame in enumerate(ep.frames):
         obs = {"image": frame.transpose(2, 0, 1), "tokens": ep.tokens, "task": 0, "time": t}
-        out, state = model(obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, "cpu"), state,
-                           torch.tensor([[t == 0]]))
+        out, state = model(
+            obs_to_torch({k: np.asarray(v)[None] for k, v in obs.items()}, "cpu"), state, torch.tensor([[t == 0]])
+        )
         np.testing.assert_allclose(ep.attention[t], out.attention[0, 0].detach().numpy(), rtol=1e-5, atol=1e-6)
-        np.testing.assert_allclose(ep.answers[t], torch.softmax(out.answer_logits[0, 0], -1).detach().numpy(),
-                                   rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(
+            ep.answers[t], torch.softmax(out.answer_logits[0, 0], -1).detach().numpy(), rtol=1e-5, atol=1e-6
+        )
         assert int(out.logits[0, 0].argmax()) == ep.moves[t]
     words = ep.sentence.split()
     assert set(w for w in words if w in ep.words) <= set(ep.words)
@@ -103,8 +112,7 @@ def test_a_gif_per_episode(checkpoints, tmp_path, no_leftovers):
     assert Image.open(path).n_frames >= 2  # identical consecutive frames may be merged by the encoder
 
 
-def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints, tmp_path, monkeypatch,
-                                                                     no_leftovers):
+def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints, tmp_path, monkeypatch, no_leftovers):
     import shutil
 
     from emml.report.index import write_reports
@@ -117,10 +125,20 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
         cfg.table, cfg.run_root, cfg.results_root = "table2", str(tmp_path / "runs"), str(tmp_path / "results")
         name = f"dual_attention-easy-{'aux' if aux else 'noaux'}-s0-smoke"
         shutil.copytree(ckpt.parent, tmp_path / "runs" / "table2" / name)
-        payload = {"run_name": name, "table": "table2", "model": "dual_attention", "difficulty": "easy", "aux": aux,
-                   "seed": 0, "profile": "smoke", "frames": 64, "git_sha": "12e0077", "run_id": "x",
-                   "eval_episodes": 1, "metrics": {"sgn_train": 0.5, "sgn_test": 0.5, "eqa_train": 0.5,
-                                                   "eqa_test": 0.5}}
+        payload = {
+            "run_name": name,
+            "table": "table2",
+            "model": "dual_attention",
+            "difficulty": "easy",
+            "aux": aux,
+            "seed": 0,
+            "profile": "smoke",
+            "frames": 64,
+            "git_sha": "12e0077",
+            "run_id": "x",
+            "eval_episodes": 1,
+            "metrics": {"sgn_train": 0.5, "sgn_test": 0.5, "eqa_train": 0.5, "eqa_test": 0.5},
+        }
         record_result(payload, cfg)
     index = write_reports(tmp_path / "reports", tmp_path / "results", tmp_path / "runs", log=lambda m: None)
     text = index.read_text()

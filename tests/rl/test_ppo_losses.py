@@ -136,6 +136,33 @@ def test_ppo_losses_total_combines_terms():
     torch.testing.assert_close(out2["aux"], F.binary_cross_entropy_with_logits(aux_logits, labels.float()))
 
 
+def test_ppo_losses_read_nothing_back_from_the_device():
+    """The losses have no data-dependent shape or branch, so a GPU update needs no host sync and can be captured
+    (issue 19): dynamo traces them as one graph. Fails on a masked selection (`bool(keep.any())`, `x[mask]`)."""
+    cfg = PPOConfig()
+    g = torch.Generator().manual_seed(0)
+    T, B, V = 3, 2, 5
+    kw = dict(
+        logits=torch.randn(T, B, 4, generator=g),
+        values=torch.randn(T, B, generator=g),
+        actions=torch.randint(0, 4, (T, B), generator=g),
+        old_logprobs=torch.randn(T, B, generator=g) - 1.5,
+        old_values=torch.randn(T, B, generator=g),
+        advantages=torch.randn(T, B, generator=g),
+        returns=torch.randn(T, B, generator=g),
+        answer_logits=torch.randn(T, B, V, generator=g),
+        answer_targets=torch.tensor([[-1, 1], [2, -1], [-1, -1]]),
+        aux_logits=torch.randn(T, B, V, 2, 2, generator=g),
+        aux_labels=torch.randint(0, 2, (T, B, V, 2, 2), dtype=torch.uint8, generator=g),
+        aux_channel_mask=torch.tensor([True, False, True, True, False]),
+    )
+    torch._dynamo.reset()
+    traced = torch.compile(lambda **k: ppo_losses(cfg, **k), fullgraph=True, backend="eager")
+    got, want = traced(**kw), ppo_losses(cfg, **kw)
+    for k in want:
+        torch.testing.assert_close(got[k], want[k])
+
+
 @pytest.mark.parametrize(
     "field,value",
     [
