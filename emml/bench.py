@@ -201,12 +201,14 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     return updates * B * T / (time.perf_counter() - t0)
 
 
-def _end_to_end(cfg, updates: int) -> tuple[float, dict]:
+def _end_to_end(cfg, updates: int, stack: int = 1) -> tuple[float, dict]:
     """Frames/s of the trainer's own loop (real envs) over ``updates`` updates after a warm-up one, and its time
-    split. Writes nothing outside a temporary directory."""
+    split; with ``stack`` N > 1, of N seeds packed in one process (emml/rl/packed_trainer.py), all their frames
+    counted. Writes nothing outside a temporary directory."""
     import dataclasses
     import tempfile
 
+    from emml.rl.packed_trainer import PackedTrainer
     from emml.rl.trainer import Trainer
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -221,6 +223,12 @@ def _end_to_end(cfg, updates: int) -> tuple[float, dict]:
             table="bench",
         )
         run.env = dataclasses.replace(cfg.env)
+        if stack > 1:
+            trackers = [MemoryTracker() for _ in range(stack)]
+            seeds = [dataclasses.replace(run, seed=s) for s in range(stack)]
+            PackedTrainer(seeds, trackers=trackers, quiet=True).train()
+            fps = [m["charts/packed_fps"] for _, m in trackers[0].history if "charts/packed_fps" in m][1:]
+            return sum(fps) / len(fps), {}
         tracker = MemoryTracker()
         trainer = Trainer(run, tracker=tracker, quiet=True)
         trainer.train()
@@ -262,8 +270,8 @@ def bench_train(
     """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
     split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
     N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
-    the raw simulator limit of all cores. With ``stack`` N > 1, model-only only: N runs stacked in one model
-    (emml/rl/packed.py), their aggregate frames/s beside one plain run's, measured in turn."""
+    the raw simulator limit of all cores. With ``stack`` N > 1: one run, then N seeds stacked in one model and one
+    process (emml/rl/packed.py), measured in turn, their aggregate frames/s beside the one run's."""
     import dataclasses
     import os
 
@@ -287,12 +295,16 @@ def bench_train(
         "compiled": wants_compile(cfg.compile, cfg.device),
         "updates": updates,
     }
-    if stack > 1:
-        if part != "model":
-            raise ValueError(f"stack={stack} measures the model-only loop: use part='model'")
-        single, stacked = _model_only(cfg, updates), _model_only(cfg, updates, stack)
-        out |= {"model_only_fps": round(single, 1), "stack": stack, "stacked_model_only_fps": round(stacked, 1)}
-        out["stacked_gain"] = round(stacked / single, 3)
+    if stack > 1:  # one run, then N seeds packed in one process, measured in turn
+        out["stack"] = stack
+        if part in ("both", "model"):
+            single, stacked = _model_only(cfg, updates), _model_only(cfg, updates, stack)
+            out |= {"model_only_fps": round(single, 1), "stacked_model_only_fps": round(stacked, 1)}
+            out["stacked_model_only_gain"] = round(stacked / single, 3)
+        if part in ("both", "e2e"):
+            single, stacked = _end_to_end(cfg, updates)[0], _end_to_end(cfg, updates, stack)[0]
+            out |= {"end_to_end_fps": round(single, 1), "stacked_end_to_end_fps": round(stacked, 1)}
+            out["stacked_end_to_end_gain"] = round(stacked / single, 3)
         return out
     if part == "model":
         out["model_only_fps"] = round(_model_only(cfg, updates), 1)

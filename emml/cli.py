@@ -191,7 +191,7 @@ def bench_train_cmd(
     runs: int = typer.Option(0, min=0, help="Also pack N end-to-end runs side by side: aggregate vs simulator limit."),
     sets: list[str] = typer.Option([], "--set", help="Override any config field."),
     part: str = typer.Option("both", help="both (model-only, end-to-end and their ratio), model or e2e."),
-    stack: int = typer.Option(1, min=1, help="With --part model: N runs stacked in one model (vmap), vs one run."),
+    stack: int = typer.Option(1, min=1, help="N seeds stacked in one model and process (vmap), vs one run."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
@@ -206,18 +206,17 @@ def bench_train_cmd(
         _fail(str(e))
     if part not in PARTS:
         _fail(f"--part {part!r}: allowed values are {', '.join(PARTS)}")
-    if stack > 1 and part != "model":
-        _fail(f"--stack {stack} measures the model-only loop: add --part model")
     _use_tcmalloc()
     install_signal_handlers()
     r = bench_train(cfg, updates, runs, part=part, stack=stack)
     if stack > 1:
-        _echo(
-            r,
-            as_json,
-            f"{model} at {r['width']}x{r['height']} on {r['device']}: one run {r['model_only_fps']:.0f} frames/s, "
-            f"{stack} stacked runs {r['stacked_model_only_fps']:.0f} frames/s in all (×{r['stacked_gain']})",
-        )
+        lines = [
+            f"{model} at {r['width']}x{r['height']} on {r['device']}, {name}: one run {r[f'{key}_fps']:.0f} frames/s, "
+            f"{stack} stacked runs {r[f'stacked_{key}_fps']:.0f} frames/s in all (×{r[f'stacked_{key}_gain']})"
+            for key, name in (("model_only", "model-only"), ("end_to_end", "end to end"))
+            if f"stacked_{key}_fps" in r
+        ]
+        _echo(r, as_json, "\n".join(lines))
         return
     if part != "both":
         fps = r.get("model_only_fps", r.get("end_to_end_fps"))
@@ -356,10 +355,14 @@ def train(
     device: str = typer.Option("cpu", help="cpu | cuda"),
     frames: int = typer.Option(0, help="Override the profile's frames (0: keep)."),
     sets: list[str] = typer.Option([], "--set", help="Override any config field: --set env.shaping=false"),
+    pack_seeds: str = typer.Option(
+        "", help="Seeds to train packed in this process, e.g. 0,1,2: one stacked model (emml/rl/packed.py)."
+    ),
     quiet: bool = False,
     as_json: bool = typer.Option(False, "--json"),
 ):
-    """Train one run (resumes it if interrupted; a finished run is not retrained)."""
+    """Train one run (resumes it if interrupted; a finished run is not retrained); with --pack-seeds, several
+    seeds of it in one process, each written as its own run."""
     from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
 
@@ -367,9 +370,19 @@ def train(
     if frames:
         overrides["frames"] = frames
     try:
-        cfg = profile_config(
-            profile, difficulty, overrides, model=model, aux=aux, seed=seed, table=table, device=device
-        ).validate()
+        seeds = [int(s) for s in pack_seeds.split(",")] if pack_seeds else [seed]
+    except ValueError:
+        _fail(f"--pack-seeds {pack_seeds!r}: allowed values are integers separated by commas, e.g. 0,1,2")
+    try:
+        cfgs = [
+            profile_config(profile, difficulty, overrides, model=model, aux=aux, seed=s, table=table, device=device)
+            for s in seeds
+        ]
+        cfg = cfgs[0].validate()
+        if pack_seeds:
+            from emml.rl.packed_trainer import check_packable
+
+            check_packable(cfgs)
     except ValueError as e:
         _fail(str(e))
     _use_tcmalloc()
@@ -378,6 +391,20 @@ def train(
     from emml.rl.trainer import ConfigMismatch
     from emml.rl.trainer import train as run
 
+    if pack_seeds:
+        from emml.rl.packed_trainer import train_packed
+
+        try:
+            results = train_packed(cfgs, quiet=quiet or as_json)
+        except (CheckpointError, ConfigMismatch, ValueError) as e:
+            _fail(str(e))
+        data = [{"run_dir": str(r.run_dir), "run_id": r.run_id, "frames": r.frames, **r.metrics} for r in results]
+        text = [
+            f"{c.run_name()} after {r.frames:,} frames: " + ", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items())
+            for c, r in zip(cfgs, results)
+        ]
+        _echo(data, as_json, "\n".join(text))
+        return
     try:  # both are raised before any engine starts or anything is written
         result = run(cfg, quiet=quiet or as_json)
     except (CheckpointError, ConfigMismatch) as e:

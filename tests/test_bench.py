@@ -3,8 +3,6 @@
 import math
 import os
 
-import pytest
-
 from emml import alloc, bench
 from emml.bench import bench_train
 from emml.profiles import profile_config
@@ -33,13 +31,13 @@ def test_bench_train_packs_runs_and_measures_the_simulator_limit(tmp_path, track
     assert packed["threads_per_run"] == max(1, (os.cpu_count() or 1) // 2)
 
 
-def test_bench_train_stacks_runs_in_one_model():
+def test_bench_train_stacks_runs_in_one_model(tracking, no_leftovers):
     cfg = profile_config("smoke", "easy", model="dual_attention", aux=True)
-    r = bench_train(cfg, updates=1, part="model", stack=2)
+    r = bench_train(cfg, updates=1, stack=2)
     assert r["stack"] == 2 and r["model_only_fps"] > 0 and r["stacked_model_only_fps"] > 0
-    assert math.isclose(r["stacked_gain"], r["stacked_model_only_fps"] / r["model_only_fps"], rel_tol=0.01)
-    with pytest.raises(ValueError, match="part='model'"):
-        bench_train(cfg, updates=1, part="both", stack=2)
+    assert math.isclose(r["stacked_model_only_gain"], r["stacked_model_only_fps"] / r["model_only_fps"], rel_tol=0.01)
+    assert r["end_to_end_fps"] > 0 and r["stacked_end_to_end_fps"] > 0
+    assert math.isclose(r["stacked_end_to_end_gain"], r["stacked_end_to_end_fps"] / r["end_to_end_fps"], rel_tol=0.01)
 
 
 def test_bench_alloc_runs_each_allocator_in_its_own_process(monkeypatch):

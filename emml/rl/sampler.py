@@ -36,13 +36,15 @@ log = logging.getLogger(__name__)
 class Sampler:
     """Owns the actors' envs, their current observations and the policy's recurrent state between rollouts."""
 
-    def __init__(self, cfg: TrainConfig, device: torch.device):
+    def __init__(self, cfg: TrainConfig, device: torch.device, runs: int = 1):
         self.cfg = cfg
         self.device = device
         self.groups = cfg.env_groups
-        B = cfg.num_envs
-        if self.groups < 1 or B % self.groups:
-            raise ValueError(f"env_groups={self.groups} must divide num_envs={B}")
+        self.runs = runs
+        """Packed runs (emml/rl/packed.py) whose actors are interleaved: actor j is actor j // runs of run j % runs."""
+        self.num_envs = B = cfg.num_envs * runs
+        if self.groups < 1 or cfg.num_envs % self.groups:
+            raise ValueError(f"env_groups={self.groups} must divide num_envs={cfg.num_envs}")
         size = B // self.groups
         self.slices = [slice(g * size, (g + 1) * size) for g in range(self.groups)]
         self.venvs = []
@@ -52,8 +54,9 @@ class Sampler:
         except BaseException:
             self.close(abort=True)
             raise
-        self.recent = {0: deque(maxlen=100), 1: deque(maxlen=100)}
-        """Training-episode success per task id (0 SGN, 1 EQA), last 100 episodes."""
+        self.recent_by_run = [{0: deque(maxlen=100), 1: deque(maxlen=100)} for _ in range(runs)]
+        """Training-episode success per run and task id (0 SGN, 1 EQA), last 100 episodes."""
+        self.recent = self.recent_by_run[0]
         self.dropped_episodes = 0
         """Episodes cut short by an engine or worker death (the engine or group was restarted; not scored)."""
         self.workers = RestartBudget(cfg.max_engine_restarts, cfg.engine_restart_window, "env worker", WorkerDied)
@@ -68,7 +71,7 @@ class Sampler:
         cfg = self.cfg
         return make_vector_env(
             cfg.env,
-            cfg.num_envs // self.groups,
+            self.num_envs // self.groups,
             asynchronous=cfg.asynchronous,
             copy=False,
             max_restarts=cfg.max_engine_restarts,
@@ -96,18 +99,21 @@ class Sampler:
     def single_observation_space(self):
         return self.venvs[0].single_observation_space
 
-    def reset(self, model, seed: int) -> None:
-        """Start an episode in every actor (actor i gets seed ``seed + i``) and zero the recurrent state."""
-        self._seed = seed
+    def reset(self, model, seed: int | list[int]) -> None:
+        """Start an episode in every actor (actor i gets seed ``seed + i``, or ``seed[i]`` from a list) and zero
+        the recurrent state."""
+        self._seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else list(seed)
+        if len(self._seeds) != self.num_envs:
+            raise ValueError(f"{len(self._seeds)} seeds for {self.num_envs} actors")
         self.obs, self.answers, self.tasks = [None] * self.groups, [None] * self.groups, [None] * self.groups
         for g in range(self.groups):
-            self._reset_group(g, seed)
-        self.state = model.initial_state(self.cfg.num_envs, device=self.device)
-        self.episode_start = torch.ones(self.cfg.num_envs, dtype=torch.bool, device=self.device)
+            self._reset_group(g, 0)
+        self.state = model.initial_state(self.num_envs, device=self.device)
+        self.episode_start = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
 
-    def _reset_group(self, g: int, seed: int) -> None:
+    def _reset_group(self, g: int, offset: int) -> None:
         sl = self.slices[g]
-        obs, info = self.venvs[g].reset(seed=[seed + i for i in range(sl.start, sl.stop)])
+        obs, info = self.venvs[g].reset(seed=[self._seeds[i] + offset for i in range(sl.start, sl.stop)])
         self.obs[g] = obs
         self.answers[g], self.tasks[g] = np.asarray(info["answer"]), np.asarray(info["task"])
 
@@ -116,7 +122,7 @@ class Sampler:
         self.workers.death(error)
         self.venvs[g].abort()
         self.venvs[g] = self._make_group()
-        self._reset_group(g, self._seed + 1_000_003 * self.workers.restarts)  # fresh episodes, reproducibly
+        self._reset_group(g, 1_000_003 * self.workers.restarts)  # fresh episodes, reproducibly
 
     # --- one rollout ------------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -208,7 +214,8 @@ class Sampler:
                         self.dropped_episodes,
                     )
                 else:
-                    self.recent[int(final["task"][i])].append(float(final["success"][i]))
+                    run = self.recent_by_run[(sl.start + i) % self.runs]
+                    run[int(final["task"][i])].append(float(final["success"][i]))
         self.obs[g] = obs
         self.answers[g], self.tasks[g] = np.asarray(info["answer"]), np.asarray(info["task"])
         self.episode_start[sl] = torch.as_tensor(done, device=self.device)

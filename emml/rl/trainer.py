@@ -146,15 +146,48 @@ class Trainer:
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
+        opened = self.open()
+        if isinstance(opened, RunResult):
+            return opened
+        model, optimizer, update, frames, resumed = opened
+        try:
+            metrics = self._loop(model, optimizer, update, frames)
+        except (KeyboardInterrupt, SystemExit):  # Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers)
+            self.tracker.finish("KILLED")
+            raise
+        except BaseException:
+            self.tracker.finish("FAILED")
+            raise
+        self.tracker.finish("FINISHED")
+        return RunResult(self.dir, self.tracker.run_id, metrics.pop("_frames"), metrics, resumed=resumed)
+
+    def saved(self) -> dict | None:
+        """This run's checkpoint, checked against the config (ConfigMismatch names the fields), or None."""
+        path = self.dir / CHECKPOINT
+        if not path.exists():
+            return None
+        saved = load_checkpoint(path)
+        _check_same_config(saved["config"], self.cfg.to_dict(), path)
+        return saved
+
+    def finished(self, saved: dict | None = None) -> bool:
+        """Whether this run's checkpoint (``saved``, else read) holds the whole run: nothing left to train."""
+        saved = saved if saved is not None else self.saved()
+        return bool(
+            saved and saved.get("finished") and saved["frames"] >= self.cfg.num_updates * self.cfg.frames_per_update
+        )
+
+    def open(self, build: bool = True):
+        """Everything before the loop: the checkpoint read and checked, the model and optimizer built (and
+        restored), the MLflow run started. Returns the RunResult of a finished run (nothing to train), else
+        (model, optimizer, update, frames, resumed). With ``build=False`` (packed runs, emml/rl/packed_trainer.py)
+        the model is built from this run's seed but not compiled, and the optimizer's state is returned raw."""
         cfg = self.cfg
-        ckpt_path = self.dir / CHECKPOINT
-        saved = load_checkpoint(ckpt_path) if ckpt_path.exists() else None
-        if saved is not None:
-            _check_same_config(saved["config"], cfg.to_dict(), ckpt_path)
-            if saved.get("finished") and saved["frames"] >= cfg.num_updates * cfg.frames_per_update:
-                results = json.loads((self.dir / RESULTS).read_text())
-                record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
-                return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
+        saved = self.saved()
+        if self.finished(saved):
+            results = json.loads((self.dir / RESULTS).read_text())
+            record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
+            return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
         alloc.tune_glibc()  # PPO reuses its large buffers from the heap (no-op under tcmalloc): docs/throughput.md
         threads, warning = share_cores(cfg.threads)
         if warning:
@@ -166,14 +199,17 @@ class Trainer:
         model = build_model(
             cfg.model, len(self.vocab), env_cfg.height, env_cfg.width, env_cfg.max_steps, **cfg.model_options
         ).to(self.device)
-        optimizer = make_optimizer(model.parameters(), cfg.ppo)
+        optimizer = make_optimizer(model.parameters(), cfg.ppo) if build else None
         update, frames = 0, 0
         if saved is not None:
             model.load_state_dict(saved["model"])
-            optimizer.load_state_dict(saved["optimizer"])
+            if optimizer is not None:
+                optimizer.load_state_dict(saved["optimizer"])
+            else:
+                optimizer = saved["optimizer"]
             set_rng_state(saved["rng"])
             update, frames = saved["update"], saved["frames"]
-        if wants_compile(cfg.compile, self.device):
+        if build and wants_compile(cfg.compile, self.device):
             compile_model(model)
         tags = {
             "table": cfg.table,
@@ -205,17 +241,8 @@ class Trainer:
             if not self.quiet:
                 tqdm.write(f"resuming {cfg.run_name()} from frame {frames:,} (update {update}), MLflow run {run_id}")
         else:  # at once, so that a run killed before its first update resumes this MLflow run, not a second one
-            self._checkpoint(model, optimizer, update, frames, finished=False)
-        try:
-            metrics = self._loop(model, optimizer, update, frames)
-        except (KeyboardInterrupt, SystemExit):  # Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers)
-            self.tracker.finish("KILLED")
-            raise
-        except BaseException:
-            self.tracker.finish("FAILED")
-            raise
-        self.tracker.finish("FINISHED")
-        return RunResult(self.dir, run_id, metrics.pop("_frames"), metrics, resumed=saved is not None)
+            self._checkpoint(model, optimizer or make_optimizer(model.parameters(), cfg.ppo), update, frames, False)
+        return model, optimizer, update, frames, saved is not None
 
     # --- the loop ---------------------------------------------------------------------------------------------
     def _loop(self, model, optimizer, update: int, frames: int) -> dict:
@@ -301,11 +328,12 @@ class Trainer:
         return acc
 
     def _checkpoint(self, model, optimizer, update: int, frames: int, finished: bool) -> None:
+        """``optimizer``: the optimizer, or its state_dict (a packed run's slice, emml/rl/packed.py)."""
         save_checkpoint(
             self.dir / CHECKPOINT,
             {
                 "model": model.state_dict(),
-                "optimizer": optimizer.state_dict(),
+                "optimizer": optimizer if isinstance(optimizer, dict) else optimizer.state_dict(),
                 "rng": rng_state(),
                 "update": update,
                 "frames": frames,
