@@ -62,7 +62,7 @@ def test_engines_starting_together_in_a_fresh_temp_dir_all_start(tmp_path, monke
 
     monkeypatch.chdir(tmp_path)
     ctx = multiprocessing.get_context("fork")
-    n = 6
+    n = 16  # issue 19: a 16-core node starts one engine per core at once
     barrier, out = ctx.Barrier(n), ctx.Queue()
     procs = [ctx.Process(target=_start_one, args=(str(tmp_path / "tmp"), barrier, out)) for _ in range(n)]
     (tmp_path / "tmp").mkdir()

@@ -110,10 +110,9 @@ def test_aux_loss_ignores_masked_channels():
     assert none.item() == 0.0 and none.requires_grad
 
 
-def test_ppo_losses_total_combines_terms():
-    cfg = PPOConfig(ent_coef=0.1, vf_coef=0.3, answer_coef=0.7, aux_coef=2.0, norm_adv=False)
+def _batch(T: int = 3, B: int = 2, V: int = 5) -> tuple[dict, torch.Generator]:
+    """One minibatch's inputs of `ppo_losses` (no aux), and the generator to draw more from."""
     g = torch.Generator().manual_seed(0)
-    T, B, V = 3, 2, 5
     kw = dict(
         logits=torch.randn(T, B, 4, generator=g),
         values=torch.randn(T, B, generator=g),
@@ -125,6 +124,13 @@ def test_ppo_losses_total_combines_terms():
         answer_logits=torch.randn(T, B, V, generator=g),
         answer_targets=torch.tensor([[-1, 1], [2, -1], [-1, -1]]),
     )
+    return kw, g
+
+
+def test_ppo_losses_total_combines_terms():
+    cfg = PPOConfig(ent_coef=0.1, vf_coef=0.3, answer_coef=0.7, aux_coef=2.0, norm_adv=False)
+    T, B, V = 3, 2, 5
+    kw, g = _batch(T, B, V)
     out = ppo_losses(cfg, **kw)
     assert "aux" not in out
     expected = out["policy"] - 0.1 * out["entropy"] + 0.3 * out["value"] + 0.7 * out["answer"]
@@ -140,18 +146,9 @@ def test_ppo_losses_read_nothing_back_from_the_device():
     """The losses have no data-dependent shape or branch, so a GPU update needs no host sync and can be captured
     (issue 19): dynamo traces them as one graph. Fails on a masked selection (`bool(keep.any())`, `x[mask]`)."""
     cfg = PPOConfig()
-    g = torch.Generator().manual_seed(0)
     T, B, V = 3, 2, 5
-    kw = dict(
-        logits=torch.randn(T, B, 4, generator=g),
-        values=torch.randn(T, B, generator=g),
-        actions=torch.randint(0, 4, (T, B), generator=g),
-        old_logprobs=torch.randn(T, B, generator=g) - 1.5,
-        old_values=torch.randn(T, B, generator=g),
-        advantages=torch.randn(T, B, generator=g),
-        returns=torch.randn(T, B, generator=g),
-        answer_logits=torch.randn(T, B, V, generator=g),
-        answer_targets=torch.tensor([[-1, 1], [2, -1], [-1, -1]]),
+    kw, g = _batch(T, B, V)
+    kw.update(
         aux_logits=torch.randn(T, B, V, 2, 2, generator=g),
         aux_labels=torch.randint(0, 2, (T, B, V, 2, 2), dtype=torch.uint8, generator=g),
         aux_channel_mask=torch.tensor([True, False, True, True, False]),
