@@ -44,7 +44,7 @@ class ImageEncoder(nn.Module):
             raise TypeError(f"ImageEncoder expects a uint8 image, got {image.dtype}")
         if self.channels_last:
             image = image.contiguous(memory_format=torch.channels_last)
-        x = image.float().div(255.0)
+        x = image.float().div_(255.0)
         x = torch.relu(self.conv1(x))
         x = torch.relu(self.conv2(x))
         return self.conv3(x).contiguous()
