@@ -215,9 +215,10 @@ class TrainConfig:
     (emml/rl/precision.py). bf16 is refused on a CPU without native bf16 arithmetic, where it runs slower."""
     compile: str = "off"
     """torch.compile the conv stack and the fusion unit (emml/rl/compiled.py): the same model within float
-    tolerance, ~10-20 s of compiling at start, then faster (84x150, 2-core CPU: end to end x1.12). 'on' (refused
-    before any compute where it cannot run: a CPU without a C++ compiler), 'off', or 'auto' (on where measured
-    faster: a CPU with a C++ compiler; off on CUDA until measured there)."""
+    tolerance, ~10-20 s of compiling at start, then faster (2-core CPU, end to end: x1.03 at 84x150, x1.23 at
+    168x300; docs/throughput.md). 'on' (refused before any compute where it cannot run: a CPU without a C++
+    compiler), 'off', or 'auto' (on where measured faster: a CPU with a C++ compiler; off on CUDA until measured
+    there)."""
     threads: int = 0
     """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
     asynchronous: bool = True

@@ -58,7 +58,6 @@ class StackedModels(nn.Module):
         self.names = list(params)
         """Parameter names of the plain model, in its `parameters()` order."""
         self.template = [template.to("meta")]  # a list: not a submodule, its meta weights are never used
-        self.text_cache = None
 
     # --- the plain model's interface ------------------------------------------------------------------------------
     @property
@@ -75,7 +74,7 @@ class StackedModels(nn.Module):
     def forward_runs(self, obs: dict[str, Tensor], state: dict[str, Tensor], episode_start: Tensor):
         """Interleaved inputs -> ({ModelOutput field: (N, T, B, ...)}, new state {key: (N, B, ...)})."""
         n = self.runs
-        params = {name: self.stacked[name.replace(".", "/")] for name in self.names}
+        params = dict(zip(self.names, self.parameters_in_order()))
         template = self.template[0]
 
         def one(p, o, s, e):
@@ -97,14 +96,15 @@ class StackedModels(nn.Module):
         """Run ``run`` as a plain model (a copy) on the stacked parameters' device."""
         template = self.template[0]
         model = EmmlModel(template.cfg, template.vocab_size, template.height, template.width, template.policy.max_steps)
-        model.load_state_dict({name: self.stacked[name.replace(".", "/")][run].detach() for name in self.names})
-        return model.to(next(iter(self.stacked.values())).device)
+        params = self.parameters_in_order()
+        model.load_state_dict({name: p[run].detach() for name, p in zip(self.names, params)})
+        return model.to(params[0].device)
 
     def load_run(self, run: int, state_dict: dict[str, Tensor]) -> None:
         """Put a plain model's ``state_dict`` into slot ``run`` (resuming a run from its checkpoint)."""
         with torch.no_grad():
-            for name in self.names:
-                self.stacked[name.replace(".", "/")][run].copy_(state_dict[name])
+            for name, p in zip(self.names, self.parameters_in_order()):
+                p[run].copy_(state_dict[name])
 
     def parameters_in_order(self) -> list[nn.Parameter]:
         """The stacked parameters in the plain model's `parameters()` order (the optimizer's order)."""
@@ -202,12 +202,12 @@ def packed_ppo_update(
         norms = clip_grad_norm_per_run(params, cfg.max_grad_norm)
         optimizer.step()
         for r, terms in enumerate(per_run):
-            for k, v in terms.items():
-                sums[r][k] = sums[r].get(k, 0.0) + float(v.detach())
-            sums[r]["grad_norm"] = sums[r].get("grad_norm", 0.0) + float(norms[r])
+            for k, v in terms.items():  # summed on the device and read once, after the last epoch (as ppo_update)
+                sums[r][k] = sums[r].get(k, 0.0) + v.detach()
+            sums[r]["grad_norm"] = sums[r].get("grad_norm", 0.0) + norms[r].detach()
     stats = []
     for r in range(n):
-        s = {k: v / cfg.epochs for k, v in sums[r].items()}
+        s = {k: float(v) / cfg.epochs for k, v in sums[r].items()}
         s["explained_variance"] = explained_variance(run_slice(buffer.values, r), run_slice(buffer.returns, r))
         stats.append(s)
     return stats

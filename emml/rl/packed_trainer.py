@@ -24,7 +24,7 @@ from emml.rl.ppo import make_optimizer
 from emml.rl.precision import autocast
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
-from emml.rl.trainer import RunResult, Trainer, _dtype
+from emml.rl.trainer import RunResult, Trainer, _dtype, update_metrics
 from emml.tracking import Tracker
 
 SEED_ONLY = "seed"
@@ -57,7 +57,8 @@ class PackedTrainer:
         self.quiet = quiet
 
     def train(self) -> list[RunResult]:
-        finished = [t.finished() for t in self.trainers]
+        saved = [t.saved() for t in self.trainers]  # each checkpoint read (and checked) once here
+        finished = [t.finished(s) for t, s in zip(self.trainers, saved)]
         if any(finished):  # finished runs are skipped (and recorded); the rest train packed, or alone if one
             left = [t for t, f in zip(self.trainers, finished) if not f]
             rest = iter(
@@ -68,7 +69,7 @@ class PackedTrainer:
                 else PackedTrainer([t.cfg for t in left], [t.tracker for t in left], self.quiet).train()
             )
             return [t.open() if f else next(rest) for t, f in zip(self.trainers, finished)]
-        updates = {t.saved()["update"] if t.saved() else 0 for t in self.trainers}
+        updates = {s["update"] if s else 0 for s in saved}
         if len(updates) != 1:
             raise ValueError(
                 f"packed runs must resume from the same update, found updates {sorted(updates)}: train them apart "
@@ -124,14 +125,9 @@ class PackedTrainer:
                 frames += B * T
                 fps = B * T * n / (time.perf_counter() - t_start)
                 for r, t in enumerate(self.trainers):
-                    metrics = {f"losses/{k}": v for k, v in stats[r].items()}
-                    metrics["charts/fps"] = fps / n
+                    recent = sampler.recent_by_run[r]
+                    metrics = update_metrics(stats[r], fps / n, recent, update, sampler.dropped_episodes)
                     metrics["charts/packed_fps"] = fps
-                    for task_id, name in ((0, "sgn"), (1, "eqa")):
-                        if sampler.recent_by_run[r][task_id]:
-                            metrics[f"train/success_{name}"] = float(np.mean(sampler.recent_by_run[r][task_id]))
-                    metrics["charts/update"] = update
-                    metrics["charts/dropped_episodes"] = sampler.dropped_episodes
                     t.tracker.log_metrics(metrics, step=frames)
                 if not self.quiet and update % cfg.log_every == 0:
                     line = " ".join(

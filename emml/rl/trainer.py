@@ -283,13 +283,7 @@ class Trainer:
                 now = time.perf_counter()
                 timing["learn"] += now - t_learn
                 timing["simulate"], timing["infer"] = sampler.timing["simulate"], sampler.timing["infer"]
-                metrics = {f"losses/{k}": v for k, v in stats.items()}
-                metrics["charts/fps"] = B * T / (now - t_start)
-                for task_id, name in ((0, "sgn"), (1, "eqa")):
-                    if recent[task_id]:
-                        metrics[f"train/success_{name}"] = float(np.mean(recent[task_id]))
-                metrics["charts/update"] = update
-                metrics["charts/dropped_episodes"] = sampler.dropped_episodes
+                metrics = update_metrics(stats, B * T / (now - t_start), recent, update, sampler.dropped_episodes)
                 self.tracker.log_metrics(metrics, step=frames)
                 bar.update(B * T)
                 bar.set_postfix(
@@ -380,6 +374,19 @@ def record_result(payload: dict, cfg: TrainConfig) -> Path:
     row = {k: v for k, v in payload.items() if k != "metrics"}
     row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, **payload["metrics"])
     return upsert_result(results_csv(cfg), row)
+
+
+def update_metrics(stats: dict, fps: float, recent: dict, update: int, dropped: int) -> dict:
+    """What a run logs after each update: its losses, frames/s, training success per task (last 100 episodes),
+    the update count and the episodes dropped to engine deaths."""
+    metrics = {f"losses/{k}": v for k, v in stats.items()}
+    metrics["charts/fps"] = fps
+    for task_id, name in ((0, "sgn"), (1, "eqa")):
+        if recent[task_id]:
+            metrics[f"train/success_{name}"] = float(np.mean(recent[task_id]))
+    metrics["charts/update"] = update
+    metrics["charts/dropped_episodes"] = dropped
+    return metrics
 
 
 def _dtype(space) -> torch.dtype:
