@@ -137,8 +137,8 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     from emml.models import build_model
     from emml.rl.compiled import compile_model, wants_compile
     from emml.rl.packed import StackedModels, packed_ppo_update
-    from emml.rl.ppo import make_optimizer, ppo_update
-    from emml.rl.precision import autocast, fp32_outputs
+    from emml.rl.ppo import make_optimizer, model_forward, ppo_update
+    from emml.rl.precision import conv_precision
     from emml.rl.rollout import RolloutBuffer
     from emml.tasks.language import Vocabulary, load_dataset
 
@@ -168,14 +168,10 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     buffer.rewards.copy_(torch.randn(buffer.rewards.shape, generator=gen))
     mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))), device=device)
 
-    def forward(o, s, e):
-        with autocast(cfg.precision, device):
-            return fp32_outputs(model(o, s, e)[0])
-
     def one_update():
         state = model.initial_state(B, device=device)
         buffer.set_initial_state(state)
-        with torch.no_grad(), autocast(cfg.precision, device):
+        with torch.no_grad():
             for t in range(T):  # acting: one batched step at a time, as in a rollout
                 out, state = model(
                     {k: v[t : t + 1] for k, v in buffer.obs.items()}, state, buffer.episode_starts[t : t + 1]
@@ -183,21 +179,21 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
                 buffer.values[t] = out.value[0]
         buffer.compute_returns(torch.zeros(B, device=device), cfg.ppo.gamma, cfg.ppo.gae_lambda)
         if stack > 1:
-            with autocast(cfg.precision, device):
-                packed_ppo_update(model, optimizer, buffer, cfg.ppo, mask, use_aux=cfg.aux)
+            packed_ppo_update(model, optimizer, buffer, cfg.ppo, mask, use_aux=cfg.aux)
         else:
-            ppo_update(forward, optimizer, params, buffer, cfg.ppo, mask, use_aux=cfg.aux)
+            ppo_update(model_forward(model), optimizer, params, buffer, cfg.ppo, mask, use_aux=cfg.aux)
 
     def sync():
         if device.type == "cuda":
             torch.cuda.synchronize(device)
 
-    one_update()  # warm-up
-    sync()
-    t0 = time.perf_counter()
-    for _ in range(updates):
-        one_update()
-    sync()
+    with conv_precision(model, cfg.precision):
+        one_update()  # warm-up
+        sync()
+        t0 = time.perf_counter()
+        for _ in range(updates):
+            one_update()
+        sync()
     return updates * B * T / (time.perf_counter() - t0)
 
 

@@ -211,8 +211,9 @@ class TrainConfig:
     device: str = "cpu"
     """'cpu' or 'cuda'."""
     precision: str = "fp32"
-    """'fp32' (the paper's) or 'bf16': autocast of acting and the PPO update, weights and losses in fp32
-    (emml/rl/precision.py). bf16 is refused on a CPU without native bf16 arithmetic, where it runs slower."""
+    """'fp32' (the paper's) or 'bf16': the conv stack's convolutions in bf16 in acting and the PPO update; the rest
+    of the model, weights, losses and evaluation in fp32 (emml/rl/precision.py). bf16 is refused on a CPU
+    without native bf16 arithmetic, where it runs slower."""
     compile: str = "off"
     """torch.compile the conv stack and the fusion unit (emml/rl/compiled.py): the same model within float
     tolerance, ~10-20 s of compiling at start, then faster (2-core CPU, end to end: x1.03 at 84x150, x1.23 at
@@ -314,7 +315,8 @@ class TrainConfig:
         return -(-self.frames // self.frames_per_update)
 
     def run_name(self) -> str:
-        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, seed, profile."""
+        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, model options,
+        precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
             parts.append(f"{self.env.tasks}only")
@@ -322,6 +324,8 @@ class TrainConfig:
             parts.append("noshaping")
         if (t := self.model_options.get("state_temperature")) is not None:  # opt-in: the policy reads a sharper map
             parts.append(f"xs{t:g}")
+        if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it
+            parts.append(self.precision)
         return "-".join([*parts, f"s{self.seed}", self.profile])
 
     def to_dict(self) -> dict:

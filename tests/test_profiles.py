@@ -93,3 +93,9 @@ def test_a_model_option_is_set_from_the_command_line_and_recorded():
     assert TrainConfig.from_dict(cfg.to_dict()).model_options == {"state_temperature": 0.25}  # saved with the run
     assert cfg.run_name() == "dual_attention-easy-noaux-xs0.25-s0-paper"  # beside the default run, not over it
     assert TrainConfig().run_name() == "dual_attention-easy-noaux-s0-paper"
+
+
+def test_a_bf16_run_is_named_apart_from_its_fp32_run():
+    from emml.config import TrainConfig, apply_overrides
+
+    assert apply_overrides(TrainConfig(), {"precision": "bf16"}).run_name() == "dual_attention-easy-noaux-bf16-s0-paper"

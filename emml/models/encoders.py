@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from emml.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv geometry
@@ -37,17 +38,52 @@ class ImageEncoder(nn.Module):
         self.to(memory_format=torch.channels_last)
         self.channels_last = True
         """Convert the input to channels_last (off under `torch.func.vmap`, which cannot query memory formats)."""
+        self.bf16 = False
+        """Run the convolutions in bf16 (TrainConfig.precision, set by emml/rl/precision.py); the logits are
+        returned in fp32 either way."""
+        self.space_to_depth = False
+        """Run conv1 (8×8, stride 4, on 3 channels) as the same convolution on 4×4 pixel blocks: 2×2, stride 1, on
+        48 channels. Same weights and values within float tolerance; oneDNN's kernels run it faster (issue 14)."""
+
+    def _conv(self, conv: nn.Conv2d, x: Tensor, weight: Tensor | None = None) -> Tensor:
+        """``conv`` of ``x`` (with ``weight`` in place of its own), in bf16 when `bf16` is set: inputs, weight and
+        bias cast as autocast would, cast explicitly, because autocast does not reach under `torch.func.vmap`."""
+        weight, bias = conv.weight if weight is None else weight, conv.bias
+        if self.bf16:
+            x, weight, bias = x.to(torch.bfloat16), weight.to(torch.bfloat16), bias.to(torch.bfloat16)
+        return F.conv2d(x, weight, bias, conv.stride)
+
+    def _conv1_on_blocks(self, image: Tensor) -> Tensor:
+        """conv1 of the scaled image, computed on its s×s pixel blocks (space to depth, s = conv1's stride).
+
+        A k×k stride-s convolution equals a (k/s)×(k/s) stride-1 convolution over the image cut into s×s blocks,
+        block channel (c, i, j) holding pixel (s·y + i, s·x + j) of channel c, with the kernel cut the same way.
+        The rows and columns past the last block conv1 reads are dropped: conv1 never reads them either."""
+        weight = self.conv1.weight
+        out_ch, in_ch, k, _ = weight.shape
+        s = self.conv1.stride[0]
+        kb = k // s
+        n, _, height, width = image.shape
+        hb, wb = (height - k) // s + kb, (width - k) // s + kb  # blocks that conv1's windows cover
+        blocks = image[:, :, : hb * s, : wb * s].reshape(n, in_ch, hb, s, wb, s)
+        # one uint8 copy, (N, hb, wb, C, s, s) in memory: the block tensor channels_last, as the other layers run
+        blocks = blocks.permute(0, 2, 4, 1, 3, 5).contiguous().reshape(n, hb, wb, in_ch * s * s).permute(0, 3, 1, 2)
+        kernel = weight.reshape(out_ch, in_ch, kb, s, kb, s).permute(0, 1, 3, 5, 2, 4).reshape(out_ch, -1, kb, kb)
+        return self._conv(self.conv1, blocks.float().div_(255.0), kernel)
 
     def forward(self, image: Tensor) -> Tensor:
         """uint8 image (N, 3, H, W) -> conv3 logits (N, V, h, w), contiguous (NCHW) like any other tensor."""
         if image.dtype != torch.uint8:
             raise TypeError(f"ImageEncoder expects a uint8 image, got {image.dtype}")
-        if self.channels_last:
-            image = image.contiguous(memory_format=torch.channels_last)
-        x = image.float().div_(255.0)
-        x = torch.relu(self.conv1(x))
-        x = torch.relu(self.conv2(x))
-        return self.conv3(x).contiguous()
+        if self.space_to_depth:
+            x = torch.relu(self._conv1_on_blocks(image))
+        else:
+            if self.channels_last:
+                image = image.contiguous(memory_format=torch.channels_last)
+            x = torch.relu(self._conv(self.conv1, image.float().div_(255.0)))
+        x = torch.relu(self._conv(self.conv2, x))
+        logits = self._conv(self.conv3, x)
+        return logits.to(torch.float32, memory_format=torch.contiguous_format)
 
 
 class TextEncoder(nn.Module):

@@ -21,7 +21,7 @@ from emml.config import TrainConfig
 from emml.envs.labels import channel_mask
 from emml.rl.packed import StackedModels, load_optimizer_state, optimizer_state, packed_ppo_update
 from emml.rl.ppo import make_optimizer
-from emml.rl.precision import autocast
+from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.rl.trainer import RunResult, Trainer, _dtype, update_metrics
@@ -115,11 +115,9 @@ class PackedTrainer:
             next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
-                with autocast(cfg.precision, device):
+                with conv_precision(stacked, cfg.precision):
                     sampler.collect(stacked, buffer)
-                    last_value = sampler.last_value(stacked).float()
-                buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
-                with autocast(cfg.precision, device):
+                    buffer.compute_returns(sampler.last_value(stacked), cfg.ppo.gamma, cfg.ppo.gae_lambda)
                     stats = packed_ppo_update(stacked, optimizer, buffer, cfg.ppo, mask, use_aux=cfg.aux)
                 update += 1
                 frames += B * T

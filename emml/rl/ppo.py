@@ -245,6 +245,15 @@ auxiliary labels are used, ``aux_logits`` (T, b, V, h, w).
 """
 
 
+def model_forward(model: torch.nn.Module) -> ForwardFn:
+    """``model``'s replay as a ForwardFn: its `ModelOutput` fields as a mapping."""
+
+    def forward(obs, state, episode_starts):
+        return vars(model(obs, state, episode_starts)[0])
+
+    return forward
+
+
 def make_optimizer(params: Iterable[torch.nn.Parameter], cfg: PPOConfig) -> torch.optim.Adam:
     """Adam with the paper's learning rate and our epsilon."""
     return torch.optim.Adam(params, lr=cfg.lr, eps=cfg.adam_eps)

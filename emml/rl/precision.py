@@ -1,10 +1,12 @@
-"""Reduced-precision training, opt-in: bf16 autocast for the conv stack, acting and the PPO update.
+"""Reduced-precision training, opt-in: the conv stack in bf16 (autocast), in acting and in the PPO update.
 
-Weights, optimizer state and the losses stay fp32; only the autocast-eligible ops (convolutions, matmuls) run in
-bf16. On CPU this pays only where the CPU has native bf16 arithmetic (AVX-512 BF16 or AMX on x86, the bf16
-extension on Arm): elsewhere oneDNN emulates it and runs several times slower than fp32 (notes/cpu-training.md),
-so the option refuses there instead. On CUDA it is the usual mixed precision (bf16 needs no loss scaling).
-The paper trains in fp32; the `paper` profile keeps fp32.
+Only the convolutions run in bf16. Weights, optimizer state, the conv stack's logits, the rest of the model (the
+small per-step matmuls and GRU cells of the recurrent policy) and the losses stay fp32: autocast over the whole
+model measured slower, its per-op casts costing more than bf16 saves on small ops (docs/throughput.md).
+
+On CPU bf16 pays only where the CPU has native bf16 arithmetic (AVX-512 BF16 or AMX on x86, the bf16 extension on
+Arm): elsewhere oneDNN emulates it, several times slower than fp32 (notes/cpu-training.md), so the option refuses
+there instead. On CUDA it needs no loss scaling. The paper trains in fp32; the `paper` profile keeps fp32.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import contextlib
 
 import torch
+from torch import nn
 
 PRECISIONS = ("fp32", "bf16")
 """Values of TrainConfig.precision."""
@@ -60,13 +63,24 @@ def check_precision(precision: str, device: str) -> None:
         )
 
 
-def autocast(precision: str, device: torch.device | str):
-    """The context the model's forward passes run in: bf16 autocast, or nothing for fp32."""
-    if precision != "bf16":
-        return contextlib.nullcontext()
-    return torch.autocast(torch.device(device).type, dtype=torch.bfloat16)
+def image_encoders(model: nn.Module) -> list[nn.Module]:
+    """The conv stacks (`ImageEncoder`s) of a model, or of the template a `StackedModels` runs its stack through."""
+    from emml.models.encoders import ImageEncoder
+
+    roots = [model, *getattr(model, "template", [])]
+    return [m for root in roots for m in root.modules() if isinstance(m, ImageEncoder)]
 
 
-def fp32_outputs(out) -> dict:
-    """A ModelOutput's fields as a dict, floating tensors cast to fp32: PPO's losses are computed in fp32."""
-    return {k: v.float() if torch.is_tensor(v) and v.is_floating_point() else v for k, v in vars(out).items()}
+@contextlib.contextmanager
+def conv_precision(model: nn.Module, precision: str):
+    """Within it, ``model``'s conv stack runs in ``precision`` (bf16: its convolutions in bf16, logits back in
+    fp32); as before, after it. Acting and the PPO update run inside it; evaluation runs outside, in fp32."""
+    encoders = image_encoders(model)
+    before = [e.bf16 for e in encoders]
+    for e in encoders:
+        e.bf16 = precision == "bf16"
+    try:
+        yield
+    finally:
+        for e, b in zip(encoders, before):
+            e.bf16 = b

@@ -32,8 +32,8 @@ from emml.results import upsert_result
 from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
-from emml.rl.ppo import make_optimizer, ppo_update
-from emml.rl.precision import autocast, fp32_outputs
+from emml.rl.ppo import make_optimizer, model_forward, ppo_update
+from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.tasks.language import load_dataset, resolve_vocabulary
@@ -267,17 +267,14 @@ class Trainer:
             log_mark = (time.perf_counter(), frames)
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
-                with autocast(cfg.precision, self.device):
+                with conv_precision(model, cfg.precision):
                     sampler.collect(model, buffer)
                     t_learn = time.perf_counter()
-                    last_value = sampler.last_value(model).float()
-                buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
-
-                def forward(o, s, e):
-                    with autocast(cfg.precision, self.device):
-                        return fp32_outputs(model(o, s, e)[0])
-
-                stats = ppo_update(forward, optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux)
+                    last_value = sampler.last_value(model)
+                    buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
+                    stats = ppo_update(
+                        model_forward(model), optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux
+                    )
                 update += 1
                 frames += B * T
                 now = time.perf_counter()

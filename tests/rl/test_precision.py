@@ -60,25 +60,57 @@ def _model_and_batch():
 def test_fp32_runs_exactly_as_without_the_option():
     model, obs, state, start = _model_and_batch()
     plain = model(obs, state, start)[0]
-    with precision.autocast("fp32", "cpu"):
-        wrapped = precision.fp32_outputs(model(obs, state, start)[0])
+    with precision.conv_precision(model, "fp32"):
+        wrapped = model(obs, state, start)[0]
     for key, value in vars(plain).items():
         if torch.is_tensor(value):
-            assert torch.equal(value, wrapped[key]), key
+            assert torch.equal(value, getattr(wrapped, key)), key
 
 
-def test_bf16_runs_the_convolutions_in_bf16_and_hands_ppo_fp32(native_bf16):
+def test_bf16_runs_only_the_convolutions_in_bf16_and_restores_fp32_after(native_bf16, monkeypatch):
+    """Inside conv_precision('bf16') the convolutions run in bf16 and nothing else does (the Linear layers and the
+    outputs PPO reads stay fp32); outside it, evaluation's fp32 again, exactly."""
     model, obs, state, start = _model_and_batch()
-    dtypes = []
+    dtypes = {"conv": [], "linear": []}
+    conv2d = torch.nn.functional.conv2d
+
+    def spy(x, weight, *args):
+        dtypes["conv"].append((x.dtype, weight.dtype))
+        return conv2d(x, weight, *args)
+
+    monkeypatch.setattr(torch.nn.functional, "conv2d", spy)
     for module in model.modules():
-        if isinstance(module, torch.nn.Conv2d):
-            module.register_forward_hook(lambda m, i, o: dtypes.append(o.dtype))
+        if isinstance(module, torch.nn.Linear):
+            module.register_forward_hook(lambda m, i, o: dtypes["linear"].append(o.dtype))
     plain = model(obs, state, start)[0]
-    with precision.autocast("bf16", "cpu"):
-        out = precision.fp32_outputs(model(obs, state, start)[0])
-    assert dtypes and set(dtypes[len(dtypes) // 2 :]) == {torch.bfloat16}
-    assert out["logits"].dtype == torch.float32 and out["value"].dtype == torch.float32
-    assert torch.allclose(out["logits"], plain.logits, atol=0.1)  # bf16 keeps ~3 significant digits
+    for d in dtypes.values():
+        d.clear()
+    with precision.conv_precision(model, "bf16"):
+        out = model(obs, state, start)[0]
+    assert len(dtypes["conv"]) == 3 and set(dtypes["conv"]) == {(torch.bfloat16, torch.bfloat16)}
+    assert dtypes["linear"] and set(dtypes["linear"]) == {torch.float32}
+    for key, value in vars(out).items():
+        if torch.is_tensor(value) and value.is_floating_point():
+            assert value.dtype == torch.float32, key
+    assert torch.allclose(out.logits, plain.logits, atol=0.1)  # bf16 keeps ~3 significant digits
+    assert not torch.equal(out.logits, plain.logits)
+    assert torch.equal(model(obs, state, start)[0].logits, plain.logits)  # restored: fp32 after the block
+
+
+def test_bf16_reaches_the_conv_stack_of_packed_runs(native_bf16):
+    from emml.rl.packed import StackedModels
+
+    models = [_model_and_batch()[0] for _ in range(2)]
+    stacked = StackedModels(models)
+    _, obs, state, start = _model_and_batch()
+    obs = {k: v.repeat_interleave(2, dim=1) for k, v in obs.items()}
+    state = {k: v.repeat_interleave(2, dim=0) for k, v in stacked.initial_state(4).items()}
+    start = start.repeat_interleave(2, dim=1)
+    plain = stacked(obs, state, start)[0]
+    with precision.conv_precision(stacked, "bf16"):
+        out = stacked(obs, state, start)[0]
+    assert precision.image_encoders(stacked) and out.logits.dtype == torch.float32
+    assert torch.allclose(out.logits, plain.logits, atol=0.1) and not torch.equal(out.logits, plain.logits)
 
 
 def test_a_bf16_run_trains_with_finite_losses(native_bf16, tracking, no_leftovers):
