@@ -286,12 +286,11 @@ def ppo_update(
     sums: dict[str, torch.Tensor] = {}
     count = 0
     for _ in range(cfg.epochs):
-        if cfg.minibatches == 1:
-            order = torch.arange(num_envs, device=buffer.device)
-        else:
+        if cfg.minibatches > 1:
             order = torch.randperm(num_envs, generator=generator).to(buffer.device)
         for start in range(0, num_envs, per_mb):
-            idx = order[start : start + per_mb]
+            # the paper's single batch is a slice (views, no copy of the rollout's frames); minibatches a selection
+            idx = slice(None) if cfg.minibatches == 1 else order[start : start + per_mb]
             obs = {k: v[:, idx] for k, v in buffer.obs.items()}
             state = {k: v[idx] for k, v in buffer.initial_state.items()}
             out = forward(obs, state, buffer.episode_starts[:, idx])

@@ -87,6 +87,16 @@ def _as_dtype(dtype: torch.dtype | str) -> torch.dtype:
     return resolved
 
 
+def _storage(tb: Shape, shape: Shape, dtype: torch.dtype, device, channels_last: bool) -> torch.Tensor:
+    """Zeros of shape (T, B, *shape); with ``channels_last`` a (C, H, W) frame is laid out (H, W, C) in memory,
+    the layout the conv stack runs in (emml/models/encoders.py): a (T·B, C, H, W) batch of it is channels_last as
+    stored, and the update converts nothing. Storing a step copies into it either way."""
+    if channels_last and len(shape) == 3:
+        c, h, w = shape
+        return torch.zeros(tb + (h, w, c), dtype=dtype, device=device).permute(0, 1, 4, 2, 3)
+    return torch.zeros(tb + shape, dtype=dtype, device=device)
+
+
 class RolloutBuffer:
     """Preallocated (T, B) storage for one on-policy rollout.
 
@@ -121,7 +131,7 @@ class RolloutBuffer:
         self.device = torch.device(device)
         tb = (num_steps, num_envs)
         self.obs: dict[str, torch.Tensor] = {
-            key: torch.zeros(tb + tuple(shape), dtype=_as_dtype(dtype), device=self.device)
+            key: _storage(tb, tuple(shape), _as_dtype(dtype), self.device, channels_last=key == "image")
             for key, (shape, dtype) in obs_shapes.items()
         }
         self.actions = torch.zeros(tb, dtype=torch.int64, device=self.device)

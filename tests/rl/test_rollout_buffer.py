@@ -101,3 +101,17 @@ def test_initial_state_is_a_detached_clone():
     assert buf.initial_state["frames"].dtype == torch.uint8 and buf.initial_state["frames"].any()
     with pytest.raises(ValueError):
         buf.set_initial_state({"h": torch.zeros(B + 1, 3)})
+
+
+def test_frames_are_stored_in_the_conv_stacks_layout():
+    """The (T·B, 3, H, W) batch the update feeds the conv stack is channels_last as stored (a view, no copy)."""
+    g = torch.Generator().manual_seed(0)
+    buf = RolloutBuffer(T, B, SHAPES)
+    frames = [_obs(g)["image"] for _ in range(T)]
+    for t, frame in enumerate(frames):
+        buf._put("image", buf.obs["image"], frame, t)
+    batch = buf.obs["image"].flatten(0, 1)
+    assert batch.is_contiguous(memory_format=torch.channels_last)
+    assert batch.data_ptr() == buf.obs["image"].data_ptr()
+    assert torch.equal(batch, torch.stack(frames).flatten(0, 1))
+    assert buf.obs["aux"].is_contiguous()  # labels are not frames
