@@ -19,6 +19,12 @@ from emml.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv 
 from emml.geometry import MIN_INPUT_SIZE, conv_output_size  # noqa: F401  (re-exported)
 from emml.models.gru import gru_scan
 
+BLOCKS_FROM = (64, 25_000)
+"""Batches from which conv1 runs on pixel blocks: at least 64 frames of at least 25,000 pixels. Measured on a
+2-core AVX-512 CPU (docs/throughput.md): the conv stack's forward + backward on the update's batch of 1,024 frames
+took 0.71x the time (fp32) and 0.82x (bf16) at 168×300 (50,400 pixels), but 1.08x and 1.06x at 84×150 (12,600),
+and acting's batches of 4-8 frames ran slower at both sizes."""
+
 
 class ImageEncoder(nn.Module):
     """Conv stack f(I; theta_conv) -> conv3 pre-sigmoid logits (N, V, h, w).
@@ -41,41 +47,49 @@ class ImageEncoder(nn.Module):
         self.bf16 = False
         """Run the convolutions in bf16 (TrainConfig.precision, set by emml/rl/precision.py); the logits are
         returned in fp32 either way."""
-        self.space_to_depth = False
-        """Run conv1 (8×8, stride 4, on 3 channels) as the same convolution on 4×4 pixel blocks: 2×2, stride 1, on
-        48 channels. Same weights and values within float tolerance; oneDNN's kernels run it faster (issue 14)."""
+        self.blocks_from = BLOCKS_FROM
+        """(batch, pixels per frame) from which conv1 runs on 4×4 pixel blocks (`_conv1_on_blocks`); None: never."""
 
-    def _conv(self, conv: nn.Conv2d, x: Tensor, weight: Tensor | None = None) -> Tensor:
-        """``conv`` of ``x`` (with ``weight`` in place of its own), in bf16 when `bf16` is set: inputs, weight and
-        bias cast as autocast would, cast explicitly, because autocast does not reach under `torch.func.vmap`."""
-        weight, bias = conv.weight if weight is None else weight, conv.bias
+    def _conv(self, conv: nn.Conv2d, x: Tensor, blocks_kernel: Tensor | None = None) -> Tensor:
+        """``conv`` of ``x`` (with ``blocks_kernel``, stride 1: conv1 on pixel blocks), in bf16 when `bf16` is set:
+        inputs, weight and bias cast as autocast would, explicitly, as autocast does not reach under `vmap`."""
+        weight, stride = (conv.weight, conv.stride) if blocks_kernel is None else (blocks_kernel, 1)
+        bias = conv.bias
         if self.bf16:
             x, weight, bias = x.to(torch.bfloat16), weight.to(torch.bfloat16), bias.to(torch.bfloat16)
-        return F.conv2d(x, weight, bias, conv.stride)
+        return F.conv2d(x, weight, bias, stride)
 
     def _conv1_on_blocks(self, image: Tensor) -> Tensor:
-        """conv1 of the scaled image, computed on its s×s pixel blocks (space to depth, s = conv1's stride).
+        """conv1 of the scaled image, computed on its s×s pixel blocks (space to depth, s = conv1's stride 4).
 
-        A k×k stride-s convolution equals a (k/s)×(k/s) stride-1 convolution over the image cut into s×s blocks,
-        block channel (c, i, j) holding pixel (s·y + i, s·x + j) of channel c, with the kernel cut the same way.
-        The rows and columns past the last block conv1 reads are dropped: conv1 never reads them either."""
+        A k×k stride-s convolution equals a (k/s)×(k/s) stride-1 convolution over the image cut into s×s blocks:
+        block channel (i, j, c) holds pixel (s·y + i, s·x + j) of channel c, and the kernel is cut the same way.
+        Here: 2×2 on 48 channels instead of 8×8 on 3, the same weights and values within float tolerance. The
+        rows and columns past the last block conv1 reads are dropped: conv1 never reads them either."""
         weight = self.conv1.weight
         out_ch, in_ch, k, _ = weight.shape
         s = self.conv1.stride[0]
         kb = k // s
         n, _, height, width = image.shape
         hb, wb = (height - k) // s + kb, (width - k) // s + kb  # blocks that conv1's windows cover
-        blocks = image[:, :, : hb * s, : wb * s].reshape(n, in_ch, hb, s, wb, s)
-        # one uint8 copy, (N, hb, wb, C, s, s) in memory: the block tensor channels_last, as the other layers run
-        blocks = blocks.permute(0, 2, 4, 1, 3, 5).contiguous().reshape(n, hb, wb, in_ch * s * s).permute(0, 3, 1, 2)
-        kernel = weight.reshape(out_ch, in_ch, kb, s, kb, s).permute(0, 1, 3, 5, 2, 4).reshape(out_ch, -1, kb, kb)
+        # (N, H, W, C): a view of the rollout's frames as stored (emml/rl/rollout.py); one uint8 copy to
+        # (N, hb, wb, s, s, C), which is the block tensor channels_last, the layout the other layers run in
+        pixels = image[:, :, : hb * s, : wb * s].permute(0, 2, 3, 1).reshape(n, hb, s, wb, s, in_ch)
+        blocks = pixels.permute(0, 1, 3, 2, 4, 5).contiguous().reshape(n, hb, wb, -1).permute(0, 3, 1, 2)
+        kernel = weight.reshape(out_ch, in_ch, kb, s, kb, s).permute(0, 3, 5, 1, 2, 4).reshape(out_ch, -1, kb, kb)
         return self._conv(self.conv1, blocks.float().div_(255.0), kernel)
+
+    def _on_blocks(self, image: Tensor) -> bool:
+        if self.blocks_from is None:
+            return False
+        batch, pixels = self.blocks_from
+        return image.shape[0] >= batch and image.shape[-2] * image.shape[-1] >= pixels
 
     def forward(self, image: Tensor) -> Tensor:
         """uint8 image (N, 3, H, W) -> conv3 logits (N, V, h, w), contiguous (NCHW) like any other tensor."""
         if image.dtype != torch.uint8:
             raise TypeError(f"ImageEncoder expects a uint8 image, got {image.dtype}")
-        if self.space_to_depth:
+        if self._on_blocks(image):
             x = torch.relu(self._conv1_on_blocks(image))
         else:
             if self.channels_last:

@@ -93,3 +93,29 @@ def test_channels_last_gives_the_plain_layout_results_forward_and_backward():
     ref.square().sum().backward()
     torch.testing.assert_close(enc.conv3.weight.grad, w3.grad, rtol=1e-4, atol=1e-5)
     torch.testing.assert_close(enc.conv1.weight.grad, weights[0][0].grad, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("stored", ["nchw", "hwc"])
+def test_conv1_on_pixel_blocks_equals_conv1_forward_and_backward(stored):
+    """conv1 computed on 4×4 pixel blocks (the update's large batches) equals the plain conv1 within float
+    tolerance, outputs and gradients, for a width that is not a multiple of 4 and for frames stored either way."""
+    torch.manual_seed(0)
+    plain, blocks = ImageEncoder(vocab_size=7), ImageEncoder(vocab_size=7)
+    blocks.load_state_dict(plain.state_dict())
+    plain.blocks_from, blocks.blocks_from = None, (1, 1)
+    img = torch.randint(0, 256, (3, 3, 84, 150), dtype=torch.uint8)
+    if stored == "hwc":
+        img = img.contiguous(memory_format=torch.channels_last)
+    out, ref = blocks(img), plain(img)
+    torch.testing.assert_close(out, ref, rtol=1e-5, atol=1e-5)
+    out.square().sum().backward()
+    ref.square().sum().backward()
+    for a, b in zip(blocks.parameters(), plain.parameters()):
+        torch.testing.assert_close(a.grad, b.grad, rtol=1e-4, atol=1e-5)
+
+
+def test_conv1_runs_on_blocks_for_large_batches_of_large_frames_only():
+    enc = ImageEncoder(vocab_size=3)
+    big, small = torch.zeros(64, 3, 168, 300, dtype=torch.uint8), torch.zeros(8, 3, 168, 300, dtype=torch.uint8)
+    assert enc._on_blocks(big) and not enc._on_blocks(small)
+    assert not enc._on_blocks(torch.zeros(1024, 3, 84, 150, dtype=torch.uint8))
