@@ -120,3 +120,14 @@ def test_a_bf16_run_trains_with_finite_losses(native_bf16, tracking, no_leftover
     assert result.frames >= 64
     losses = [v for _, key, v in read_mirror(result.run_dir / METRICS) if key.startswith("losses/")]
     assert losses and all(math.isfinite(v) for v in losses)
+
+
+def test_bf16_scales_pixels_straight_to_the_fp32_quotient_rounded_to_bf16():
+    from emml.models.encoders import ImageEncoder
+
+    enc = ImageEncoder(vocab_size=3)
+    pixels = torch.arange(256, dtype=torch.uint8)
+    enc.bf16 = True
+    assert torch.equal(enc._scaled(pixels), (pixels.float() / 255).to(torch.bfloat16))
+    enc.bf16 = False
+    assert torch.equal(enc._scaled(pixels), pixels.float() / 255)
