@@ -1,4 +1,4 @@
-"""Reduced-precision training, opt-in: the conv stack in bf16 (autocast), in acting and in the PPO update.
+"""Reduced-precision training, opt-in: the conv stack's convolutions in bf16, in acting and in the PPO update.
 
 Only the convolutions run in bf16. Weights, optimizer state, the conv stack's logits, the rest of the model (the
 small per-step matmuls and GRU cells of the recurrent policy) and the losses stay fp32: autocast over the whole
