@@ -22,6 +22,7 @@ TEXT = (
     "git_sha",
     "run_id",
     "tasks",
+    "precision",
     "transfer_words",
     "transfer_detector",
 )

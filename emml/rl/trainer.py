@@ -222,6 +222,7 @@ class Trainer:
             "allocator": alloc.loaded(),
             "tasks": env_cfg.tasks,
             "shaping": env_cfg.shaping,
+            "precision": cfg.precision,
             "checkpoint": str(self.dir / CHECKPOINT),
         }
         self.tracker.mirror_to(self.dir / METRICS)
@@ -369,7 +370,7 @@ def results_csv(cfg: TrainConfig) -> Path:
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
     """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv (emml.results)."""
     row = {k: v for k, v in payload.items() if k != "metrics"}
-    row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, **payload["metrics"])
+    row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, precision=cfg.precision, **payload["metrics"])
     return upsert_result(results_csv(cfg), row)
 
 

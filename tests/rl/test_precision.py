@@ -1,5 +1,5 @@
 """The bf16 option: refused (by name, before compute) on a CPU without native bf16, untouched fp32, and a bf16 run
-whose convolutions really run in bf16 while PPO's losses stay fp32."""
+whose convolutions really run in bf16 while the rest and PPO's losses stay fp32."""
 
 from __future__ import annotations
 
@@ -12,8 +12,9 @@ from typer.testing import CliRunner
 from emml.cli import app
 from emml.models import build_model
 from emml.profiles import profile_config
+from emml.results import read_results
 from emml.rl import precision
-from emml.rl.trainer import METRICS, Trainer
+from emml.rl.trainer import METRICS, Trainer, results_csv
 from emml.tracking import read_mirror
 from tests.conftest import SMOKE
 
@@ -120,6 +121,8 @@ def test_a_bf16_run_trains_with_finite_losses(native_bf16, tracking, no_leftover
     assert result.frames >= 64
     losses = [v for _, key, v in read_mirror(result.run_dir / METRICS) if key.startswith("losses/")]
     assert losses and all(math.isfinite(v) for v in losses)
+    row = read_results(results_csv(cfg)).set_index("run_name").loc[cfg.run_name()]
+    assert row["precision"] == "bf16" and cfg.run_name().endswith("-bf16-s0-smoke")
 
 
 def test_bf16_scales_pixels_straight_to_the_fp32_quotient_rounded_to_bf16():
