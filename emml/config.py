@@ -229,8 +229,9 @@ class TrainConfig:
     (double-buffered sampling; same algorithm, see emml/rl/sampler.py). 1: all actors in lockstep. Must divide
     num_envs."""
     envs_per_worker: int = 1
-    """Envs hosted by each env worker process, stepped in turn (`emml.envs.vector.GroupedDoomVectorEnv`): the
-    same envs and seeds, fewer processes to wake at every step. Must divide num_envs / env_groups."""
+    """Envs hosted by each env worker process, stepped at once from one thread each (ViZDoom releases the GIL;
+    `emml.envs.vector.GroupedDoomVectorEnv`): the same envs and seeds, fewer processes to wake at every step.
+    Must divide num_envs / env_groups."""
     acting_threads: int = 1
     """torch threads while acting (batches of num_envs/env_groups, one step): one is about as fast as two for
     such small batches and leaves the other cores to the env workers; 0: as many as the learner."""

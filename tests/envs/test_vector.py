@@ -5,6 +5,7 @@ import sys
 import textwrap
 import time
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -147,3 +148,57 @@ def test_workers_hosting_several_envs_give_the_same_envs(no_leftovers):
                 for key in ("task", "success", "engine_restart"):
                     assert np.array_equal(a_info["final_info"][key][done], b_info["final_info"][key][done]), key
         assert ends >= 4
+
+
+class _Slow(gym.Env):
+    """A stand-in env whose step blocks ``delay`` seconds without the GIL (as a ViZDoom engine step does) and whose
+    episodes end every ``length`` steps."""
+
+    def __init__(self, index: int, delay: float = 0.0, length: int = 3):
+        self.index, self.delay, self.length = index, delay, length
+        self.observation_space = gym.spaces.Box(0, 1000, (2,), np.int64)
+        self.action_space = gym.spaces.Discrete(4)
+
+    def reset(self, *, seed=None, options=None):
+        self.t, self.episodes = 0, getattr(self, "episodes", -1) + 1
+        return np.array([self.index, 100 * self.episodes]), {"episode": self.episodes}
+
+    def step(self, action):
+        time.sleep(self.delay)
+        self.t += 1
+        obs = np.array([self.index, 100 * self.episodes + 10 * self.t + int(action)])
+        return obs, float(action), self.t >= self.length, False, {"episode": self.episodes}
+
+
+def test_threaded_batch_steps_its_envs_at_once_with_the_results_of_stepping_in_turn():
+    from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+    from emml.envs.vector import ThreadedSyncVectorEnv
+
+    def fns(delay):
+        return [lambda i=i: _Slow(i, delay) for i in range(4)]
+
+    serial = SyncVectorEnv(fns(0.0), autoreset_mode=AutoresetMode.SAME_STEP)
+    threaded = ThreadedSyncVectorEnv(fns(0.0), autoreset_mode=AutoresetMode.SAME_STEP)
+    try:
+        a, b = serial.reset(seed=0), threaded.reset(seed=0)
+        assert np.array_equal(a[0], b[0])
+        for step in range(7):  # over two same-step autoresets (episodes of 3)
+            actions = np.array([step % 4, 1, 2, 3])
+            a, b = serial.step(actions), threaded.step(actions)
+            for x, y in zip(a[:4], b[:4]):
+                assert np.array_equal(x, y)
+            assert a[4]["episode"].tolist() == b[4]["episode"].tolist()
+            assert ("final_info" in a[4]) == ("final_info" in b[4])
+    finally:
+        serial.close()
+        threaded.close()
+    slow = ThreadedSyncVectorEnv(fns(0.2), autoreset_mode=AutoresetMode.SAME_STEP)
+    try:
+        slow.reset(seed=0)
+        t0 = time.perf_counter()
+        slow.step(np.zeros(4, dtype=np.int64))
+        assert time.perf_counter() - t0 < 0.5  # in turn: 0.8 s
+    finally:
+        slow.close()
+    assert slow._pool._shutdown
