@@ -18,7 +18,7 @@ from torch import Tensor, nn
 from emml.models.config import ModelConfig
 from emml.models.encoders import ImageEncoder, TextEncoder, conv_output_size
 from emml.models.fusion import FusionOutput, Pacman, build_fusion
-from emml.models.gru import gru_cell
+from emml.models.gru import gru_cell, gru_sequence
 
 NUM_ACTIONS = 4
 """Navigation actions (the harness's action set size)."""
@@ -102,13 +102,15 @@ class PolicyModule(nn.Module):
             parts.append((task.unsqueeze(-1) == torch.arange(NUM_TASKS, device=task.device)).to(state.dtype))
         x = torch.relu(self.linear(torch.cat(parts, dim=-1)))  # batched over T*B
         keep = (~episode_start.bool()).to(x.dtype).unsqueeze(-1)  # (T, B, 1)
-        outs = []
-        cell = (lambda x_t, h_t: gru_cell(self.gru, x_t, h_t)) if self.unrolled else self.gru
-        for t in range(t_len):
-            h = cell(x[t], h * keep[t])
-            outs.append(h)
-        out = torch.stack(outs)  # (T, B, hidden)
-        return self.actor(out), self.critic(out).squeeze(-1), h
+        if self.unrolled:
+            outs = []
+            for t in range(t_len):
+                h = gru_cell(self.gru, x[t], h * keep[t])
+                outs.append(h)
+            out = torch.stack(outs)  # (T, B, hidden)
+        else:
+            out = gru_sequence(self.gru, x, h, keep)  # the same loop, with a hand-written backward
+        return self.actor(out), self.critic(out).squeeze(-1), out[-1]
 
 
 class TextCache:
