@@ -102,14 +102,15 @@ class PolicyModule(nn.Module):
             parts.append((task.unsqueeze(-1) == torch.arange(NUM_TASKS, device=task.device)).to(state.dtype))
         x = torch.relu(self.linear(torch.cat(parts, dim=-1)))  # batched over T*B
         keep = (~episode_start.bool()).to(x.dtype).unsqueeze(-1)  # (T, B, 1)
-        if self.unrolled:
+        if torch.is_grad_enabled() and not self.unrolled:
+            out = gru_sequence(self.gru, x, h, keep)  # the loop below, with a hand-written backward
+        else:  # acting, evaluation, and vmap over stacked runs (`unrolled`)
+            cell = (lambda x_t, h_t: gru_cell(self.gru, x_t, h_t)) if self.unrolled else self.gru
             outs = []
             for t in range(t_len):
-                h = gru_cell(self.gru, x[t], h * keep[t])
+                h = cell(x[t], h * keep[t])
                 outs.append(h)
             out = torch.stack(outs)  # (T, B, hidden)
-        else:
-            out = gru_sequence(self.gru, x, h, keep)  # the same loop, with a hand-written backward
         return self.actor(out), self.critic(out).squeeze(-1), out[-1]
 
 

@@ -119,3 +119,26 @@ def test_conv1_runs_on_blocks_for_large_batches_of_large_frames_only():
     big, small = torch.zeros(64, 3, 168, 300, dtype=torch.uint8), torch.zeros(8, 3, 168, 300, dtype=torch.uint8)
     assert enc._on_blocks(big) and not enc._on_blocks(small)
     assert not enc._on_blocks(torch.zeros(1024, 3, 84, 150, dtype=torch.uint8))
+
+
+def test_a_large_batch_encodes_each_distinct_instruction_once_with_the_same_values_and_gradients():
+    """The PPO update's T·B rows repeat each episode's instruction: the GRU runs on the distinct rows only, and
+    the sentence embeddings and gradients are those of encoding every row."""
+    torch.manual_seed(0)
+    enc = TextEncoder(vocab_size=12)
+    distinct = torch.randint(0, 13, (9, 6))
+    distinct[:, 0] = torch.arange(1, 10)  # 9 different instructions
+    tokens = distinct[torch.randint(0, 9, (256,))]
+    seen = []
+    enc.gru.register_forward_hook(lambda module, args, out: seen.append(args[0].shape[0]))
+    bow, sent = enc(tokens)
+    assert seen == [9]
+    weights = torch.randn_like(sent)
+    grads = torch.autograd.grad((sent * weights).sum(), list(enc.parameters()), allow_unused=True)
+    ref = enc.sentence_embedding(tokens)  # every row through the GRU
+    ref_grads = torch.autograd.grad((ref * weights).sum(), list(enc.parameters()), allow_unused=True)
+    torch.testing.assert_close(sent, ref)
+    for got, want in zip(grads, ref_grads):
+        if want is not None:
+            torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-6)
+    assert torch.equal(bow, enc.bag_of_words(tokens))
