@@ -127,6 +127,11 @@ class MemoryTracker:
         return 0
 
 
+SYNTHETIC_EPISODE = 32
+"""Steps per episode in model-only's synthetic rollout, over which an actor's instruction stays the same (the text
+encoder encodes each distinct instruction of the update once)."""
+
+
 def _model_only(cfg, updates: int, stack: int = 1) -> float:
     """Frames/s of acting (T batched forward steps) + one PPO update on synthetic observations of the real shapes;
     with ``stack`` N > 1, of N runs stacked in one model (emml/rl/packed.py), all their frames counted."""
@@ -165,6 +170,9 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     for key, tensor in buffer.obs.items():
         high = {"image": 256, "tokens": V + 1, "task": 2, "time": env.max_steps, "aux": 2}[key]
         tensor.copy_(torch.randint(0, high, tensor.shape, generator=gen))
+    # one instruction per actor and episode, as in a rollout (episodes of SYNTHETIC_EPISODE steps)
+    episode = torch.arange(T) // SYNTHETIC_EPISODE
+    buffer.obs["tokens"].copy_(buffer.obs["tokens"][episode].clone())
     buffer.rewards.copy_(torch.randn(buffer.rewards.shape, generator=gen))
     mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))), device=device)
 
