@@ -72,15 +72,15 @@ class _Recurrence(torch.autograd.Function):
         grad_gates_h = torch.empty_like(gates_h)  # d(W_hh h + b_hh) per step
         grad_xn = torch.empty_like(grad_out)  # d(W_in x + b_in): the h side's n gate times r
         grad_h = torch.zeros_like(grad_out[0])
-        for t in reversed(range(grad_out.shape[0])):
-            g = grad_h + grad_out[t]  # d h'_t
-            r_t, z_t, n_t = r[t], z[t], n[t]
-            grad_a = torch.mul(g * (1 - z_t), 1 - n_t * n_t, out=grad_xn[t])  # through (1 - z) * n and tanh
-            gr, gz, gn = grad_gates_h[t].split(hidden, dim=-1)
-            torch.mul(grad_a * hn[t], r_t * (1 - r_t), out=gr)
-            torch.mul(g * (h_in[t] - n_t), z_t * (1 - z_t), out=gz)
+        per_step = (x.unbind(0) for x in (grad_out, r, z, n, hn, h_in, keep, grad_gates_h, grad_xn))
+        for g_out, r_t, z_t, n_t, hn_t, h_t, keep_t, grad_gh, grad_xn_t in reversed(list(zip(*per_step))):
+            g = grad_h + g_out  # d h'_t
+            grad_a = torch.mul(g * (1 - z_t), 1 - n_t * n_t, out=grad_xn_t)  # through (1 - z) * n and tanh
+            gr, gz, gn = grad_gh.split(hidden, dim=-1)
+            torch.mul(grad_a * hn_t, r_t * (1 - r_t), out=gr)
+            torch.mul(g * (h_t - n_t), z_t * (1 - z_t), out=gz)
             torch.mul(grad_a, r_t, out=gn)
-            grad_h = torch.addmm(g * z_t, grad_gates_h[t], weight_hh).mul_(keep[t])
+            grad_h = torch.addmm(g * z_t, grad_gh, weight_hh).mul_(keep_t)
         grad_gates_x = torch.cat([grad_gates_h[..., : 2 * hidden], grad_xn], dim=-1)
         flat = grad_gates_h.reshape(-1, 3 * hidden)
         return grad_gates_x, grad_h, None, flat.t() @ h_in.reshape(-1, hidden), flat.sum(0)

@@ -23,6 +23,7 @@ from collections import deque
 
 import numpy as np
 import torch
+from torch import Tensor
 
 from emml.config import TrainConfig
 from emml.envs.doom import ANSWER
@@ -161,8 +162,7 @@ class Sampler:
         out, state = model(obs_t, state, self.episode_start[sl].unsqueeze(0))
         for k, v in state.items():
             self.state[k][sl] = v
-        dist = torch.distributions.Categorical(logits=out.logits[0])
-        move = dist.sample()
+        move, log_prob = sample_moves(out.logits[0])
         word = out.answer_logits[0].argmax(-1)
         action = torch.stack([move, word], dim=1).cpu().numpy()  # (waits for the device: staging reusable after)
         target = np.where(self.tasks[g] == 1, self.answers[g], -1)  # answer CE on EQA episodes (§3.3)
@@ -173,7 +173,7 @@ class Sampler:
             {k: v[0] for k, v in obs_t.items()},
             move,
             torch.as_tensor(target),
-            dist.log_prob(move),
+            log_prob,
             out.value[0],
             self.episode_start[sl],
             envs=sl,
@@ -234,6 +234,15 @@ class Sampler:
             buf.copy_(src)
             out[k] = buf.to(self.device, non_blocking=True).unsqueeze(0)
         return out
+
+
+def sample_moves(logits: Tensor) -> tuple[Tensor, Tensor]:
+    """A move per row of ``logits`` (B, moves) and its log-probability: the ops of
+    `torch.distributions.Categorical(logits=logits)`'s ``sample()`` and ``log_prob()``, so the same draws and values
+    bit for bit (tested), without building a distribution object and validating its arguments at every step."""
+    logits = logits - logits.logsumexp(dim=-1, keepdim=True)
+    move = torch.multinomial(torch.softmax(logits, dim=-1), 1, True)[:, 0]
+    return move, logits.gather(-1, move.unsqueeze(-1))[:, 0]
 
 
 def _stack(parts: list[dict]) -> dict:

@@ -156,3 +156,16 @@ def test_a_killed_worker_process_is_replaced_and_its_group_restarted(no_leftover
         assert all(p.is_alive() for p in sampler.venvs[1].processes)
         sampler.collect(model, buffer)
         assert sampler.workers.restarts == 1
+
+
+def test_sample_moves_draws_and_scores_as_categorical_bit_for_bit():
+    from emml.rl.sampler import sample_moves
+
+    logits = torch.randn(64, 4, generator=torch.Generator().manual_seed(0)) * 3
+    torch.manual_seed(7)
+    dist = torch.distributions.Categorical(logits=logits)
+    want_move = dist.sample()
+    want_log_prob = dist.log_prob(want_move)
+    torch.manual_seed(7)
+    move, log_prob = sample_moves(logits)
+    assert torch.equal(move, want_move) and torch.equal(log_prob, want_log_prob)
