@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import asdict
 
 import gymnasium as gym
@@ -183,6 +183,12 @@ class _Ahead(gym.Wrapper):
         out = self.env.step(action)
         return out, (self.env.reset() if out[2] or out[3] else None)
 
+    def settle(self) -> None:
+        """Wait for the step in flight, if any, and forget it and its result."""
+        future, self._pending, self._reset = self._pending, None, None
+        if future is not None:
+            wait([future])
+
     def step(self, action):
         if self._pending is None:
             return self.env.step(action)
@@ -210,7 +216,12 @@ class ThreadedSyncVectorEnv(SyncDoomVectorEnv):
     def step(self, actions):
         for env, action in zip(self.envs, iterate(self.action_space, actions), strict=True):
             env.launch(self._pool, action)
-        return super().step(actions)
+        try:
+            return super().step(actions)
+        except BaseException:
+            for env in self.envs:  # let the other envs' steps end: no env may be stepped by two threads after this
+                env.settle()
+            raise
 
     def close_extras(self, **kwargs):
         self._pool.shutdown(wait=True, cancel_futures=True)  # no thread may be inside an env that closes

@@ -202,3 +202,24 @@ def test_threaded_batch_steps_its_envs_at_once_with_the_results_of_stepping_in_t
     finally:
         slow.close()
     assert slow._pool._shutdown
+
+
+def test_threaded_batch_lets_every_step_end_before_an_error_leaves_it():
+    from gymnasium.vector import AutoresetMode
+
+    from emml.envs.vector import ThreadedSyncVectorEnv
+
+    class Failing(_Slow):
+        def step(self, action):
+            raise RuntimeError("engine gone")
+
+    envs = ThreadedSyncVectorEnv(
+        [lambda: Failing(0), lambda: _Slow(1, delay=0.3)], autoreset_mode=AutoresetMode.SAME_STEP
+    )
+    try:
+        envs.reset(seed=0)
+        with pytest.raises(RuntimeError, match="engine gone"):
+            envs.step(np.zeros(2, dtype=np.int64))
+        assert all(env._pending is None for env in envs.envs)  # the slow env's step ended and was forgotten
+    finally:
+        envs.close()
