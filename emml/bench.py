@@ -172,7 +172,7 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
         tensor.copy_(torch.randint(0, high, tensor.shape, generator=gen))
     # one instruction per actor and episode, as in a rollout (episodes of SYNTHETIC_EPISODE steps)
     episode = torch.arange(T) // SYNTHETIC_EPISODE
-    buffer.obs["tokens"].copy_(buffer.obs["tokens"][episode].clone())
+    buffer.obs["tokens"].copy_(buffer.obs["tokens"][episode])  # indexing by a tensor copies: no aliasing
     buffer.rewards.copy_(torch.randn(buffer.rewards.shape, generator=gen))
     mask = torch.as_tensor(channel_mask(vocab, default_aux_words(vocab, load_dataset(env.dataset))), device=device)
 
