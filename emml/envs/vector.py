@@ -164,7 +164,16 @@ class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
 
 
 class SyncDoomVectorEnv(_Closing, SyncVectorEnv):
-    pass
+    """The envs in this process, stepped in turn (``asynchronous=False``: for debugging, one process to step
+    through). ``step_async``/``step_wait`` as AsyncVectorEnv has them, so the sampler drives either: the step runs
+    in ``step_wait``."""
+
+    def step_async(self, actions) -> None:
+        self._actions = np.array(actions)  # a copy: the caller may reuse its array before step_wait
+
+    def step_wait(self, **kwargs):
+        actions, self._actions = self._actions, None
+        return self.step(actions)
 
 
 class _Ahead(gym.Wrapper):

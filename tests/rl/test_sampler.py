@@ -52,9 +52,9 @@ def _buffer(sampler, cfg):
     return RolloutBuffer(cfg.num_steps, cfg.num_envs, shapes)
 
 
-@pytest.mark.parametrize("groups", [1, 2])
-def test_rollouts_hold_exactly_what_plain_envs_produce(groups, no_leftovers):
-    cfg = _config(groups)
+@pytest.mark.parametrize("groups,asynchronous", [(1, True), (2, True), (2, False)])
+def test_rollouts_hold_exactly_what_plain_envs_produce(groups, asynchronous, no_leftovers):
+    cfg = _config(groups, asynchronous=asynchronous)  # asynchronous=False: the envs in this process
     torch.manual_seed(0)
     rollouts = []
     with Sampler(cfg, torch.device("cpu")) as sampler:
