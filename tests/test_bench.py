@@ -21,6 +21,13 @@ def test_bench_train_reports_both_throughputs_and_the_split(tmp_path, tracking, 
     assert math.isclose(r["double_buffer_gain"], r["end_to_end_fps"] / r["lockstep_fps"], rel_tol=0.01)
 
 
+def test_the_time_split_is_over_the_updates_given():
+    first = {"perf/simulate_s": 1.0, "perf/infer_s": 20.0, "perf/learn_s": 30.0}  # a warm-up that compiles
+    later = {"perf/simulate_s": 1.0, "perf/infer_s": 1.0, "perf/learn_s": 2.0}
+    assert bench.time_split([later, later]) == {"simulate": 0.25, "infer": 0.25, "learn": 0.5}
+    assert bench.time_split([first, later])["infer"] == round(21 / 55, 3)
+
+
 def test_bench_train_packs_runs_and_measures_the_simulator_limit(tmp_path, tracking, no_leftovers):
     cfg = profile_config("smoke", "easy", model="dual_attention", aux=False)
     r = bench_train(cfg, updates=1, runs=2, limit_steps=300)

@@ -268,6 +268,7 @@ class Trainer:
             log_mark = (time.perf_counter(), frames)
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
+                spent = dict(sampler.timing)
                 with conv_precision(model, cfg.precision):
                     sampler.collect(model, buffer)
                     t_learn = time.perf_counter()
@@ -281,7 +282,10 @@ class Trainer:
                 now = time.perf_counter()
                 timing["learn"] += now - t_learn
                 timing["simulate"], timing["infer"] = sampler.timing["simulate"], sampler.timing["infer"]
-                metrics = update_metrics(stats, B * T / (now - t_start), recent, update, sampler.dropped_episodes)
+                seconds = {k: v - spent[k] for k, v in sampler.timing.items()} | {"learn": now - t_learn}
+                metrics = update_metrics(
+                    stats, B * T / (now - t_start), recent, update, sampler.dropped_episodes, seconds
+                )
                 self.tracker.log_metrics(metrics, step=frames)
                 bar.update(B * T)
                 bar.set_postfix(
@@ -374,9 +378,12 @@ def record_result(payload: dict, cfg: TrainConfig) -> Path:
     return upsert_result(results_csv(cfg), row)
 
 
-def update_metrics(stats: dict, fps: float, recent: dict, update: int, dropped: int) -> dict:
+def update_metrics(
+    stats: dict, fps: float, recent: dict, update: int, dropped: int, seconds: dict | None = None
+) -> dict:
     """What a run logs after each update: its losses, frames/s, training success per task (last 100 episodes),
-    the update count and the episodes dropped to engine deaths."""
+    the update count, the episodes dropped to engine deaths, and the update's seconds waiting on the envs, acting
+    and learning (``perf/simulate_s``, ``perf/infer_s``, ``perf/learn_s``)."""
     metrics = {f"losses/{k}": v for k, v in stats.items()}
     metrics["charts/fps"] = fps
     for task_id, name in ((0, "sgn"), (1, "eqa")):
@@ -384,6 +391,8 @@ def update_metrics(stats: dict, fps: float, recent: dict, update: int, dropped: 
             metrics[f"train/success_{name}"] = float(np.mean(recent[task_id]))
     metrics["charts/update"] = update
     metrics["charts/dropped_episodes"] = dropped
+    for part, value in (seconds or {}).items():
+        metrics[f"perf/{part}_s"] = value
     return metrics
 
 

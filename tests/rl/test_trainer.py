@@ -44,6 +44,16 @@ def test_every_model_trains_a_few_hundred_frames(model, tracking, no_leftovers):
     assert len(losses) == 2  # one point per update (2 updates of 2 x 32 frames)
 
 
+def test_each_update_logs_where_its_time_went(tracking, no_leftovers):
+    result = train(smoke(tracking, frames=192, eval_every=0), quiet=True)
+    fps = [v for _, v in metric_history(result.run_id, "charts/fps")]
+    parts = [[v for _, v in metric_history(result.run_id, f"perf/{p}_s")] for p in ("simulate", "infer", "learn")]
+    assert len(fps) == 3 and all(len(p) == 3 for p in parts)  # one point per update, not cumulative:
+    for u, f in enumerate(fps):  # the update's own seconds add up to its wall time (64 frames / its frames/s)
+        spent = sum(p[u] for p in parts)
+        assert 0.9 * 64 / f <= spent <= 64 / f, (u, spent, 64 / f)
+
+
 def test_a_run_dir_moved_to_another_store_resumes_with_its_whole_curve(tracking, tmp_path, monkeypatch, no_leftovers):
     first = train(smoke(tracking, frames=128, eval_episodes=1), quiet=True)
     monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/other.db")  # a fresh clone, another machine
