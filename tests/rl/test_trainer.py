@@ -51,7 +51,7 @@ def test_each_update_logs_where_its_time_went(tracking, no_leftovers):
     assert len(fps) == 3 and all(len(p) == 3 for p in parts)  # one point per update, not cumulative:
     for u, f in enumerate(fps):  # the update's own seconds add up to its wall time (64 frames / its frames/s)
         spent = sum(p[u] for p in parts)
-        assert 0.9 * 64 / f <= spent <= 64 / f, (u, spent, 64 / f)
+        assert 0.75 * 64 / f <= spent <= 64 / f * (1 + 1e-9), (u, spent, 64 / f)  # slack: loop code, preemption
 
 
 def test_a_run_dir_moved_to_another_store_resumes_with_its_whole_curve(tracking, tmp_path, monkeypatch, no_leftovers):
