@@ -142,7 +142,7 @@ class Trainer:
         self.device = torch.device(cfg.device)
         self.git_sha = git_sha()  # the code this process runs: read once, before the tree can change under it
         self.timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
-        """Seconds spent per part of an update in this process (log lines, `emml bench train`)."""
+        """Seconds spent per part of the updates in this process, all of them (each update's own: ``perf/*_s``)."""
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
@@ -265,6 +265,7 @@ class Trainer:
                 smoothing=0.1,
             )
             timing = self.timing
+            since_line = dict.fromkeys(timing, 0.0)  # the log line's split: since the previous line, not since start
             log_mark = (time.perf_counter(), frames)
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
@@ -280,9 +281,10 @@ class Trainer:
                 update += 1
                 frames += B * T
                 now = time.perf_counter()
-                timing["learn"] += now - t_learn
-                timing["simulate"], timing["infer"] = sampler.timing["simulate"], sampler.timing["infer"]
                 seconds = {k: v - spent[k] for k, v in sampler.timing.items()} | {"learn": now - t_learn}
+                for part, value in seconds.items():
+                    timing[part] += value
+                    since_line[part] += value
                 metrics = update_metrics(
                     stats, B * T / (now - t_start), recent, update, sampler.dropped_episodes, seconds
                 )
@@ -295,7 +297,8 @@ class Trainer:
                     now, since = time.perf_counter(), log_mark
                     log_mark = (now, frames)
                     fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
-                    bar.write(_log_line(update, frames, fps, metrics, timing))
+                    bar.write(_log_line(update, frames, fps, metrics, since_line))
+                    since_line = dict.fromkeys(timing, 0.0)
                 if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
                     self._eval(model, frames)
                     next_eval += cfg.eval_every

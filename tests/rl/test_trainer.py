@@ -54,6 +54,19 @@ def test_each_update_logs_where_its_time_went(tracking, no_leftovers):
         assert 0.75 * 64 / f <= spent <= 64 / f * (1 + 1e-9), (u, spent, 64 / f)  # slack: loop code, preemption
 
 
+def test_a_log_line_splits_the_time_since_the_previous_line(tracking, monkeypatch, no_leftovers):
+    import emml.rl.trainer as trainer
+
+    lines = []
+    real = trainer._log_line
+    monkeypatch.setattr(trainer, "_log_line", lambda *a: lines.append(dict(a[-1])) or real(*a))
+    result = train(smoke(tracking, frames=192, eval_every=0, log_every=1), quiet=False)
+    logged = {p: [v for _, v in metric_history(result.run_id, f"perf/{p}_s")] for p in ("simulate", "infer", "learn")}
+    assert len(lines) == 3  # one line per update: each splits that update's seconds, not all since the start
+    for u, line in enumerate(lines):
+        assert line == pytest.approx({p: v[u] for p, v in logged.items()})
+
+
 def test_a_run_dir_moved_to_another_store_resumes_with_its_whole_curve(tracking, tmp_path, monkeypatch, no_leftovers):
     first = train(smoke(tracking, frames=128, eval_episodes=1), quiet=True)
     monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/other.db")  # a fresh clone, another machine
