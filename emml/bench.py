@@ -240,15 +240,12 @@ def _end_to_end(cfg, updates: int, stack: int = 1) -> tuple[float, dict]:
     return sum(m["charts/fps"] for m in measured) / len(measured), time_split(measured)
 
 
-TIME_SPLIT = ("simulate", "infer", "learn")
-"""Where an update's time goes: waiting on the envs, acting, learning (the trainer's ``perf/<part>_s`` metrics)."""
-
-
 def time_split(metrics: list[dict]) -> dict[str, float]:
-    """Each part's share of the time over these updates' metrics."""
+    """Each part's share of the time over these updates' metrics (the trainer's ``perf/<part>_s``)."""
+    from emml.rl.trainer import TIME_SPLIT, time_shares
+
     seconds = {part: sum(m[f"perf/{part}_s"] for m in metrics) for part in TIME_SPLIT}
-    total = sum(seconds.values()) or 1.0
-    return {part: round(v / total, 3) for part, v in seconds.items()}
+    return {part: round(share, 3) for part, share in time_shares(seconds).items()}
 
 
 def _raw_steps(config: DoomConfig, steps: int) -> float:

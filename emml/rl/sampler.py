@@ -63,7 +63,7 @@ class Sampler:
         self.workers = RestartBudget(cfg.max_engine_restarts, cfg.engine_restart_window, "env worker", WorkerDied)
         """Groups restarted because one of their worker processes died (``.restarts``)."""
         self.timing = {"simulate": 0.0, "infer": 0.0}
-        """Seconds the learner waited on the envs / spent acting."""
+        """Seconds the learner waited on the envs / spent acting in the last `collect`."""
         self.acting_threads = cfg.acting_threads
         self._pinned = self.device.type == "cuda"
         self._staging: dict[int, dict[str, torch.Tensor]] = {}
@@ -132,6 +132,7 @@ class Sampler:
         answer word), and leave the observation after the last step in ``self.obs`` for bootstrapping."""
         T = self.cfg.num_steps
         buffer.set_initial_state(self.state)
+        self.timing = dict.fromkeys(self.timing, 0.0)
         pending = [False] * self.groups
         learner_threads = torch.get_num_threads()
         if self.acting_threads:

@@ -141,8 +141,6 @@ class Trainer:
             cfg.env.aux_words = default_aux_words(self.vocab, dataset)
         self.device = torch.device(cfg.device)
         self.git_sha = git_sha()  # the code this process runs: read once, before the tree can change under it
-        self.timing = {"simulate": 0.0, "infer": 0.0, "learn": 0.0}
-        """Seconds spent per part of the updates in this process, all of them (each update's own: ``perf/*_s``)."""
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
@@ -264,12 +262,10 @@ class Trainer:
                 dynamic_ncols=True,
                 smoothing=0.1,
             )
-            timing = self.timing
-            since_line = dict.fromkeys(timing, 0.0)  # the log line's split: since the previous line, not since start
+            since_line = dict.fromkeys(TIME_SPLIT, 0.0)  # the log line's split: since the previous line
             log_mark = (time.perf_counter(), frames)
             while update < cfg.num_updates:
                 t_start = time.perf_counter()
-                spent = dict(sampler.timing)
                 with conv_precision(model, cfg.precision):
                     sampler.collect(model, buffer)
                     t_learn = time.perf_counter()
@@ -281,9 +277,8 @@ class Trainer:
                 update += 1
                 frames += B * T
                 now = time.perf_counter()
-                seconds = {k: v - spent[k] for k, v in sampler.timing.items()} | {"learn": now - t_learn}
+                seconds = sampler.timing | {"learn": now - t_learn}
                 for part, value in seconds.items():
-                    timing[part] += value
                     since_line[part] += value
                 metrics = update_metrics(
                     stats, B * T / (now - t_start), recent, update, sampler.dropped_episodes, seconds
@@ -298,7 +293,7 @@ class Trainer:
                     log_mark = (now, frames)
                     fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
                     bar.write(_log_line(update, frames, fps, metrics, since_line))
-                    since_line = dict.fromkeys(timing, 0.0)
+                    since_line = dict.fromkeys(TIME_SPLIT, 0.0)
                 if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
                     self._eval(model, frames)
                     next_eval += cfg.eval_every
@@ -399,13 +394,22 @@ def update_metrics(
     return metrics
 
 
+TIME_SPLIT = ("simulate", "infer", "learn")
+"""Where an update's time goes: waiting on the envs, acting, learning (the metrics ``perf/<part>_s``)."""
+
+
+def time_shares(seconds: dict[str, float]) -> dict[str, float]:
+    """Each part's share of the seconds given."""
+    total = sum(seconds.values()) or 1.0
+    return {part: v / total for part, v in seconds.items()}
+
+
 def _dtype(space) -> torch.dtype:
     return {np.uint8: torch.uint8}.get(space.dtype.type, torch.int64)
 
 
-def _log_line(update: int, frames: int, fps: float, m: dict, timing: dict) -> str:
-    total = sum(timing.values()) or 1.0
-    split = "/".join(f"{100 * v / total:.0f}" for v in timing.values())
+def _log_line(update: int, frames: int, fps: float, m: dict, seconds: dict) -> str:
+    split = "/".join(f"{100 * share:.0f}" for share in time_shares(seconds).values())
     return (
         f"update {update:>5} frames {frames:>9,} fps {fps:6.0f} "
         f"sgn {m.get('train/success_sgn', float('nan')):.2f} eqa {m.get('train/success_eqa', float('nan')):.2f} "
