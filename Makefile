@@ -9,7 +9,7 @@ BACKEND ?= local
 TCMALLOC := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib/x86_64-linux-gnu/libtcmalloc.so.4))
 EMML := $(if $(TCMALLOC),LD_PRELOAD=$(TCMALLOC) )$(VENV)/bin/emml
 
-.PHONY: setup demo test test-slow lint bench ui table2 ablations transfer house3d reports list
+.PHONY: setup demo test test-slow lint bench ui table2 ablations transfer house3d reports list campaign campaign-status
 
 setup: $(VENV)/.installed
 
@@ -37,7 +37,10 @@ lint: setup
 bench: setup
 	$(EMML) bench env
 
+# the committed run dirs into the store first (emml import-runs: once each; later calls only skip), then the browser;
+# a run dir that cannot be imported is named and the browser opens all the same
 ui: setup
+	-MLFLOW_TRACKING_URI=sqlite:///$(CURDIR)/mlflow.db $(EMML) import-runs
 	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///mlflow.db
 
 # The paper's tables (reproduce/tableN.toml): every run under PROFILE, skipping finished ones, resuming the rest.
@@ -64,6 +67,16 @@ transfer: setup
 house3d: setup
 	$(EMML) run table5 $(RUN_OPTS)
 	$(EMML) visualize house --out reports
+
+# An ordered, resumable list of table runs (reproduce/campaigns/CAMPAIGN.toml), trained from a git worktree of
+# this commit (.campaign/<sha>) into this checkout's runs/, results/ and MLflow store; campaign-status shows it.
+CAMPAIGN ?= reference
+
+campaign: setup
+	$(EMML) campaign $(CAMPAIGN)
+
+campaign-status: setup
+	$(EMML) campaign $(CAMPAIGN) --status
 
 # every profile with results: reports/tableN-PROFILE.{md,tex}, -curves.{png,pdf}, the best Dual-Attention run's
 # figures (when its run dir is here) and reports/index.md linking them all

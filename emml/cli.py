@@ -27,13 +27,19 @@ def _fail(message: str) -> None:
 
 @app.callback()
 def _check_project_files() -> None:
-    """Every command reads reproduce/profiles.toml: a broken one is named in one line before anything runs."""
+    """Every command reads reproduce/profiles.toml: a broken one is named in one line before anything runs; and
+    every command first ends the engines that killed emml processes left (emml/envs/engine.py, sweep_orphans)."""
     from emml.profiles import ProfileError, load_profiles
 
     try:
         load_profiles()
     except ProfileError as e:
         _fail(str(e))
+    from emml.envs.engine import sweep_orphans
+
+    ended = sweep_orphans()  # engines of emml processes killed with SIGKILL (nothing else could end them)
+    if ended:
+        typer.secho(f"ended {len(ended)} ViZDoom engines left by killed emml processes: pids {ended}", err=True)
 
 
 def _check_checkpoint(path: Path) -> None:
@@ -43,6 +49,17 @@ def _check_checkpoint(path: Path) -> None:
     try:
         load_checkpoint(path)
     except CheckpointError as e:
+        _fail(str(e))
+
+
+def _check_store() -> None:
+    """Fail with one line naming the MLflow store unless it answers and takes writes within seconds
+    (emml/preflight.py): MLflow itself retries an unreachable store for ~100 s, then prints a traceback."""
+    from emml.preflight import check_store
+
+    try:
+        check_store()
+    except ValueError as e:
         _fail(str(e))
 
 
@@ -383,20 +400,31 @@ def train(
             from emml.rl.packed_trainer import check_packable
 
             check_packable(cfgs)
+        from emml.preflight import check_train
+
+        check_train(*cfgs)  # the store, the run and results folders, the results CSV: before any engine or run
     except ValueError as e:
         _fail(str(e))
     _use_tcmalloc()
+    if cfg.num_updates * cfg.frames_per_update != cfg.frames and not (quiet or as_json):  # after the re-exec: once
+        typer.echo(
+            f"note: frames={cfg.frames:,} rounded up to whole updates of num_envs × num_steps = "
+            f"{cfg.frames_per_update:,}: {cfg.num_updates * cfg.frames_per_update:,} frames",
+            err=True,
+        )
     install_signal_handlers()
+    from emml.diskspace import NoSpaceError
     from emml.rl.checkpoint import CheckpointError
     from emml.rl.trainer import ConfigMismatch
     from emml.rl.trainer import train as run
+    from emml.runlock import RunLocked
 
     if pack_seeds:
         from emml.rl.packed_trainer import train_packed
 
         try:
             results = train_packed(cfgs, quiet=quiet or as_json)
-        except (CheckpointError, ConfigMismatch, ValueError) as e:
+        except (CheckpointError, ConfigMismatch, RunLocked, ValueError, NoSpaceError) as e:
             _fail(str(e))
         data = [{"run_dir": str(r.run_dir), "run_id": r.run_id, "frames": r.frames, **r.metrics} for r in results]
         text = [
@@ -405,9 +433,9 @@ def train(
         ]
         _echo(data, as_json, "\n".join(text))
         return
-    try:  # both are raised before any engine starts or anything is written
+    try:  # raised before any engine starts or anything is written, but a full disk (the run then ends FAILED)
         result = run(cfg, quiet=quiet or as_json)
-    except (CheckpointError, ConfigMismatch) as e:
+    except (CheckpointError, ConfigMismatch, RunLocked, NoSpaceError) as e:
         _fail(str(e))
     data = {
         "run_dir": str(result.run_dir),
@@ -427,11 +455,18 @@ def train(
     )
 
 
+_CONTROLS = (
+    "detectors (x_I := aux labels), target_mask (x_S := the referent's cells), type_gate (Eq. 4's gate from the "
+    "dataset's word types), none (emml/models/config.py)"
+)
+
+
 @app.command("eval")
 def eval_checkpoint(
     checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
     episodes: int = typer.Option(100, min=1, help="Episodes per (task, split)."),
     seed: int = 10_000,
+    control: str = typer.Option(None, help="Play under a diagnostic control instead of the run's: " + _CONTROLS),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Greedy accuracy of a checkpoint on SGN/EQA train/test (reproducible under --seed)."""
@@ -442,8 +477,65 @@ def eval_checkpoint(
     install_signal_handlers()
     if not as_json:
         typer.echo(f"evaluating {checkpoint}: {episodes} greedy episodes per task and split…", err=True)
-    result = evaluate_checkpoint(checkpoint, episodes, seed)
+    try:
+        result = evaluate_checkpoint(checkpoint, episodes, seed, control=control)
+    except ValueError as e:  # a control the model cannot take
+        _fail(str(e))
     _echo(result, as_json, ", ".join(f"{k} {v:.3f}" for k, v in result.items()))
+
+
+@app.command("rescore")
+def rescore_runs(
+    runs: list[Path] = typer.Argument(..., help="Finished run directories (or their checkpoint.pt)."),
+    episodes: int = typer.Option(0, min=0, help="Episodes per (task, split); 0: the run's final_eval_episodes."),
+    seed: int = typer.Option(10_000, help="First episode seed (the trainer's evaluations use 10,000)."),
+    record: bool = typer.Option(True, "--record/--no-record", help="Also upsert the run's results-table row."),
+    force: bool = typer.Option(False, "--force", help="Play again a run already scored with this protocol."),
+    results_root: str = typer.Option(None, help="Results root of the rows (default: the run's, from its checkpoint)."),
+    device: str = typer.Option("cpu", help="cpu | cuda"),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Re-score finished runs with the final-evaluation protocol (issue 33): results.json's metrics and the
+    results-table row rewritten, training provenance kept, scored_sha / eval_episodes / eval_seed recorded."""
+    from emml.config import TrainConfig
+    from emml.envs.engine import install_signal_handlers
+    from emml.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
+    from emml.rl.checkpoint import load_checkpoint
+    from emml.runlock import RunLocked
+
+    for run in runs:  # every run checked before any is played
+        rdir = run if run.is_dir() else run.parent
+        _check_checkpoint(rdir / "checkpoint.pt")
+        ckpt = load_checkpoint(rdir / "checkpoint.pt")
+        cfg = TrainConfig.from_dict(ckpt["config"])
+        if results_root is not None:
+            cfg.results_root = results_root
+        try:
+            check_finished(rdir, ckpt, cfg)
+            training_record(rdir, ckpt, cfg)
+        except (NotFinished, NoProvenance) as e:
+            _fail(str(e))
+    install_signal_handlers()
+    data, lines = [], []
+    for run in runs:
+        if not as_json:
+            typer.echo(f"re-scoring {run}…", err=True)
+        try:
+            r = rescore(run, episodes, seed, record=record, force=force, results_root=results_root, device=device)
+        except RunLocked as e:  # being trained: its score is not final
+            _fail(str(e))
+        data.append({"run_dir": str(r.run_dir), "before": r.before, "after": r.after, "played": r.played})
+        data[-1]["csv"] = str(r.csv) if r.csv else None
+        keys = [k for k in r.after if k not in ("eval_episodes", "eval_seed")]
+        scores = ", ".join(f"{k} {_score(r.before.get(k))} -> {r.after[k]:.3f}" for k in keys)
+        protocol = f"{r.before['eval_episodes']} -> {r.after['eval_episodes']} episodes, seed {r.after['eval_seed']}"
+        lines.append(f"{r.run_dir.name}: {scores} ({protocol})" + ("" if r.played else " [already scored]"))
+        lines.append(f"  wrote {r.run_dir / 'results.json'}" + (f" and its row in {r.csv}" if r.csv else ""))
+    _echo(data, as_json, "\n".join(lines))
+
+
+def _score(value) -> str:
+    return "-" if value is None else f"{value:.3f}"
 
 
 @app.command()
@@ -486,29 +578,40 @@ def transfer(
 @app.command()
 def diagnose(
     checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
-    episodes: int = typer.Option(20, min=1, help="Sampled SGN episodes for the attention and detector figures."),
+    episodes: int = typer.Option(
+        20, min=0, help="Sampled SGN episodes for the attention and detector figures (0: no SGN figures)."
+    ),
     step0_episodes: int = typer.Option(100, min=0, help="Resets for the actor's sensitivity to the target slot."),
+    eqa_episodes: int = typer.Option(10, min=0, help="Greedy episodes per EQA question (0: no EQA table)."),
+    control: str = typer.Option(None, help="Play under a diagnostic control instead of the run's: " + _CONTROLS),
     seed: int = 20_000,
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Why a model does (not) follow instructions: attention on the target, per-word detector AP, and how much
-    the first move depends on where the target stands (emml/diagnose.py)."""
+    the first move depends on where the target stands (emml/diagnose.py); per EQA question its accuracy, answers,
+    where the attention sits and the GA2 gate per channel (emml/diagnose_eqa.py)."""
     from emml.diagnose import diagnose_checkpoint, summary_line
+    from emml.diagnose_eqa import eqa_table
     from emml.envs.engine import install_signal_handlers
 
     _check_checkpoint(checkpoint)
     install_signal_handlers()
-    result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed)
-    words = ", ".join(f"{w} {ap:.2f}" for w, ap in sorted(result["detector_ap_words"].items(), key=lambda x: -x[1]))
-    slots = "; ".join(f"slot {s}: " + " ".join(f"{p:.2f}" for p in m) for s, m in result["step0_moves"].items())
-    text = "\n".join(
-        [
+    try:
+        result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed, eqa_episodes, control)
+    except ValueError as e:  # a control the model cannot take
+        _fail(str(e))
+    lines = []
+    if episodes:
+        ap = sorted(result["detector_ap_words"].items(), key=lambda x: -x[1])
+        slots = "; ".join(f"slot {s}: " + " ".join(f"{p:.2f}" for p in m) for s, m in result["step0_moves"].items())
+        lines += [
             summary_line(result) + f" ({result['frames']} frames)",
-            f"detector AP per word: {words}",
+            "detector AP per word: " + ", ".join(f"{w} {v:.2f}" for w, v in ap),
             f"step-0 move distribution (forward left right answer) by target slot: {slots or 'n/a (Hard)'}",
         ]
-    )
-    _echo(result, as_json, text)
+    if "eqa" in result:
+        lines += ([""] if lines else []) + [eqa_table(result["eqa"])]
+    _echo(result, as_json, "\n".join(lines))
 
 
 def _models(*paths: Path) -> list[tuple[str, object, object]]:
@@ -616,7 +719,13 @@ def demo(
 
     # SGN only: within the demo's minutes the agent leaves chance on instructions (both tasks need more frames)
     over = {"env.tasks": "sgn"}
-    cfg = profile_config(profile, "easy", over, model="dual_attention", aux=True, seed=0, table="demo").validate()
+    try:
+        cfg = profile_config(profile, "easy", over, model="dual_attention", aux=True, seed=0, table="demo").validate()
+        from emml.preflight import check_train
+
+        check_train(cfg)  # before any engine or MLflow run
+    except ValueError as e:
+        _fail(str(e))
     _use_tcmalloc()
     install_signal_handlers()
     from emml.report.demo import write_demo_report
@@ -717,6 +826,10 @@ def run_table(
     except ValueError as e:
         _fail(str(e))
     data = asdict(report)
+    if report.stopped:
+        again = " ".join(["emml run", table, "--profile", profile, *(f"--only {o}" for o in only)])
+        _echo(data, as_json, _stopped_line(report, again))
+        raise typer.Exit(130)
     _echo(
         data,
         as_json,
@@ -727,6 +840,105 @@ def run_table(
         raise typer.Exit(1)
 
 
+def _stopped_line(report, again: str) -> str:
+    """The one line a stopped launch ends with: what stopped, what was left, and the command that resumes it."""
+    interrupted = len(report.not_started) and "the runs in progress ended KILLED (resumable from their checkpoints), "
+    return (
+        f"stopped by {report.stopped}: {len(report.done)} runs finished, {interrupted or ''}"
+        f"{len(report.not_started)} not finished; resume with: {again}"
+    )
+
+
+@app.command()
+def campaign(
+    name: str = typer.Argument(..., help="A campaign of reproduce/campaigns/ (e.g. reference)."),
+    show_status: bool = typer.Option(False, "--status", help="Show each run as done / running / interrupted / to do."),
+    pin: bool = typer.Option(
+        True,
+        "--pin/--no-pin",
+        help="Train from a git worktree of this commit (.campaign/<sha>), so edits cannot reach it.",
+    ),
+    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores)."),
+    device: str = typer.Option("cpu", help="cpu | cuda"),
+    run_root: str = typer.Option(None, help="Run dirs (default: the checkout's runs/)."),
+    results_root: str = typer.Option(None, help="Results CSVs (default: the checkout's results/)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Train a campaign's unfinished runs in its order (resuming interrupted ones), or show its status."""
+    import os
+    import sys
+    from dataclasses import asdict
+
+    from emml.campaign import load_campaign, pin_worktree, run_campaign, status
+    from emml.tracking import project_path, project_root, tracking_uri
+
+    try:
+        plan = load_campaign(name)
+    except ValueError as e:
+        _fail(str(e))
+    if show_status:
+        rows = status(plan, run_root, results_root)
+        _echo([asdict(r) for r in rows], as_json, _status_text(plan, rows))
+        return
+    if pin:  # re-exec from a worktree of HEAD, writing into this checkout's runs, results and MLflow store
+        try:
+            tree = pin_worktree(project_root(), log=typer.echo)
+        except ValueError as e:
+            _fail(str(e))
+        roots = {
+            "--run-root": str(project_path(run_root or "runs")),
+            "--results-root": str(project_path(results_root or "results")),
+        }
+        args = [sys.executable, "-m", "emml.cli", "campaign", name, "--no-pin", "--jobs", str(jobs), "--device", device]
+        args += [x for kv in roots.items() for x in kv] + (["--json"] if as_json else [])
+        env = {**os.environ, "PYTHONPATH": str(tree), "MLFLOW_TRACKING_URI": tracking_uri()}
+        typer.echo(f"{name}: training from {tree} (commit {tree.name})")
+        os.execve(sys.executable, args, env)
+    _use_tcmalloc()
+    try:
+        reports = run_campaign(plan, run_root, results_root, device=device, jobs=jobs or None, log=typer.echo)
+    except ValueError as e:
+        _fail(str(e))
+    failed = {k: v for r in reports for k, v in r.failed.items()}
+    if reports and reports[-1].stopped:
+        _echo([asdict(r) for r in reports], as_json, _stopped_line(reports[-1], f"emml campaign {name}"))
+        raise typer.Exit(130)
+    _echo(
+        [asdict(r) for r in reports],
+        as_json,
+        f"{name}: {sum(len(r.done) for r in reports)} trained, {sum(len(r.skipped) for r in reports)} already "
+        f"finished, {len(failed)} failed",
+    )
+    if failed:
+        raise typer.Exit(1)
+
+
+def _status_text(plan, rows) -> str:
+    """--status as text: one line per run, by step, and the estimated time left."""
+
+    def hours(seconds: float | None) -> str:
+        return "?" if seconds is None else f"{seconds / 3600:.1f} h"
+
+    lines = [f"{plan.name}: {plan.title}"]
+    for step in plan.steps:
+        mine = [r for r in rows if r.step == step.name]
+        done = sum(r.state == "done" for r in mine)
+        lines.append(f"{step.name} ({step.table} [{step.profile}]): {done}/{len(mine)} done")
+        for r in mine:
+            who = f" pid {r.holder.get('pid')} on {r.holder.get('host')}" if r.holder else ""
+            left = "" if r.state == "done" else f", ~{hours(r.seconds_left)} left"
+            lines.append(f"  {r.state:<11} {r.run_name:<45} {r.frames:>10,}/{r.target:,} frames{left}{who}")
+    todo = [r.seconds_left for r in rows if r.state != "done"]
+    unknown = sum(s is None for s in todo)
+    total = sum(s for s in todo if s is not None)
+    lines.append(
+        f"left: {len(todo)} runs, ~{hours(total)} on this machine (one at a time; training frames/s and evaluation "
+        "seconds measured from this machine's runs of each profile)"
+        + (f"; {unknown} runs of a profile not yet measured here are not counted" if unknown else "")
+    )
+    return "\n".join(lines)
+
+
 @app.command()
 def report(
     table: str = typer.Argument(..., help="table2 | table3 | table4 | table5"),
@@ -735,12 +947,15 @@ def report(
     out: Path = typer.Option(None, help="Output folder (default: reports/)."),
     as_json: bool = typer.Option(False, "--json"),
 ):
-    """Ours beside the paper: reports/TABLE-PROFILE.md/.tex (mean [95% CI] | paper) and -curves.png/.pdf."""
+    """Ours beside the paper: reports/TABLE-PROFILE.md/.tex (mean (each seed) | paper, the runs' deviations from the
+    paper, an rliable aggregate) and -curves.png/.pdf (smoke: under scratch/reports)."""
     from emml.profiles import load_profiles
     from emml.report.tables import report_table
 
     if profile not in load_profiles():
         _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
+    if curves:  # they read MLflow
+        _check_store()
     try:
         data = report_table(table, profile, out=_out(out) if out else None)
     except ValueError as e:
@@ -762,8 +977,52 @@ def reports(out: Path = typer.Option(None, help="Output folder (default: reports
     from emml.envs.engine import install_signal_handlers
     from emml.report.index import write_reports
 
+    _check_store()  # the curves read MLflow
     install_signal_handlers()
     typer.echo(f"wrote {write_reports(_out(out) if out else None, log=typer.echo)}")
+
+
+@app.command("backfill-config")
+def backfill_config(
+    paths: list[Path] = typer.Argument(..., help="Run dirs, or folders holding them (e.g. runs/table2)."),
+):
+    """Copy each finished run's config from its checkpoint into its results.json (runs finished before the trainer
+    wrote it there), so reports read the deviations from the paper without loading checkpoints. A run still
+    training is skipped."""
+    from emml.report.saved_config import backfill_config as backfill
+    from emml.report.saved_config import run_dirs
+    from emml.tracking import project_path
+
+    found = run_dirs([project_path(p) for p in paths])
+    if not found:
+        _fail(f"no run dir (a folder with checkpoint.pt) at or under {', '.join(map(str, paths))}")
+    for run_dir in found:
+        typer.echo(f"{run_dir}: {backfill(run_dir)}")
+
+
+@app.command("import-runs")
+def import_runs_cmd(
+    paths: list[Path] = typer.Argument(None, help="Run dirs, or folders holding them (default: runs/)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Import finished run dirs (results.json, metrics.csv) into the MLflow store, one FINISHED run each in its
+    table's experiment with the trainer's tags, its config as params and its whole curve, so that `make ui` shows
+    the committed runs. Once: a run already in the store (trained or imported here) is skipped, and so is an
+    unfinished one (its trainer logs it)."""
+    from emml.import_runs import import_runs
+    from emml.tracking import project_path, tracking_uri
+
+    roots = [project_path(p) for p in paths] if paths else [project_path("runs")]
+    missing = [str(p) for p in roots if paths and not p.exists()]
+    if missing:
+        _fail(f"no such run dir or folder: {', '.join(missing)}")
+    _check_store()
+    results = import_runs(roots, log=None if as_json else lambda r: typer.echo(r.line()))
+    counts = {k: sum(r.outcome == k for r in results) for k in ("imported", "skipped", "failed")}
+    text = ", ".join(f"{n} {k}" for k, n in counts.items()) + f" (MLflow store {tracking_uri()})"
+    _echo({"uri": tracking_uri(), **counts, "runs": [vars(r) for r in results]}, as_json, text)
+    if counts["failed"]:
+        _fail(f"{counts['failed']} run dirs not imported: their errors are above")
 
 
 if __name__ == "__main__":

@@ -4,10 +4,14 @@ allowed values."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field, fields
 from typing import ClassVar
 
 from emml.tasks.language import VOCABULARY_SOURCES, check_choice
+
+PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+"""A table or profile name: it becomes a folder or file name, so no path separator, no leading dot."""
 
 RESOLUTIONS_16_9 = ((256, 144), (320, 180), (400, 225), (512, 288), (640, 360), (800, 450), (1024, 576))
 """ViZDoom's 16:9 screen resolutions (width, height), the aspect of the paper's 300×168 input."""
@@ -187,7 +191,8 @@ class TrainConfig:
     seed: int = 0
     """Seeds Python, NumPy, torch and the envs (worker i gets seed + i)."""
     frames: int = 10_000_000
-    """Agent steps to train, summed over actors (§5.1: 10M Easy, 50M Hard)."""
+    """Agent steps to train, summed over actors (§5.1: 10M Easy, 50M Hard); at least one update (num_envs ×
+    num_steps), and rounded up to whole updates (10M is 9,766 updates of 1,024: 10,000,384 frames)."""
     num_envs: int = 8
     """Parallel actors (Appendix A: 8)."""
     num_steps: int = 128
@@ -197,7 +202,12 @@ class TrainConfig:
     eval_every: int = 0
     """Evaluate every this many frames for the curves; 0: only at the end."""
     eval_episodes: int = 100
-    """Greedy evaluation episodes per (task, split)."""
+    """Greedy evaluation episodes per (task, split) of the evaluations during training (the curves)."""
+    final_eval_episodes: int = 500
+    """Greedy evaluation episodes per (task, split) of the final evaluation, the score in results.json and the
+    results table (paper silent). Larger than `eval_episodes`: one checkpoint's SGN train accuracy (GA quick seed
+    0) ranged 0.51-0.71 over 18 disjoint blocks of 100 episodes, 0.54-0.61 over 5 blocks of 500 (docs/fidelity.md,
+    "Trainer"); a score's binomial sd is ≤ 0.05 at 100 episodes, ≤ 0.022 at 500."""
     diagnose_episodes: int = 20
     """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP; the actor's
     sensitivity reads 5× as many first steps: emml/diagnose.py); 0: none."""
@@ -270,9 +280,31 @@ class TrainConfig:
         self.ppo.validate()
         check_choice("answer_supervision", self.answer_supervision, ("eqa_steps", "answer_steps"))
         check_choice("device", self.device.split(":")[0], ("cpu", "cuda"))
-        for name in ("frames", "num_envs", "num_steps", "eval_episodes", "checkpoint_every", "log_every"):
+        for name in (
+            "frames",
+            "num_envs",
+            "num_steps",
+            "eval_episodes",
+            "final_eval_episodes",
+            "checkpoint_every",
+            "log_every",
+        ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
+        if self.frames < self.frames_per_update:  # it used to be rounded up to one update, silently
+            raise ValueError(
+                f"frames={self.frames!r} is less than one update (num_envs × num_steps = {self.frames_per_update}); "
+                f"the minimum is {self.frames_per_update}"
+            )
+        if self.seed < 0:
+            raise ValueError(f"seed={self.seed!r} must be >= 0")
+        for name in ("table", "profile"):  # they name folders and files: run_root/<table>/…, <table>/<profile>.csv
+            value = getattr(self, name)
+            if not isinstance(value, str) or not PLAIN_NAME.fullmatch(value):
+                raise ValueError(
+                    f"{name}={value!r} must be a plain name: letters, digits, '_', '.' or '-', starting with a letter "
+                    "or digit (no path separators)"
+                )
         if self.env_groups < 1 or self.num_envs % self.env_groups:
             raise ValueError(f"env_groups={self.env_groups!r} must be a positive divisor of num_envs={self.num_envs}")
         group = self.num_envs // self.env_groups
@@ -283,6 +315,11 @@ class TrainConfig:
 
         check_compile(self.compile, self.device)
         control = self.model_options.get("control", "none")
+        if control == "type_gate":
+            raise ValueError(
+                "model_options.control='type_gate' is an evaluation control: apply it to a trained checkpoint "
+                "(emml eval CKPT --control type_gate, emml diagnose CKPT --control type_gate)"
+            )
         if control != "none" and not self.aux:
             raise ValueError(f"model_options.control={control!r} reads the aux labels: it needs aux=True")
         for name in (

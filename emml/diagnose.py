@@ -146,9 +146,23 @@ def summary_line(result: dict) -> str:
     return "diagnose: " + ", ".join(parts)
 
 
-def diagnose_checkpoint(path, episodes: int = 20, step0_episodes: int = 100, seed: int = 20_000) -> dict:
-    """Rebuild a checkpoint's model (its own config and vocabulary) and diagnose it."""
+def diagnose_checkpoint(
+    path,
+    episodes: int = 20,
+    step0_episodes: int = 100,
+    seed: int = 20_000,
+    eqa_episodes: int = 0,
+    control: str | None = None,
+) -> dict:
+    """Rebuild a checkpoint's model (its own config and vocabulary, ``control`` as in `emml.evaluate.load_model`)
+    and diagnose it: the SGN figures above (none when ``episodes`` is 0) and, with ``eqa_episodes``, the EQA
+    per-question ones under "eqa" (emml/diagnose_eqa.py)."""
+    from emml.diagnose_eqa import diagnose_eqa
     from emml.evaluate import load_model
 
-    model, cfg = load_model(path)
-    return diagnose(model, cfg.env, episodes, step0_episodes, seed)
+    model, cfg = load_model(path, control=control)
+    result = diagnose(model, cfg.env, episodes, step0_episodes, seed) if episodes else {}
+    if eqa_episodes:
+        result["eqa"] = diagnose_eqa(model, cfg.env, eqa_episodes, seed)
+    result["control"] = model.cfg.control
+    return result

@@ -75,9 +75,12 @@ def _run(model, envs, episodes: int, seed: int, device) -> float:
     return float(np.mean(play(model, envs, [(seed + i, None) for i in range(episodes)], device)))
 
 
-def play(model, envs, plan: list[tuple[int, dict | None]], device) -> list[bool]:
+def play(model, envs, plan: list[tuple[int, dict | None]], device, on_step=None) -> list[bool]:
     """Play the episodes of ``plan`` greedily, (reset seed, reset options) each, on ``envs`` in lockstep (an env
-    takes the next planned episode when its own ends); success per planned episode, in plan order."""
+    takes the next planned episode when its own ends); success per planned episode, in plan order.
+
+    ``on_step(k, env, out, i)``, when given, is called before each move of planned episode ``k`` with its env (its
+    engine state is the frame the model saw), the batch's `ModelOutput` and the episode's row ``i`` in it."""
     outcomes: list[bool] = [False] * len(plan)
     envs = envs[: len(plan)]  # more envs than episodes: the rest stay idle
     started, finished = 0, 0
@@ -98,6 +101,8 @@ def play(model, envs, plan: list[tuple[int, dict | None]], device) -> list[bool]
         for i, env in enumerate(envs):
             if not active[i]:
                 continue
+            if on_step is not None:
+                on_step(playing[i], env, out, i)
             obs, _, terminated, truncated, info = env.step(np.array([moves[i], words[i]]))
             obs_list[i] = obs
             if terminated or truncated:
@@ -114,22 +119,33 @@ def play(model, envs, plan: list[tuple[int, dict | None]], device) -> list[bool]
     return outcomes
 
 
-def load_model(path, device: str = "cpu"):
-    """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary."""
+def load_model(path, device: str = "cpu", control: str | None = None):
+    """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary; ``control`` (one of
+    `emml.models.config.CONTROLS`) replaces the run's diagnostic control, for evaluation (same weights)."""
     from emml.config import TrainConfig
     from emml.models import build_model
     from emml.rl.checkpoint import load_checkpoint
 
     ckpt = load_checkpoint(path)
     cfg = TrainConfig.from_dict(ckpt["config"])
+    if control is not None:
+        cfg.model_options = {**cfg.model_options, "control": control}
     env = cfg.env
     model = build_model(cfg.model, len(ckpt["vocabulary"]), env.height, env.width, env.max_steps, **cfg.model_options)
     model.load_state_dict(ckpt["model"])
+    if model.cfg.control == "type_gate":  # the word-type gate needs the run's words and the dataset's types
+        from emml.models.type_gate import TypeGate
+        from emml.tasks.language import load_dataset
+
+        model.type_gate = TypeGate(tuple(ckpt["vocabulary"]), load_dataset(env.dataset))
     return model.to(device), cfg
 
 
-def evaluate_checkpoint(path, episodes: int, seed: int = 10_000, device: str = "cpu") -> dict[str, float]:
-    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily."""
-    model, cfg = load_model(path, device)
+def evaluate_checkpoint(
+    path, episodes: int, seed: int = 10_000, device: str = "cpu", control: str | None = None
+) -> dict[str, float]:
+    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily; ``control``
+    as in `load_model`."""
+    model, cfg = load_model(path, device, control)
     torch.manual_seed(seed)
     return evaluate(model, cfg.env, episodes, seed=seed, device=device)

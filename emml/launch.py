@@ -12,8 +12,7 @@ import multiprocessing
 import os
 import traceback
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from emml.registry import RunSpec, load_table
@@ -63,6 +62,11 @@ class LaunchReport:
     parent_run_id: str | None = None
     placeholder: bool = False
     """The table is a placeholder: nothing to run."""
+    stopped: str | None = None
+    """Why the launch stopped early (Ctrl-C, SIGTERM): no queued run started, the runs in progress ended KILLED;
+    None when it ran to the end."""
+    not_started: list[str] = field(default_factory=list)
+    """Runs left unstarted by a stop (the next launch trains them)."""
 
 
 def run_states(name: str, profile: str, run_root: str | None = None, results_root: str | None = None) -> dict:
@@ -75,10 +79,10 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
     table = load_table(name)
     fields = _roots(run_root, results_root)
     out: dict[str, tuple[RunSpec, str]] = {}
-    recorded: set[str] | None = None
+    recorded_in: dict[Path, set[str]] = {}  # per results CSV: a row may borrow another table's runs (from_table)
     for spec in table.runs(profile_seeds(profile)):
         cfg = spec.to_config(profile, **fields)
-        if recorded is None:
+        if results_csv(cfg) not in recorded_in:
             results = read_results(results_csv(cfg))
             if table.transfer is not None:  # a transfer run is recorded once its scores are in the row
                 from emml.transfer import metric_column
@@ -86,7 +90,8 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
                 columns = [metric_column(x) for x in spec.instructions]
                 complete = set(columns) <= set(results.columns)
                 results = results[results[columns].notna().all(axis=1)] if complete else results.iloc[:0]
-            recorded = set(results["run_name"])
+            recorded_in[results_csv(cfg)] = set(results["run_name"])
+        recorded = recorded_in[results_csv(cfg)]
         rname, rdir = cfg.run_name(), run_dir(cfg)
         done = (rdir / CHECKPOINT).exists() and (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT)
         if rname in recorded:
@@ -103,21 +108,41 @@ ONLY_FIELDS = ("row", "model", "difficulty", "aux", "seed")
 """RunSpec fields `emml run --only FIELD=VALUE` can select on."""
 
 
-def select_runs(states: dict, only: dict[str, str]) -> dict:
-    """The runs of `states` whose fields equal every `only` value (compared as lower-case text). An unknown field,
-    or a value no run has, fails by name with the allowed fields or the values present."""
-    for key, value in only.items():
+def select_runs(states: dict, only: dict) -> dict:
+    """The runs of `states` whose fields equal every `only` value (compared as lower-case text); a value may be a
+    list of allowed values, whose order then orders the runs (a campaign's step lists them in the order it wants
+    them trained; otherwise the table's order). An unknown field, or a value no run has, fails by name with the
+    allowed fields or the values present."""
+    wanted = {
+        key: [str(v).lower() for v in (value if isinstance(value, list | tuple) else [value])]
+        for key, value in only.items()
+    }
+    for key, values in wanted.items():
         if key not in ONLY_FIELDS:
             allowed = ", ".join(ONLY_FIELDS)
-            raise ValueError(f"--only {key}={value}: unknown field {key!r}; allowed fields are {allowed}")
+            raise ValueError(f"--only {key}={only[key]}: unknown field {key!r}; allowed fields are {allowed}")
         present = sorted({str(getattr(spec, key)).lower() for spec, _ in states.values()})
-        if str(value).lower() not in present:
-            raise ValueError(f"--only {key}={value}: no run has it; the values present are {', '.join(present)}")
-    return {
-        rname: (spec, state)
+        for value in values:
+            if value not in present:
+                raise ValueError(f"--only {key}={value}: no run has it; the values present are {', '.join(present)}")
+    chosen = [
+        (rname, (spec, state))
         for rname, (spec, state) in states.items()
-        if all(str(getattr(spec, k)).lower() == str(v).lower() for k, v in only.items())
-    }
+        if all(str(getattr(spec, k)).lower() in values for k, values in wanted.items())
+    ]
+
+    def rank(item) -> tuple[int, ...]:
+        return tuple(values.index(str(getattr(item[1][0], k)).lower()) for k, values in wanted.items())
+
+    return dict(sorted(chosen, key=rank))
+
+
+def with_overrides(spec: RunSpec, overrides: dict, profile: str) -> RunSpec:
+    """`spec` with extra dotted TrainConfig overrides after its own (they may not change its run name)."""
+    out = replace(spec, overrides={**spec.overrides, **overrides})
+    if out.run_name(profile) != spec.run_name(profile):
+        raise ValueError(f"overrides {overrides} change the run's name: declare them as a row of the table instead")
+    return out
 
 
 def _finished(path: Path) -> bool:
@@ -165,10 +190,13 @@ def run_table(
     wait: bool = False,
     train_fn: Callable | None = None,
     log: Callable[[str], None] = print,
-    only: dict[str, str] | None = None,
+    only: dict | None = None,
+    overrides: dict | None = None,
 ) -> LaunchReport:
     """Train every unfinished run of table `name` under `profile` (`only`: those whose RunSpec fields match, e.g.
-    {'difficulty': 'easy', 'seed': '0'}: a table's Easy column on a machine that cannot afford Hard).
+    {'difficulty': 'easy', 'seed': '0'}: a table's Easy column on a machine that cannot afford Hard; a list of values
+    selects each and orders the runs by it). `overrides` (dotted TrainConfig fields, e.g. {'frames': 1_500_000})
+    apply to every run on top of its table's: a campaign's step trains the paper profile to fewer frames.
 
     backend 'local': `jobs` concurrent runs (default: half the cores) in a forkserver process pool, each with
     cores // jobs torch threads; jobs=1 runs in this process. backend 'slurm': one submitit job per run on
@@ -192,9 +220,16 @@ def run_table(
     if jobs < 1:
         raise ValueError(f"jobs={jobs} must be >= 1")
     states = select_runs(run_states(name, profile, run_root, results_root), only or {})
+    if overrides:
+        states = {rname: (with_overrides(spec, overrides, profile), state) for rname, (spec, state) in states.items()}
     report.total = len(states)
     todo = [spec for spec, state in states.values() if state != "finished"]
     report.skipped = [rname for rname, (_, state) in states.items() if state == "finished"]
+    if todo:  # each run's config, the store, the run and results folders, the results CSV: before the parent run
+        from emml.preflight import check_train
+
+        roots = _roots(run_root, results_root)
+        check_train(*(spec.to_config(profile, **roots, device=device).validate() for spec in todo))
     log(f"{name} [{profile}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
     if not todo:
         return report
@@ -207,21 +242,113 @@ def run_table(
         folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile}"
         return _submit(report, args, folder, partition, time_min, gpus, cpus, slurm_cluster, wait, log)
     set_run_status(report.parent_run_id, "RUNNING")
-    if jobs == 1:
-        for a in args:
-            _collect(report, a[0], a[1], lambda a=a: _train_one(*a), log)
-    else:
-        from emml.envs.engine import private_mp_tempdir
+    from emml.envs.engine import install_signal_handlers
 
-        private_mp_tempdir()
-        ctx = multiprocessing.get_context("forkserver")
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            futures = {pool.submit(_train_one, *a): a for a in args}
-            for fut in as_completed(futures):
-                spec, prof = futures[fut][:2]
-                _collect(report, spec, prof, fut.result, log)
+    install_signal_handlers()  # SIGTERM/SIGHUP raise SystemExit here as Ctrl-C raises KeyboardInterrupt
+    try:
+        if jobs == 1:
+            for a in args:
+                _collect(report, a[0], a[1], lambda a=a: _train_one(*a), log)
+        else:
+            _pool(report, args, jobs, log)
+    except (KeyboardInterrupt, SystemExit) as e:  # stop: the parent run ends KILLED, the caller says how to resume
+        set_run_status(report.parent_run_id, "KILLED")
+        finished = set(report.done) | set(report.failed)
+        report.stopped = "Ctrl-C" if isinstance(e, KeyboardInterrupt) else f"signal {_signal_name(e)}"
+        report.not_started = [spec.run_name(profile) for spec in todo if spec.run_name(profile) not in finished]
+        return report
+    except BaseException:  # a broken pool: the parent run ends, never stays RUNNING
+        set_run_status(report.parent_run_id, "FAILED")
+        raise
     set_run_status(report.parent_run_id, "FAILED" if report.failed else "FINISHED")
     return report
+
+
+STOP_GRACE_S = 8.0
+"""Seconds the pool's workers get to end their runs (checkpoint, MLflow run KILLED, engines) after a stop, before
+they are killed; a second Ctrl-C kills them at once."""
+
+
+def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
+    """Train `args`, at most `jobs` at a time, each run in a fresh forkserver process (nothing is queued in a worker
+    ahead of time, so a stop starts nothing more). On a stop (KeyboardInterrupt, SystemExit) every running child
+    gets SIGTERM (its run ends KILLED, its engines by pid) and those alive after STOP_GRACE_S, or at a second
+    Ctrl-C, are killed."""
+    from multiprocessing.connection import wait
+
+    from emml.envs.engine import private_mp_tempdir
+
+    private_mp_tempdir()
+    ctx = multiprocessing.get_context("forkserver")
+    queue, running = list(args), {}
+    try:
+        while queue or running:
+            while queue and len(running) < jobs:
+                a = queue.pop(0)
+                receive, send = ctx.Pipe(duplex=False)
+                child = ctx.Process(target=_child, args=(send, a), name=f"emml-{a[0].run_name(a[1])}")
+                child.start()
+                send.close()
+                running[child.sentinel] = (child, a, receive)
+            for sentinel in wait(list(running)):
+                child, a, receive = running.pop(sentinel)
+                outcome = receive.recv() if receive.poll() else ("failed", f"its process died (exit {child.exitcode})")
+                child.join()
+                _collect(report, a[0], a[1], lambda outcome=outcome: _outcome(*outcome), log)
+    except BaseException:
+        _end_workers([child for child, _, _ in running.values()])
+        raise
+
+
+def _child(send, a) -> None:
+    """A run's process: Ctrl-C is left to the launcher (which stops children by SIGTERM); the outcome goes back as
+    ('done', run name), ('stopped', why) or ('failed', error and traceback)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        send.send(("done", _train_one(*a)))
+    except (KeyboardInterrupt, SystemExit) as e:
+        send.send(("stopped", type(e).__name__))
+    except BaseException as e:  # noqa: BLE001 - reported to the launcher, which goes on with the table
+        send.send(("failed", f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=3)}"))
+
+
+def _outcome(kind: str, detail: str) -> str:
+    if kind == "stopped":
+        raise KeyboardInterrupt
+    if kind == "failed":
+        raise RuntimeError(detail)
+    return detail
+
+
+def _end_workers(workers: list) -> None:
+    """SIGTERM to each live worker, a grace period to end its run, then SIGKILL (a second Ctrl-C: at once)."""
+    import signal
+    import time
+
+    for w in workers:
+        if w.is_alive():
+            os.kill(w.pid, signal.SIGTERM)
+    try:
+        deadline = time.monotonic() + STOP_GRACE_S
+        for w in workers:
+            w.join(max(0.0, deadline - time.monotonic()))
+    except KeyboardInterrupt:
+        pass
+    for w in workers:
+        if w.is_alive():
+            w.kill()
+            w.join(1.0)
+
+
+def _signal_name(e: SystemExit) -> str:
+    import signal
+
+    try:
+        return signal.Signals(int(e.code) - 128).name
+    except (TypeError, ValueError):
+        return str(e.code)
 
 
 def _collect(report: LaunchReport, spec: RunSpec, profile: str, result: Callable[[], str], log) -> None:

@@ -45,11 +45,12 @@ def load_profiles(path: Path | None = None) -> dict[str, dict]:
 
 
 def profile_config(profile: str, difficulty: str = "easy", overrides: dict | None = None, **fields) -> TrainConfig:
-    """A TrainConfig for ``profile`` (its frames chosen by difficulty), then ``fields`` and dotted ``overrides``."""
+    """A TrainConfig for ``profile`` (its frames chosen by difficulty), then dotted ``overrides``; ``fields`` (e.g.
+    run_root) are TrainConfig fields that win over the profile's."""
     profiles = load_profiles()
     if profile not in profiles:
         raise ValueError(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, profiles))}")
-    values = dict(profiles[profile])
+    values = {k: v for k, v in profiles[profile].items() if k not in fields}  # the caller's fields win
     values.pop("seeds", None)
     hard_frames = values.pop("frames_hard", values.get("frames"))
     if difficulty in ("hard", "house"):  # §5.1: 50M frames in Hard; Appendix C: 50M in the House
@@ -63,3 +64,32 @@ def profile_config(profile: str, difficulty: str = "easy", overrides: dict | Non
 
 def profile_seeds(profile: str) -> list[int]:
     return list(load_profiles()[profile].get("seeds", [0]))
+
+
+COMMITTED = ("results", "reports")
+"""The committed folders of results CSVs and reports (relative to the checkout)."""
+SCRATCH = "scratch"
+"""Gitignored folder for what a profile whose numbers are not results writes (smoke, 512 frames): its run_root and
+results_root point under it in reproduce/profiles.toml, and its reports go to scratch/reports."""
+
+
+def is_scratch(profile: str) -> bool:
+    """Whether the profile's numbers are not results: its results_root is under scratch/, not results/."""
+    root = load_profiles()[profile].get("results_root", "results")
+    return Path(root).parts[:1] == (SCRATCH,)
+
+
+def refuse_committed(profile: str, path: str | Path, what: str) -> None:
+    """ValueError when ``path`` (a results CSV or report being written) lies in the checkout's committed results/
+    or reports/ and ``profile`` is a scratch profile: 512-frame smoke numbers are not results."""
+    from emml.tracking import project_path
+
+    if profile not in load_profiles() or not is_scratch(profile):
+        return
+    path = project_path(path).resolve()
+    for folder in COMMITTED:
+        if path.is_relative_to(project_path(folder).resolve()):
+            raise ValueError(
+                f"{what} {path}: the '{profile}' profile's numbers are not results and are not written under the "
+                f"committed {folder}/; they go under {SCRATCH}/ (its default), or name another folder"
+            )

@@ -28,7 +28,7 @@ TRANSFER_METRICS = ("sgn_transfer",)
 """What a transfer table's cells read: the mean of their instructions' `sgn_transfer:<instruction>` columns."""
 TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows", "transfer")
 COLUMN_KEYS = ("difficulties", "aux", "metrics")
-ROW_KEYS = ("label", "model", "overrides", "metric_overrides")
+ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "from_table")
 TRANSFER_KEYS = ("model", "overrides", "words", "detector")
 TRANSFER_RUN_ROW = "Training run (before transfer)"
 """The `RunSpec.row` of a transfer table's runs: one training setting serves every row (its curve's label)."""
@@ -110,6 +110,9 @@ class Row:
     """Transfer tables: the test instructions the row's cells average over."""
     extra: bool = False
     """Transfer tables: a row of ours below the paper's (test instructions its table does not list)."""
+    from_table: str | None = None
+    """The row's runs are that table's (same run names, run dirs and results rows), not trained again: Table 3's
+    "DA Multi-Task" is Table 2's Dual-Attention."""
 
     def settings(self, metrics: tuple[str, ...]) -> list[tuple[dict, tuple[str, ...]]]:
         """(overrides, metrics filled) for each distinct setting of the row."""
@@ -181,9 +184,8 @@ class Table:
                 for aux in self.aux:
                     for overrides, metrics in row.settings(tuple(self.metrics.values())):
                         for seed in seeds:
-                            out.append(
-                                RunSpec(self.name, row.label, row.model, difficulty, aux, seed, overrides, metrics)
-                            )
+                            owner = row.from_table or self.name
+                            out.append(RunSpec(owner, row.label, row.model, difficulty, aux, seed, overrides, metrics))
         return out
 
     def cell_runs(self, row: str, difficulty: str, aux: bool, metric: str, runs: list[RunSpec]) -> list[RunSpec]:
@@ -358,8 +360,23 @@ def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, 
             (f"{where}.metric_overrides.{m}", {**overrides, **e}) for m, e in per_metric.items()
         ]:
             _config(path, key, r["model"], ov)
-        rows.append(Row(r["label"], r["model"], dict(overrides), dict(per_metric)))
+        from_table = r.get("from_table")
+        if from_table is not None:
+            _from_table(path, f"{where}.from_table", from_table, r["model"], overrides, per_metric)
+        rows.append(Row(r["label"], r["model"], dict(overrides), dict(per_metric), from_table=from_table))
     return tuple(rows)
+
+
+def _from_table(path: Path, key: str, name, model: str, overrides: dict, per_metric: dict) -> None:
+    """A row borrowing another table's runs names a table (not itself borrowing) that trains this very setting."""
+    tables = [t for t in list_tables() if t != path.stem]
+    if name not in tables:
+        raise _err(path, key, f"{name!r} is not allowed; choose one of {', '.join(tables)}")
+    other = load_table(name)
+    if any(r.from_table for r in other.rows) or per_metric:
+        raise _err(path, key, f"only a plain row may borrow, from a table that borrows nothing ({name})")
+    if not any(r.model == model and r.overrides == overrides and not r.metric_overrides for r in other.rows):
+        raise _err(path, key, f"{name} has no row of model {model!r} with overrides {overrides} to borrow the runs of")
 
 
 def _parse_transfer(path: Path, data: dict) -> tuple[Transfer, str]:

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from emml.diskspace import no_space_names
+
 # identity and provenance columns (read as written); every other column is a metric (float)
 TEXT = (
     "run_name",
@@ -20,6 +22,7 @@ TEXT = (
     "difficulty",
     "profile",
     "git_sha",
+    "scored_sha",
     "run_id",
     "tasks",
     "precision",
@@ -27,6 +30,9 @@ TEXT = (
     "transfer_detector",
 )
 INTEGER = ("seed", "frames", "eval_episodes")
+LATE_INTEGER = ("eval_seed",)
+"""Integer columns added after rows were written: empty in older rows (read as missing), and written as floats
+('10000.0') by code from before them, which reads an unknown column as a metric."""
 BOOLEAN = ("aux", "shaping")
 _BOOL = {"True": True, "False": False, "true": True, "false": False}
 
@@ -36,12 +42,14 @@ def read_results(path: str | Path) -> pd.DataFrame:
     path = Path(path)
     if not path.exists():
         return pd.DataFrame({"run_name": pd.Series(dtype=str), "run_id": pd.Series(dtype=str)})
-    df = pd.read_csv(path, dtype=str, keep_default_na=False)
+    df = _read_csv(path)
     for col in df.columns:
         if col in TEXT:
             continue
         if col in INTEGER:
             df[col] = _convert(df[col], int, "an integer", path, col)
+        elif col in LATE_INTEGER:
+            df[col] = _convert(df[col], _late_int, "an integer", path, col).astype("Int64")
         elif col in BOOLEAN:
             df[col] = _convert(df[col], _BOOL.__getitem__, "True or False", path, col)
         else:
@@ -49,11 +57,57 @@ def read_results(path: str | Path) -> pd.DataFrame:
     return df
 
 
+def _late_int(value: str):
+    if not value:
+        return pd.NA
+    number = float(value)
+    if not number.is_integer():
+        raise ValueError(f"{value!r}")
+    return int(number)
+
+
+class ResultsError(ValueError):
+    """A results CSV that cannot be read as one (the message names the file and the line)."""
+
+
+def _read_csv(path: Path) -> pd.DataFrame:
+    """Every cell as text; a file that is not a well-formed CSV fails naming it and the line."""
+    try:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except OSError as e:
+        raise ResultsError(f"{path}: cannot be read ({e.strerror})") from None
+    except UnicodeDecodeError:
+        raise ResultsError(f"{path}: {_first_non_utf8(path)}: not UTF-8 text") from None
+    except pd.errors.EmptyDataError:
+        raise ResultsError(f"{path}: empty, without the header line a results CSV starts with") from None
+    except pd.errors.ParserError as e:  # pandas names the line: "Expected 3 fields in line 7, saw 4"
+        why = str(e).strip().removeprefix("Error tokenizing data. C error: ")
+        raise ResultsError(f"{path}: not a well-formed CSV: {why}") from None
+    if "run_name" not in df.columns:
+        raise ResultsError(f"{path}: line 1: no 'run_name' column in the header (found {', '.join(df.columns)})")
+    return df
+
+
+def _first_non_utf8(path: Path) -> str:
+    """'line N' of the first line of ``path`` that is not UTF-8 (pandas reports a position in its buffer)."""
+    for n, line in enumerate(path.read_bytes().split(b"\n"), 1):
+        try:
+            line.decode("utf-8")
+        except UnicodeDecodeError:
+            return f"line {n}"
+    return "a line"
+
+
 def _convert(values: pd.Series, cast, what: str, path: Path, col: str) -> pd.Series:
     try:
         return values.map(cast)
-    except (KeyError, ValueError) as e:
-        raise ValueError(f"{path}: column {col!r} must hold {what}, found {e}") from None
+    except (KeyError, ValueError):
+        for i, value in enumerate(values):  # the first bad cell; line 1 is the header
+            try:
+                cast(value)
+            except (KeyError, ValueError):
+                raise ResultsError(f"{path}: line {i + 2}: column {col!r} must hold {what}, found {value!r}") from None
+        raise
 
 
 def upsert_result(path: str | Path, row: dict) -> Path:
@@ -70,6 +124,7 @@ def upsert_result(path: str | Path, row: dict) -> Path:
         new = pd.DataFrame([{k: str(v) if k in TEXT else v for k, v in row.items()}])
         table = pd.concat([table, new], ignore_index=True) if not table.empty else new
         tmp = path.with_suffix(f".csv.{os.getpid()}.tmp")
-        table.sort_values("run_name").to_csv(tmp, index=False)
-        os.replace(tmp, path)
+        with no_space_names(path, tmp):
+            table.sort_values("run_name").to_csv(tmp, index=False)
+            os.replace(tmp, path)
     return path

@@ -17,6 +17,9 @@ Conventions (see docs / shared notes on MLflow 3.x):
   should keep increasing (use the global env-step counter).
 * :func:`metric_history` returns full curves (``search_runs`` only keeps the
   latest value per metric).
+* A finished run dir from another store becomes a run here with :func:`import_run` (``emml import-runs``,
+  emml/import_runs.py); :func:`stored_run` finds a run dir's run here (trained, imported or resumed), so that
+  nothing is imported twice and a resumed run dir continues that run.
 """
 
 from __future__ import annotations
@@ -25,10 +28,12 @@ import os
 import random
 import time
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any, TypeVar
+
+from emml.diskspace import NoSpaceError, no_space_names
 
 T = TypeVar("T")
 
@@ -37,6 +42,10 @@ _MAX_TAG_LEN = 8000  # mlflow.utils.validation.MAX_TAG_VAL_LENGTH
 _BATCH_PARAMS = 100  # MAX_PARAMS_TAGS_PER_BATCH
 _BATCH_METRICS = 1000  # MAX_METRICS_PER_BATCH
 _STATUSES = ("FINISHED", "FAILED", "KILLED")
+IMPORTED_RUN_ID = "emml.imported_run_id"
+"""Tag of a run imported from a finished run dir (:func:`import_run`): the MLflow run id the run dir recorded."""
+RESUMED_FROM = "emml.resumed_from_run_id"
+"""Tag of a run that resumed a run dir from another store (:meth:`Tracker.start`): the run id the run dir recorded."""
 
 
 def project_root() -> Path:
@@ -192,43 +201,52 @@ class Tracker:
         run_id: str | None = None,
         parent_run_id: str | None = None,
     ) -> str:
-        """Create a run (creating the experiment if missing) or resume ``run_id``.
+        """Create a run (creating the experiment if missing) or resume ``run_id``, or this store's run of the run dir
+        that recorded it (:func:`stored_run`: imported by ``emml import-runs``, or resumed here before).
 
         ``parent_run_id`` nests the run under a parent (tag ``mlflow.parentRunId``, which MLflow reads across
         processes). On resume, params already logged are left alone; new keys are added and
         keys whose value changed are skipped with a warning (MLflow params are
-        immutable). Returns the run id.
+        immutable). Returns the run id. A failure once the run exists (its params, a replay) ends it FAILED.
         """
+        try:
+            return self._start(experiment, run_name, tags, params, run_id, parent_run_id)
+        except BaseException as e:  # once created or set RUNNING, the run must not stay RUNNING forever
+            self.abort(e)
+            raise
+
+    def _start(self, experiment, run_name, tags, params, run_id, parent_run_id) -> str:
         from mlflow.entities import Param
 
         flat = flatten(params or {})
         if parent_run_id is not None:
             tags = {**(tags or {}), "mlflow.parentRunId": parent_run_id}
+        stored = stored_run(experiment, run_id, self._uri) if run_id is not None else None
         if run_id is None:
             exp_id = self._experiment_id(experiment)
             tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
             run = _retry(lambda: self._client.create_run(exp_id, tags=tag_strs, run_name=run_name))
             self._run_id = run.info.run_id
-        elif not self.has_run(run_id):  # the run dir came from another store: a new run, its curve replayed
+        elif stored is None:  # the run dir came from another store: a new run, its curve replayed
             exp_id = self._experiment_id(experiment)
             tag_strs = {k: str(v)[:_MAX_TAG_LEN] for k, v in (tags or {}).items()}
-            tag_strs["emml.resumed_from_run_id"] = run_id
+            tag_strs[RESUMED_FROM] = run_id
             run = _retry(lambda: self._client.create_run(exp_id, tags=tag_strs, run_name=run_name))
             self._run_id = run.info.run_id
             replayed = self._replay()
             warnings.warn(
                 f"MLflow run {run_id} is not in this store ({self._uri or tracking_uri()}): continuing as run "
                 f"{self._run_id}, {replayed} metric points replayed from {self._mirror}",
-                stacklevel=2,
+                stacklevel=3,
             )
-        else:
-            run = _retry(lambda: self._client.get_run(run_id))
+        else:  # this store's run of the run dir: trained here, or imported (emml import-runs) or resumed before
+            run = _retry(lambda: self._client.get_run(stored))
             self._run_id = run.info.run_id
-            _retry(lambda: self._client.update_run(run_id, status="RUNNING"))
+            _retry(lambda: self._client.update_run(stored, status="RUNNING"))
             existing = run.data.params
             changed = sorted(k for k, v in flat.items() if k in existing and existing[k] != v)
             if changed:
-                warnings.warn(f"resumed run {run_id}: params changed and not re-logged: {changed}", stacklevel=2)
+                warnings.warn(f"resumed run {stored}: params changed and not re-logged: {changed}", stacklevel=3)
             flat = {k: v for k, v in flat.items() if k not in existing}
             if tags:
                 self.set_tags(tags)
@@ -255,17 +273,9 @@ class Tracker:
 
     def _replay(self) -> int:
         """Log the mirror file's points into the current run (one value per key and step: the last)."""
-        from mlflow.entities import Metric
-
         if self._mirror is None:
             return 0
-        now = int(time.time() * 1000)
-        points = {(k, st): v for st, k, v in read_mirror(self._mirror)}
-        items = [Metric(k, v, now, st) for (k, st), v in sorted(points.items(), key=lambda x: (x[0][1], x[0][0]))]
-        for i in range(0, len(items), _BATCH_METRICS):
-            chunk = items[i : i + _BATCH_METRICS]
-            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, metrics=chunk))
-        return len(items)
+        return _log_points(self._client, self.run_id, read_mirror(self._mirror))
 
     def log_metrics(self, metrics: Mapping[str, float], step: int) -> None:
         """Log all ``metrics`` at ``step`` in one batched call (chunked at MLflow's 1000 limit)."""
@@ -274,10 +284,17 @@ class Tracker:
         now = int(time.time() * 1000)
         if self._mirror is not None:
             fresh = [(k, v) for k, v in metrics.items() if (k, int(step)) not in self._mirrored]
-            new_file = not self._mirror.exists()
-            with open(self._mirror, "a") as f:
-                f.write("step,key,value\n" if new_file else "")
-                f.writelines(f"{int(step)},{k},{float(v)!r}\n" for k, v in fresh)
+            text = "step,key,value\n" if not self._mirror.exists() else ""
+            text += "".join(f"{int(step)},{k},{float(v)!r}\n" for k, v in fresh)
+            with open(self._mirror, "ab", buffering=0) as f:  # unbuffered: a full disk fails here, not at close
+                end, data = f.tell(), memoryview(text.encode())
+                try:
+                    with no_space_names(self._mirror):
+                        while data:
+                            data = data[f.write(data) :]
+                except NoSpaceError:  # no half line for a resumed run to append to: the file as it was
+                    f.truncate(end)
+                    raise
         items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items() if not self._already_logged(k, step)]
         for i in range(0, len(items), _BATCH_METRICS):
             chunk = items[i : i + _BATCH_METRICS]
@@ -302,6 +319,17 @@ class Tracker:
             raise ValueError(f"status must be one of {_STATUSES}, got {status!r}")
         _retry(lambda: self._client.set_terminated(self.run_id, status=status))
 
+    def abort(self, exc: BaseException) -> None:
+        """End the run after ``exc``, never leaving it RUNNING: KILLED for Ctrl-C or a termination signal
+        (SystemExit, emml.envs.engine.install_signal_handlers), else FAILED; nothing if no run was started. A store
+        that fails too (the same full disk) is warned about, so that ``exc``, the cause, is what the caller sees."""
+        if self._run_id is None:
+            return
+        try:
+            self.finish("KILLED" if isinstance(exc, (KeyboardInterrupt, SystemExit)) else "FAILED")
+        except Exception as e:  # noqa: BLE001 - the original error matters more
+            warnings.warn(f"MLflow run {self._run_id} could not be marked ended: {type(e).__name__}: {e}", stacklevel=2)
+
     def __enter__(self) -> Tracker:
         return self
 
@@ -322,6 +350,71 @@ def parent_run(experiment: str, run_name: str, tags: Mapping[str, Any], uri: str
         return min(found, key=lambda r: r["start_time"])["run_id"]
     tracker = Tracker(uri)
     return tracker.start(experiment, run_name, tags)
+
+
+def _log_points(client, run_id: str, points: Iterable[tuple[int, str, float]]) -> int:
+    """Log (step, key, value) points into ``run_id``, one per key and step (the last), in batches of MLflow's
+    limit; returns how many were logged."""
+    from mlflow.entities import Metric
+
+    now = int(time.time() * 1000)
+    last = {(k, st): v for st, k, v in points}
+    items = [Metric(k, v, now, st) for (k, st), v in sorted(last.items(), key=lambda x: (x[0][1], x[0][0]))]
+    for i in range(0, len(items), _BATCH_METRICS):
+        chunk = items[i : i + _BATCH_METRICS]
+        _retry(lambda chunk=chunk: client.log_batch(run_id, metrics=chunk))
+    return len(items)
+
+
+def stored_run(experiment: str, run_id: str, uri: str | None = None) -> str | None:
+    """This store's run of the run dir that recorded MLflow run ``run_id``: that run when it is here (trained here),
+    else the run of ``experiment`` imported from the run dir (tag ``IMPORTED_RUN_ID``) or resuming it (tag
+    ``RESUMED_FROM``), the earliest if several; None when the store has none."""
+    if Tracker(uri).has_run(run_id):
+        return run_id
+    for tag in (IMPORTED_RUN_ID, RESUMED_FROM):
+        found = find_runs(experiment, {tag: run_id}, uri=uri)
+        if found:
+            return min(found, key=lambda r: r["start_time"])["run_id"]
+    return None
+
+
+def import_run(
+    experiment: str,
+    run_name: str,
+    run_id: str,
+    tags: Mapping[str, Any],
+    params: Mapping[str, Any],
+    points: Iterable[tuple[int, str, float]],
+    uri: str | None = None,
+) -> str:
+    """Log a finished run recorded elsewhere (a run dir's results.json and metrics.csv, emml/import_runs.py) as a
+    new FINISHED run of ``experiment``: ``tags``, ``params`` (flattened as :meth:`Tracker.start` logs a config) and
+    every metric point (step, key, value). The tag ``IMPORTED_RUN_ID`` = ``run_id``, which marks the import done
+    (:func:`stored_run`), is set last, and a failure on the way deletes the half-made run: an import cut short is
+    made again by the next one. Data the store refuses (a metric name MLflow does not take) is a ValueError. Returns
+    the new run's id."""
+    tracker = Tracker(uri)
+    try:
+        tracker.start(experiment, run_name, tags, params)
+        _log_points(tracker._client, tracker.run_id, points)
+        tracker.set_tags({IMPORTED_RUN_ID: run_id})
+        tracker.finish("FINISHED")
+    except BaseException as e:
+        if tracker._run_id is not None:
+            _discard(tracker._client, tracker._run_id)
+        if getattr(e, "error_code", None) == "INVALID_PARAMETER_VALUE":
+            raise ValueError(f"MLflow refused it: {getattr(e, 'message', e)}") from e
+        raise
+    return tracker.run_id
+
+
+def _discard(client, run_id: str) -> None:
+    """Delete a half-made run; a store that fails too is warned about (the error that stopped the run matters more)."""
+    try:
+        _retry(lambda: client.delete_run(run_id))
+    except Exception as e:  # noqa: BLE001
+        warnings.warn(f"MLflow run {run_id} could not be deleted: {type(e).__name__}: {e}", stacklevel=3)
 
 
 def set_run_status(run_id: str, status: str, uri: str | None = None) -> None:

@@ -51,15 +51,30 @@ def test_diagnose_a_checkpoint(tracking, no_leftovers):
     from emml.rl.trainer import CHECKPOINT, train
 
     over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test"}
-    cfg = profile_config("smoke", "easy", {**over, "frames": 64, "eval_episodes": 1, "diagnose_episodes": 0}, aux=True)
+    short = {"frames": 64, "eval_episodes": 1, "diagnose_episodes": 0, "env.max_steps": 12}
+    cfg = profile_config("smoke", "easy", {**over, **short}, aux=True)
     path = train(cfg, quiet=True).run_dir / CHECKPOINT
-    result = runner.invoke(app, ["diagnose", str(path), "--episodes", "2", "--step0-episodes", "10", "--json"])
+    sgn = ["--episodes", "2", "--step0-episodes", "10", "--eqa-episodes", "0"]
+    result = runner.invoke(app, ["diagnose", str(path), *sgn, "--json"])
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert 0.0 <= data["attention_on_target"] <= 1.0 and 0.0 <= data["actor_sensitivity"] <= 1.0
     assert all(0.0 <= ap <= 1.0 for ap in data["detector_ap_words"].values())
-    text = runner.invoke(app, ["diagnose", str(path), "--episodes", "1", "--step0-episodes", "5"])
+    assert "eqa" not in data and data["control"] == "none"
+    both = ["--episodes", "1", "--step0-episodes", "5", "--eqa-episodes", "1"]
+    text = runner.invoke(app, ["diagnose", str(path), *both])
     assert text.exit_code == 0 and "detector AP per word" in text.output and "slot" in text.output
+    assert "EQA per question" in text.output and "what color is the torch" in text.output
+    eqa = ["diagnose", str(path), "--episodes", "0", "--step0-episodes", "0", "--eqa-episodes", "1"]
+    gated = runner.invoke(app, [*eqa, "--control", "type_gate", "--json"])
+    assert gated.exit_code == 0, gated.output
+    data = json.loads(gated.output)
+    assert data["control"] == "type_gate" and len(data["eqa"]["questions"]) == 29 and "detector_ap" not in data
+    bad = runner.invoke(app, [*eqa, "--control", "oracle"])
+    assert bad.exit_code == 2 and "control='oracle'" in bad.output
+    scores = runner.invoke(app, ["eval", str(path), "--episodes", "1", "--control", "type_gate", "--json"])
+    assert scores.exit_code == 0, scores.output
+    assert set(json.loads(scores.output)) == {"sgn_train", "sgn_test", "eqa_train", "eqa_test"}
     missing = runner.invoke(app, ["diagnose", str(path.parent / "nope.pt")])
     assert missing.exit_code == 2 and "no such file" in missing.output
 
@@ -129,3 +144,33 @@ def test_house_tasks_and_oracle_json(no_leftovers):
     assert data["env"] == "house" and data["accuracy"] == 1.0
     result = runner.invoke(app, ["oracle", "--env", "attic"])
     assert result.exit_code == 2 and "--env='attic'" in result.output
+
+
+def test_train_on_a_full_disk_fails_in_one_line_and_its_mlflow_run_ends_failed(tracking, monkeypatch, no_leftovers):
+    """The first checkpoint is written once the MLflow run exists, before any engine starts: a full disk there names
+    the folder in one line, leaves no temp file, and ends the run FAILED (it stayed RUNNING forever)."""
+    import errno
+
+    import mlflow
+
+    from emml.profiles import profile_config
+    from emml.rl import checkpoint
+    from emml.rl.trainer import CHECKPOINT, run_dir
+
+    def fills_the_disk(payload, fh):
+        fh.write(b"half a checkpoint")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(checkpoint.torch, "save", fills_the_disk)
+    sets = ["--set", f"run_root={tracking['run_root']}", "--set", f"results_root={tracking['results_root']}"]
+    result = runner.invoke(app, ["train", "--profile", "smoke", "--table", "test", *sets])
+    folder = run_dir(profile_config("smoke", "easy", {"run_root": tracking["run_root"], "table": "test"}))
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output  # above the error: at most MLflow's log lines creating the store
+    assert result.output.splitlines()[-1] == (
+        f"error: no space left on {folder} (writing {CHECKPOINT}, left as it was): free some space and rerun the "
+        "same command to resume from the last checkpoint"
+    )
+    assert not [p for p in folder.iterdir() if p.name.endswith(".tmp") or p.name == CHECKPOINT]
+    (run,) = mlflow.search_runs(experiment_names=["test"], output_format="list")
+    assert run.info.status == "FAILED"

@@ -167,8 +167,28 @@ def test_rows_without_a_run_dir_here_are_reference_results_and_are_trained(track
     launch(tracking, jobs=1)
     import shutil
 
-    shutil.rmtree(Path(tracking["run_root"]) / "table3")
+    shutil.rmtree(Path(tracking["run_root"]))  # table3's runs and the Table 2 runs its DA Multi-Task row reads
     states = run_states("table3", PROFILE, tracking["run_root"], tracking["results_root"])
     assert sorted(state for _, state in states.values()) == ["missing"] + ["reference"] * 15  # 1 failed: no row
     again = launch(tracking, jobs=1)
     assert again.skipped == [] and len(again.done) == 15  # trained here (the failing fake run fails again)
+
+
+def interrupted(cfg, quiet=False, parent_run_id=None):
+    """Stands in for a trainer stopped by Ctrl-C (module level: picklable)."""
+    raise KeyboardInterrupt
+
+
+def test_an_interrupted_launch_ends_its_parent_run_and_says_what_is_left(tracking):
+    report = run_table(
+        "table3",
+        PROFILE,
+        jobs=1,
+        run_root=tracking["run_root"],
+        results_root=tracking["results_root"],
+        train_fn=interrupted,
+        log=lambda m: None,
+    )
+    assert report.stopped == "Ctrl-C" and len(report.not_started) == 16 and report.done == []
+    (parent,) = find_runs("table3", {"emml.role": "parent"})
+    assert parent["status"] == "KILLED"  # not RUNNING forever

@@ -99,3 +99,11 @@ def test_a_bf16_run_is_named_apart_from_its_fp32_run():
     from emml.config import TrainConfig, apply_overrides
 
     assert apply_overrides(TrainConfig(), {"precision": "bf16"}).run_name() == "dual_attention-easy-noaux-bf16-s0-paper"
+
+
+def test_the_callers_fields_win_over_the_profile_and_smoke_writes_under_scratch(tmp_path):
+    smoke = profile_config("smoke")
+    assert (smoke.run_root, smoke.results_root) == ("scratch/runs", "scratch/results")  # gitignored: not results
+    mine = profile_config("smoke", run_root=str(tmp_path), results_root=str(tmp_path / "r"))
+    assert (mine.run_root, mine.results_root) == (str(tmp_path), str(tmp_path / "r"))
+    assert emml.profiles.is_scratch("smoke") and not emml.profiles.is_scratch("quick")

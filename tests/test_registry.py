@@ -54,6 +54,27 @@ def test_table3_expands_to_ablations_and_single_task_runs():
     assert {(r.overrides["env.tasks"], r.metrics) for r in single} == {("sgn", ("sgn_test",)), ("eqa", ("eqa_test",))}
     cfg = next(r for r in runs if r.row == "w/o Reward Shaping").to_config("smoke")
     assert cfg.env.shaping is False and cfg.model == "dual_attention"
+    multi = [r for r in runs if r.row == "DA Multi-Task"]  # Table 2's Dual-Attention runs, not trained twice
+    assert {(r.table, r.run_name("quick")) for r in multi} == {
+        ("table2", "dual_attention-easy-noaux-s0-quick"),
+        ("table2", "dual_attention-easy-aux-s0-quick"),
+    }
+    assert {r.table for r in runs if r.row != "DA Multi-Task"} == {"table3"}
+
+
+@pytest.mark.parametrize(
+    "borrow, what",
+    [
+        ('from_table = "table9"', "'table9' is not allowed"),
+        ('from_table = "tableX"', "'tableX' is not allowed"),  # itself
+        ('from_table = "table2"\noverrides = { "env.shaping" = false }', "no row of model 'dual_attention'"),
+    ],
+)
+def test_a_row_borrows_only_a_run_another_table_trains(tmp_path, borrow, what):
+    path = _write(tmp_path, GOOD.replace('model = "dual_attention"', f'model = "dual_attention"\n{borrow}'))
+    with pytest.raises(ValueError, match=what) as err:
+        load_table("tableX", path)
+    assert "rows[0].from_table" in str(err.value)
 
 
 def test_run_spec_takes_seeds_and_size_from_the_profile():

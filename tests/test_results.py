@@ -1,6 +1,7 @@
 """The results CSV keeps every column's type: shas that look like numbers survive a round trip."""
 
 import string
+from pathlib import Path
 
 import pytest
 from hypothesis import given, settings
@@ -60,8 +61,29 @@ def test_a_missing_metric_reads_as_nan_and_a_bad_cell_is_named(tmp_path):
     df = read_results(path).set_index("run_name")
     assert df.loc["b", "eqa_train"] == 0.75 and df["eqa_train"].isna()["a"]
     path.write_text(path.read_text().replace(",512,", ",lots,", 1))
-    with pytest.raises(ValueError, match="'frames' must hold an integer"):
+    with pytest.raises(ValueError, match=r": line 2: column 'frames' must hold an integer, found 'lots'$"):
         read_results(path)
+
+
+def test_a_full_disk_leaves_the_results_csv_as_it_was(tmp_path, monkeypatch):
+    import errno
+
+    import pandas as pd
+
+    from emml.diskspace import NoSpaceError
+
+    path = tmp_path / "smoke.csv"
+    upsert_result(path, _row("a", "abc1234"))
+    before = path.read_bytes()
+
+    def fills_the_disk(self, target, **kwargs):
+        Path(target).write_text("run_name,ta")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", fills_the_disk)
+    with pytest.raises(NoSpaceError, match=rf"^no space left on {tmp_path} \(writing smoke.csv, left as it was\)"):
+        upsert_result(path, _row("b", "abc1234"))
+    assert path.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["smoke.csv", "smoke.csv.lock"]
 
 
 def test_the_committed_results_read_back_with_real_shas():
@@ -70,3 +92,18 @@ def test_the_committed_results_read_back_with_real_shas():
     for path in sorted((project_root() / "results").glob("*/*.csv")):
         shas = read_results(path)["git_sha"]
         assert shas.str.fullmatch(r"[0-9a-f]{7,40}").all(), (path, shas.unique())
+
+
+def test_eval_seed_reads_back_from_rows_before_it_and_from_code_before_it(tmp_path):
+    """eval_seed (issue 33) is empty in older rows, and code from before it rewrites it as a float ('10000.0')."""
+    path = tmp_path / "quick.csv"
+    upsert_result(path, _row("old", "abc1234"))
+    upsert_result(path, _row("new", "abc1234", eval_seed=10_000, scored_sha="12e0077"))
+    df = read_results(path).set_index("run_name")
+    assert df.loc["new", "eval_seed"] == 10_000 and df["eval_seed"].isna()["old"]
+    assert df.loc["new", "scored_sha"] == "12e0077" and df.loc["old", "scored_sha"] == ""
+    path.write_text(path.read_text().replace(",10000,", ",10000.0,"))  # as an older writer leaves it
+    assert read_results(path).set_index("run_name").loc["new", "eval_seed"] == 10_000
+    path.write_text(path.read_text().replace(",10000.0,", ",10000.5,"))
+    with pytest.raises(ValueError, match="'eval_seed' must hold an integer"):
+        read_results(path)

@@ -101,3 +101,108 @@ def test_a_run_exports_its_whole_curve_to_a_mirror_file(tmp_path):
     with open(tmp_path / "metrics.csv", "a") as f:
         f.write("192,a,9")  # a line cut short by a kill: skipped
     assert len(read_mirror(tmp_path / "metrics.csv")) == 4
+
+
+def test_a_run_that_fails_once_created_ends_failed_not_running(monkeypatch):
+    import errno
+
+    t = tracking.Tracker()
+    real = t._client.log_batch
+
+    def no_room_for_params(run_id, metrics=(), params=(), tags=()):
+        if params:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(run_id, metrics=metrics, params=params, tags=tags)
+
+    monkeypatch.setattr(t._client, "log_batch", no_room_for_params)
+    with pytest.raises(OSError, match="No space left"):
+        t.start("exp-fail", "r", params={"a": 1})
+    assert [r["status"] for r in tracking.find_runs("exp-fail")] == ["FAILED"]
+
+
+def test_abort_ends_a_started_run_and_never_hides_the_cause(monkeypatch):
+    tracking.Tracker().abort(RuntimeError("never started"))  # no run: nothing to end
+    t = tracking.Tracker()
+    t.start("exp-abort", "signalled")
+    t.abort(SystemExit(1))  # a termination signal (install_signal_handlers raises SystemExit)
+    broken = tracking.Tracker()
+    broken.start("exp-abort", "store-down")
+
+    def store_down(*args, **kwargs):
+        raise RuntimeError("store down")
+
+    monkeypatch.setattr(broken._client, "set_terminated", store_down)
+    with pytest.warns(UserWarning, match=r"could not be marked ended: RuntimeError: store down"):
+        broken.abort(ValueError("the cause"))
+    assert {r["run_name"]: r["status"] for r in tracking.find_runs("exp-abort")}["signalled"] == "KILLED"
+
+
+def test_a_full_disk_leaves_the_mirror_without_a_half_line(tmp_path, monkeypatch):
+    import builtins
+    import errno
+
+    from emml.diskspace import NoSpaceError
+    from emml.tracking import Tracker, read_mirror
+
+    class Filling:
+        """A file whose first write lands in part, the next fails: the disk filled in the middle of a batch."""
+
+        def __init__(self, f):
+            self.f, self.writes = f, 0
+
+        def write(self, data):
+            self.writes += 1
+            if self.writes == 1:
+                return self.f.write(bytes(data[:5]))
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def __getattr__(self, name):
+            return getattr(self.f, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+    t = Tracker(f"sqlite:///{tmp_path}/m.db")
+    t.start("exp", "r")
+    mirror = tmp_path / "metrics.csv"
+    t.mirror_to(mirror)
+    t.log_metrics({"a": 1.0}, step=64)
+    before = mirror.read_bytes()
+    monkeypatch.setattr(tracking, "open", lambda *a, **k: Filling(builtins.open(*a, **k)), raising=False)
+    with pytest.raises(NoSpaceError, match=rf"^no space left on {tmp_path} \(writing metrics.csv, left as it was\)"):
+        t.log_metrics({"a": 2.0, "b": 3.0}, step=128)
+    monkeypatch.undo()
+    assert mirror.read_bytes() == before  # cut back to the last whole line
+    t.log_metrics({"a": 4.0}, step=192)
+    assert read_mirror(mirror) == [(64, "a", 1.0), (192, "a", 4.0)]
+    t.finish()
+
+
+def test_a_run_dir_from_another_store_resumed_twice_continues_one_run(tmp_path):
+    """Killed before its first checkpoint (which still names the other store's run), a resumed run dir resumes the
+    run its first resume made here, not a third one (stored_run: tag RESUMED_FROM)."""
+    import warnings
+
+    mirror = tmp_path / "metrics.csv"
+    mirror.write_text("step,key,value\n64,loss,1.0\n")
+
+    def resume(step: int, value: float) -> str:
+        t = tracking.Tracker()
+        t.mirror_to(mirror)
+        t.resume_after(64)
+        run_id = t.start("exp-resumed", "r", run_id="f" * 32)
+        t.log_metrics({"loss": value}, step=step)
+        t.finish("KILLED")
+        return run_id
+
+    with pytest.warns(UserWarning, match="is not in this store"):
+        first = resume(128, 0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing replayed again
+        assert resume(192, 0.25) == first
+    [run] = tracking.find_runs("exp-resumed")
+    assert run["tags"][tracking.RESUMED_FROM] == "f" * 32
+    assert tracking.metric_history(first, "loss") == [(64, 1.0), (128, 0.5), (192, 0.25)]

@@ -186,7 +186,7 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, no_leftovers
     columns = [c for c in results.columns if c.startswith("sgn_transfer:")]
     assert len(columns) == 28 and results[columns].notna().all().all() and len(results) == 2
     assert set(results["transfer_words"]) == {"red,pillar"} and "sgn_test" not in results.columns  # not encodable
-    rep = report_table("table4", "smoke", results_root=roots["results_root"], out=tracking["run_root"])
+    rep = report_table("table4", "smoke", out=tracking["run_root"], **roots)
     assert len(rep["cells"]) == 30 and all(c["n"] == 1 for c in rep["cells"])
     md = (Path(tracking["run_root"]) / "table4-smoke.md").read_text()
     assert f"Go to the red tall/short pillar {EXTRA_MARK}" in md and "no fine-tuning" in rep["caption"]

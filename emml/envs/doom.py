@@ -292,6 +292,15 @@ class DoomEnv(gym.Env):
             target = self.episode.scene[self.episode.target]
             self.target_grid = self._labels.object_grid(state.labels_buffer, state.labels, target)
 
+    def scene_grids(self) -> np.ndarray:
+        """uint8 (5, h, w): the cells showing each actor of the scene in the current frame, in scene order (the
+        referent is row `episode.target`). Privileged, like the aux labels: for the diagnostics (emml/diagnose_eqa.py);
+        needs ``aux_labels``."""
+        if self._labels is None:
+            raise RuntimeError("scene_grids() reads the label buffer: make the env with aux_labels=True")
+        buf, labels = self.state.labels_buffer, self.state.labels
+        return np.stack([self._labels.object_grid(buf, labels, name) for name in self.episode.scene])
+
     def _distances(self) -> np.ndarray:
         x, y = self.pose[0], self.pose[1]
         return np.array([math.hypot(px - x, py - y) for px, py in self.positions])

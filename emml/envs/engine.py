@@ -123,7 +123,63 @@ def start_engine(game) -> Engine:
     if pid is not None:
         with _LOCK:
             _LIVE[pid] = engine
+        _record(engine)
     return engine
+
+
+def records_dir() -> Path:
+    """Where every engine started here is recorded on disk (``<owner pid>-<engine pid>``: its start time and
+    instance id) until it is ended: what a SIGKILLed owner leaves there, `sweep_orphans` ends."""
+    return Path(tempfile.gettempdir()) / f"emml-engines-{os.getuid()}"
+
+
+def _start_time(pid: int) -> str | None:
+    """The process's start time (clock ticks since boot, /proc/PID/stat field 22): with the pid, an identity that a
+    reused pid does not share."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return None
+
+
+def _record(engine: Engine) -> None:
+    folder = records_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{os.getpid()}-{engine.pid}"
+    path.write_text(f"{_start_time(engine.pid)} {engine.instance_id or '-'}\n")
+
+
+def _unrecord(pid: int) -> None:
+    with contextlib.suppress(FileNotFoundError):
+        (records_dir() / f"{os.getpid()}-{pid}").unlink()
+
+
+def sweep_orphans() -> list[int]:
+    """End the engines recorded by emml processes that are gone (killed with SIGKILL, whose cleanup never ran):
+    each is killed only if its pid still names the very process recorded (same start time), and its shm files are
+    removed. Returns the pids ended; a record whose owner lives is left alone."""
+    ended = []
+    folder = records_dir()
+    for path in folder.glob("*-*") if folder.is_dir() else ():
+        try:
+            owner, pid = (int(x) for x in path.name.split("-"))
+            started, instance = path.read_text().split()
+        except (OSError, ValueError):
+            continue
+        if Path(f"/proc/{owner}").exists():
+            continue  # its owner lives (and ends it), or a new process took the pid: not provably ours to end
+        if _start_time(pid) == started:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+                ended.append(pid)
+        if instance != "-":
+            for shm in glob.glob(os.path.join(SHM_DIR, f"ViZDoom*{instance}")):
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(shm)
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+    return ended
 
 
 def _alive(pid: int) -> bool:
@@ -170,6 +226,7 @@ def _end(engine: Engine, grace: float = 1.0) -> None:
                 pass
         with _LOCK:
             _LIVE.pop(engine.pid, None)
+        _unrecord(engine.pid)
     if engine.instance_id:
         for path in glob.glob(os.path.join(SHM_DIR, f"ViZDoom*{engine.instance_id}")):
             try:

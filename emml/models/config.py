@@ -20,8 +20,10 @@ ARCHITECTURES: tuple[str, ...] = (
 )
 """Fusion architectures a `ModelConfig.name` may name (ablations are switches)."""
 
-CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask")
-"""Values of `ModelConfig.control`: the model itself, and the two diagnostic controls."""
+CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
+"""Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
+LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
+"""The controls that read the env's privileged aux labels (acting needs them; training needs aux=True)."""
 
 
 @dataclass
@@ -64,7 +66,9 @@ class ModelConfig:
     control: str = "none"
     """Diagnostic controls, not the paper's model (they read privileged labels, so they need aux labels):
     'none'; 'detectors': x_I := the aux labels (perfect detectors, unlabelled channels 0); 'target_mask':
-    x_S := the cells showing the episode's referent (perfect x_S, values 0/1)."""
+    x_S := the cells showing the episode's referent (perfect x_S, values 0/1); 'type_gate' (Dual-Attention with GA2,
+    evaluation only: `emml eval CKPT --control type_gate`): Eq. 4's x_sent := a gate from the dataset's word types
+    that opens the channels of the attribute a question asks for (emml/models/type_gate.py), no labels read."""
 
     def validate(self) -> ModelConfig:
         """Raise `ValueError` naming the offending field; return self when valid."""
@@ -87,6 +91,11 @@ class ModelConfig:
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
         if self.control not in CONTROLS:
             raise ValueError(f"ModelConfig.control={self.control!r} is unknown; allowed: " + ", ".join(CONTROLS))
+        if self.control == "type_gate" and not (self.name == "dual_attention" and self.ga2):
+            raise ValueError(
+                f"ModelConfig.control='type_gate' replaces the GA2 gate (Eq. 4): only for name='dual_attention' "
+                f"with ga2=True (got name={self.name!r}, ga2={self.ga2})"
+            )
         for field in ("spatial_attention", "ga1", "ga2", "task_indicator", "state_scale"):
             value = getattr(self, field)
             if not isinstance(value, bool):

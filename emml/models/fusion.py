@@ -52,7 +52,7 @@ class DualAttention(nn.Module):
         x_SA   = f_SA(x_I, x_spat)                    (Eq. 3)
         x_GA2  = f_GA(x_SA, x_sent)                   (Eq. 4)
         x_Ans  = softmax_V(sum_{j,k} x_GA2[:, j, k])  (Eq. 5)
-        x_S    = vec(x_spat)
+        x_S    = h*w * vec(x_spat)                    (``state_scale``, the default; the paper: vec(x_spat))
 
     Ablation switches (Section 4, "Ablation tests"):
 
@@ -104,8 +104,8 @@ class DualAttention(nn.Module):
             scores = scores.reshape(n, h * w)
             x_spat = torch.softmax(scores, dim=1).reshape(n, h, w)  # Eq. 2: softmax over HxW
             x_sa = spatial_attention(x_image, x_spat)  # Eq. 3
-            # x_S = vec(x_spat) (× h·w: mean 1 per cell); opt-in, the policy reads a sharper copy of Eq. 2's map
-            # instead, with no gradient back into the scores
+            # x_S = h·w·vec(x_spat) under state_scale (mean 1 per cell; the paper writes vec(x_spat)); opt-in, the
+            # policy reads a sharper copy of Eq. 2's map instead, with no gradient back into the scores
             t = self.state_temperature
             read = x_spat.reshape(n, h * w) if t is None else torch.softmax(scores.detach() / t, dim=1)
             state = read * self.state_scale

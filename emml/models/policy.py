@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from emml.models.config import ModelConfig
+from emml.models.config import LABEL_CONTROLS, ModelConfig
 from emml.models.encoders import ImageEncoder, TextEncoder, conv_output_size
 from emml.models.fusion import FusionOutput, Pacman, build_fusion
 from emml.models.gru import gru_cell, gru_sequence
@@ -191,6 +191,9 @@ class EmmlModel(nn.Module):
         self.detector: nn.Module | None = None
         """Transfer to new words (§5.4, emml/transfer.py): a module mapping the observation to k extra x_I
         channels (N, k, h, w) in [0, 1], appended after the V conv3 channels; None under the paper's training."""
+        self.type_gate: nn.Module | None = None
+        """Control 'type_gate': the module that builds Eq. 4's gate from the dataset's word types
+        (emml/models/type_gate.py; `emml.evaluate.load_model` attaches it, as it needs the run's words)."""
 
     def vmappable(self) -> EmmlModel:
         """Switch this model to the ops `torch.func.vmap` can batch over stacked copies (emml/rl/packed.py): the
@@ -206,7 +209,25 @@ class EmmlModel(nn.Module):
     def reads_labels(self) -> bool:
         """Whether acting needs the env's privileged aux labels (a diagnostic control, or detectors that read
         them); a model under the paper's protocol plays from pixels and words only."""
-        return self.cfg.control != "none" or bool(getattr(self.detector, "reads_labels", False))
+        return self.cfg.control in LABEL_CONTROLS or bool(getattr(self.detector, "reads_labels", False))
+
+    def gate(self, tokens: Tensor, x_sent: Tensor | None) -> Tensor | None:
+        """x_sent as the fusion reads it: the text encoder's, or under control 'type_gate' the word-type gate
+        that replaces it in Eq. 4."""
+        if self.cfg.control != "type_gate":
+            return x_sent
+        if self.type_gate is None:
+            raise RuntimeError(
+                "control='type_gate' needs the run's words: load the checkpoint with "
+                "emml.evaluate.load_model(path, control='type_gate') (emml eval CKPT --control type_gate)"
+            )
+        return self.type_gate(tokens, x_sent)
+
+    def sentence_gate(self, tokens: Tensor) -> Tensor | None:
+        """(N, L) tokens -> the (N, V) x_sent the fusion reads (Eq. 4's gate for Dual-Attention); None for a model
+        without a sentence representation."""
+        _, x_sent = self.text_encoder(tokens)
+        return self.gate(tokens, x_sent)
 
     def initial_state(self, batch_size: int, device=None) -> dict[str, Tensor]:
         """{"h": (B, hidden) zeros} (+ PACMAN {"frames": (B, K-1, 3, H, W) uint8 zeros})."""
@@ -267,6 +288,7 @@ class EmmlModel(nn.Module):
             x_bow, x_sent = self.text_cache(self.text_encoder, tokens)
         else:
             x_bow, x_sent = self.text_encoder(tokens)
+        x_sent = self.gate(tokens, x_sent)  # diagnostic 'type_gate': Eq. 4's gate from the word types
         new_state: dict[str, Tensor] = {}
         if self.window:
             fused, aux, new_state["frames"] = self._fuse_pacman(obs, state, episode_start, x_sent)

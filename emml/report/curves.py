@@ -11,6 +11,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from emml.report.savefig import save  # noqa: E402
 from emml.tracking import metric_history  # noqa: E402
 
 SERIES = (
@@ -42,8 +43,7 @@ def plot_run(run_id: str, path: Path, title: str) -> Path:
     ax.legend(fontsize=7, loc="upper left")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
+    save(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -80,20 +80,25 @@ def plot_table(
     profile: str,
     results_root: str | Path | None = None,
     out: str | Path | None = None,
-    run_root: str | Path = "runs",
+    run_root: str | Path | None = None,
 ) -> tuple[list[Path], list[str]]:
     """Training accuracy vs frames for every row of table `name` under `profile`: a panel per (task, difficulty,
-    aux), one line per row (mean over seeds, CI band). Runs come from results/<name>/<profile>.csv (their run_id),
-    curves from MLflow, else from the run dir's metrics.csv; a run with neither is skipped with a note. When no run
-    has a curve here, existing figures are kept rather than replaced by empty ones. Returns (paths, notes)."""
-    from emml.profiles import profile_seeds
+    aux), one line per row (mean over seeds, CI band), and under the panels the deviations from the paper of the
+    runs drawn, read from their configs (emml/report/deviations.py). Runs come from results/<name>/<profile>.csv
+    (their run_id), curves from MLflow, else from the run dir's metrics.csv (under ``run_root``, default: the
+    profile's); a run with neither is skipped with a note. When no run has a curve here, existing figures are kept
+    rather than replaced by empty ones. Returns (paths, notes)."""
+    from emml.profiles import profile_config, profile_seeds
     from emml.registry import load_table
-    from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, results_path
+    from emml.report import deviations
+    from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, reports_dir, results_path
     from emml.results import read_results
     from emml.rl.trainer import METRICS
-    from emml.tracking import project_path, project_root, read_mirror
+    from emml.tracking import project_path, read_mirror
 
     table = load_table(name)
+    run_root = run_root if run_root is not None else profile_config(profile).run_root
+    out = reports_dir(profile, out)
     notes: list[str] = []
     if table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
@@ -106,6 +111,7 @@ def plot_table(
     )
     specs = table.runs(profile_seeds(profile))
     cache: dict[str, dict] = {}
+    drawn: dict = {}  # run name → RunSpec of every run with a curve in the figure
     plotted = False
     for j, (difficulty, aux) in enumerate(panels):
         for i, (key, task) in enumerate(TRAIN_KEYS):
@@ -121,7 +127,7 @@ def plot_table(
                     if rname not in cache:
                         cache[rname] = {k: _history(run_ids[rname], k) for k, _ in TRAIN_KEYS}
                         if not any(cache[rname].values()):  # another store's run: its run dir may be here
-                            mirror = read_mirror(project_path(run_root) / name / rname / METRICS)
+                            mirror = read_mirror(project_path(run_root) / spec.table / rname / METRICS)
                             cache[rname] = {k: [(st, v) for st, kk, v in mirror if kk == k] for k, _ in TRAIN_KEYS}
                         if not any(cache[rname].values()):
                             notes.append(
@@ -131,6 +137,7 @@ def plot_table(
                     if hist:
                         steps, values = zip(*hist)
                         curves.append((np.asarray(steps, float), np.asarray(values, float)))
+                        drawn.setdefault(rname, spec)
                 if not curves:
                     continue
                 plotted = True
@@ -156,12 +163,14 @@ def plot_table(
                 ax.set_ylabel("training accuracy")
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=6, loc="upper left")
-    note = "" if profile == "paper" else f"\nprofile '{profile}' differs from the paper's protocol"
+    note = "" if profile == "paper" else f"\nprofile '{profile}' is not the paper's protocol: its deviations below"
     fig.suptitle(
         f"{name} [{profile}]: training accuracy (100-episode success), seed mean, 95% bootstrap band{note}", fontsize=9
     )
-    fig.tight_layout()
-    out = Path(out) if out is not None else project_root() / "reports"
+    rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
+    shown = [deviations.shown_run(spec, profile, run_root, rows.get(r)) for r, spec in drawn.items()]
+    footer = deviations.sentence(deviations.summarise(shown)) if shown else ""
+    _footer(fig, footer)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}-{profile}-curves.png", out / f"{name}-{profile}-curves.pdf"]
     if not plotted:  # never an empty figure: keep what an earlier machine drew, or draw nothing
@@ -170,9 +179,27 @@ def plot_table(
         what = "kept the existing figures" if kept else "no figure written"
         return kept, notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
     for p in paths:
-        fig.savefig(p, dpi=120)
+        save(fig, p, dpi=120)
     plt.close(fig)
     return paths, notes
+
+
+FOOTER_CHARS_PER_INCH = 21
+"""Characters of the 6-point footer per inch of figure width (wrapping)."""
+FOOTER_LINE_INCHES = 0.11
+
+
+def _footer(fig, text: str) -> None:
+    """``text`` wrapped under the panels, the figure grown to hold it."""
+    import textwrap
+
+    w, h = fig.get_size_inches()
+    lines = textwrap.wrap(text, int(w * FOOTER_CHARS_PER_INCH)) if text else []
+    extra = FOOTER_LINE_INCHES * len(lines) + (0.1 if lines else 0)
+    fig.set_size_inches(w, h + extra)
+    fig.tight_layout(rect=(0, extra / (h + extra), 1, 1))
+    if lines:
+        fig.text(0.01, 0.005, "\n".join(lines), fontsize=6, ha="left", va="bottom")
 
 
 def _history(run_id: str, key: str) -> list[tuple[int, float]] | None:

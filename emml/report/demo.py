@@ -54,7 +54,7 @@ def write_demo_report(cfg: TrainConfig, result, out: Path) -> list[Path]:
         "paper's protocol (both tasks, 10M frames at 168×300): its numbers are not comparable with the paper's "
         "Table 2. It shows the agent leaving chance (0.2: one object of five) on instruction following.",
         "",
-        f"Greedy accuracy over {cfg.eval_episodes} episodes per cell:",
+        f"Greedy accuracy over {cfg.final_eval_episodes} episodes per cell:",
         "",
         "| task | train | test |",
         "|---|---|---|",

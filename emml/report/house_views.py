@@ -20,6 +20,7 @@ from emml.agents.house_oracle import HouseOracle  # noqa: E402
 from emml.config import HouseConfig  # noqa: E402
 from emml.envs.doom import ANSWER  # noqa: E402
 from emml.envs.house import HouseEnv  # noqa: E402
+from emml.report.savefig import save  # noqa: E402
 
 QUESTIONS = ("what color is the fireplace", "what color is the bed", "what color is the office_chair")
 """One training question per view (Table 8), each about a piece in a different room."""
@@ -54,7 +55,6 @@ def house_views(path: Path, seed: int = 0, questions: tuple[str, ...] = QUESTION
         ax.axis("off")
     fig.suptitle("Example first-person views of the House (emml/House-v0; colours drawn per episode)", fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=150)
+    save(fig, path, dpi=150)
     plt.close(fig)
     return path

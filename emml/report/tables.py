@@ -1,9 +1,12 @@
-"""Paper-side-by-side tables: ours (mean over seeds with a 95% bootstrap CI) beside the paper's number.
+"""Paper-side-by-side tables: ours (the mean over seeds, with every seed's value) beside the paper's number.
 
 Input is the committed results/<table>/<profile>.csv (one row per finished run, written by the trainer), so a
 report rebuilds without the MLflow database; the paper's numbers come from reproduce/paper/<table>.csv. Cells are
 joined by run name (derived from the registry), so a missing run shows as "—", never as zero. The layout follows
 the paper: rows are its rows, columns difficulty × aux × metric (levels with one value move to the caption).
+Under the caption, the deviations from the paper of the runs shown, read from their saved configs
+(emml/report/deviations.py); under the table, an aggregate over cells that stays honest with few seeds
+(emml/report/aggregate.py).
 """
 
 from __future__ import annotations
@@ -13,16 +16,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
 from emml.registry import REPRODUCE_DIR, Table, load_table
 from emml.results import read_results
 from emml.tracking import project_path, project_root
 
-CONFIDENCE = 0.95
-N_RESAMPLES = 9999
-CI_SEED = 0
-"""The bootstrap's seed: a report is reproducible to the digit."""
 MISSING = "—"
 EXTRA_MARK = "†"
 """Marks a row of ours that the paper's table does not have (Table 4's other test instructions)."""
@@ -35,25 +33,6 @@ METRIC_LABELS = {
     "eqa_train": "EQA train",
     "sgn_transfer": "SGN",
 }
-
-
-def mean_ci(values, confidence: float = CONFIDENCE, seed: int = CI_SEED) -> tuple[float, float | None, float | None]:
-    """Mean of `values` and its percentile-bootstrap CI (scipy.stats.bootstrap); (mean, None, None) for n < 2."""
-    x = np.asarray(values, dtype=float)
-    mean = float(np.mean(x))
-    if len(x) < 2:
-        return mean, None, None
-    if np.all(x == x[0]):  # a degenerate bootstrap distribution: the CI is the point itself
-        return mean, mean, mean
-    res = stats.bootstrap(
-        (x,),
-        np.mean,
-        confidence_level=confidence,
-        method="percentile",
-        n_resamples=N_RESAMPLES,
-        rng=np.random.default_rng(seed),
-    )
-    return mean, float(res.confidence_interval.low), float(res.confidence_interval.high)
 
 
 @dataclass
@@ -70,25 +49,27 @@ class Cell:
     """One value per finished run (seed) found in the results CSV."""
     paper: str | None = None
     """The paper's number exactly as printed, None if the paper has no such cell."""
-    mean: float | None = None
-    lo: float | None = None
-    hi: float | None = None
+    runs: list[str] = field(default_factory=list)
+    """The run names behind `values`, in the same (seed) order."""
 
     @property
     def n(self) -> int:
         return len(self.values)
 
-    def ours(self, all_single: bool) -> str:
+    @property
+    def mean(self) -> float | None:
+        return float(np.mean(self.values)) if self.values else None
+
+    def ours(self) -> str:
+        """'0.42 (0.34 · 0.34 · 0.59)': the mean and each seed's value; '(0.34 · 0.50; n=2/3)' when seeds are
+        missing; one seed of one declared: the value alone."""
         if not self.values:
             return MISSING
         text = f"{self.mean:.2f}"
-        if self.lo is not None:
-            text += f" [{self.lo:.2f}, {self.hi:.2f}]"
-        elif not all_single:
-            text += " (n=1, no CI)"
-        if 1 < self.n < self.expected:
-            text += f" (n={self.n}/{self.expected})"
-        return text
+        seeds = " · ".join(f"{v:.2f}" for v in self.values) if self.n > 1 else ""
+        partial = f"n={self.n}/{self.expected}" if self.n < self.expected else ""
+        inside = "; ".join(x for x in (seeds, partial) if x)
+        return f"{text} ({inside})" if inside else text
 
 
 def paper_numbers(name: str, directory: Path = REPRODUCE_DIR / "paper") -> pd.DataFrame:
@@ -123,8 +104,7 @@ def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.Dat
                     found = [by_name.at[name, c] for c in columns]
                     if all(pd.notna(v) for v in found):
                         cell.values.append(float(np.mean(found)))
-            if cell.values:
-                cell.mean, cell.lo, cell.hi = mean_ci(cell.values)
+                        cell.runs.append(name)
             cells.append(cell)
     return cells
 
@@ -145,11 +125,10 @@ def layout(table: Table, cells: list[Cell], tex: bool = False) -> tuple[pd.DataF
     keep = [k for k in ("difficulty", "aux", "metric") if len(levels[k]) > 1 or k == "metric"]
     constant = [_label(k, levels[k][0]) for k in ("difficulty", "aux") if k not in keep]
     metric_labels = {v: k for k, v in table.metrics.items()}
-    all_single = all(c.n <= 1 for c in cells)
     sep, missing = (r" $\mid$ ", "---") if tex else (r" \| ", MISSING)  # GFM: a bare | splits the cell
     data: dict[str, dict] = {}
     for c in cells:
-        ours = c.ours(all_single).replace(MISSING, missing)
+        ours = c.ours().replace(MISSING, missing)
         paper = c.paper if c.paper is not None else missing
         col = tuple(
             metric_labels.get(c.metric) or _label("metric", c.metric) if k == "metric" else _label(k, getattr(c, k))
@@ -193,8 +172,8 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
     used = results[results["run_name"].isin(_run_names(table, profile))] if not results.empty else results
     seeds = profile_seeds(profile)
     parts.append(
-        f"Each cell: ours, mean over seeds [{CONFIDENCE:.0%} percentile-bootstrap CI, scipy.stats.bootstrap] | "
-        f"paper; {MISSING} = run missing (not finished), never zero."
+        "Each cell: ours, the mean over seeds (each seed's value, in seed order) | paper; n=k/N: k of the N "
+        f"declared seeds finished; {MISSING} = run missing (not finished), never zero."
     )
     if table.transfer is not None:
         t = table.transfer
@@ -215,17 +194,34 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
             f"of {len(seeds)} declared ({', '.join(map(str, seeds))}); {len(used)} of "
             f"{len(_run_names(table, profile))} runs finished."
         )
-        if all(c.n <= 1 for c in cells):
-            parts.append("n=1 seed per cell, no CI.")
     if profile != "paper":
         parts.append(
-            f"The '{profile}' profile differs from the paper's protocol (frames, input size, evaluation episodes: "
-            "reproduce/profiles.toml): compare orderings, not absolute numbers."
+            f"The '{profile}' profile is not the paper's protocol (its deviations from the paper, read from the runs' "
+            "configs, are listed here): compare orderings, not absolute numbers."
         )
     parts.append(
         f"Made by `emml run {table.name} --profile {profile}` and `emml report {table.name} --profile {profile}`."
     )
     return " ".join(parts)
+
+
+def shown_runs(
+    table: Table, profile: str, cells: list[Cell], results: pd.DataFrame, run_root: str | Path | None = None
+) -> list:
+    """The runs behind the table's cells with their configs (emml/report/deviations.py); every declared run when none
+    has finished (its deviations as declared); [] for a placeholder."""
+    from emml.profiles import profile_config, profile_seeds
+    from emml.report.deviations import shown_run
+
+    if table.placeholder:
+        return []
+    run_root = run_root if run_root is not None else profile_config(profile).run_root
+    specs = {spec.run_name(profile): spec for spec in table.runs(profile_seeds(profile))}
+    names = list(dict.fromkeys(name for c in cells for name in c.runs))
+    if not names:
+        return [shown_run(spec, profile, run_root, declared=True) for spec in specs.values()]
+    rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
+    return [shown_run(specs[name], profile, run_root, rows.get(name)) for name in names]
 
 
 def _run_names(table: Table, profile: str) -> set[str]:
@@ -252,44 +248,111 @@ def _tex_escape(text: str) -> str:
 
 
 def results_path(name: str, profile: str, results_root: str | Path | None = None) -> Path:
-    return project_path(results_root if results_root is not None else "results") / name / f"{profile}.csv"
+    """results/<name>/<profile>.csv under ``results_root`` (default: the profile's, `results` but for smoke)."""
+    if results_root is None:
+        from emml.profiles import profile_config
+
+        results_root = profile_config(profile).results_root
+    return project_path(results_root) / name / f"{profile}.csv"
+
+
+def reports_dir(profile: str, out: str | Path | None = None) -> Path:
+    """Where a profile's reports go: ``out``, else the committed reports/, or scratch/reports for a profile whose
+    numbers are not results (smoke); a smoke report is refused under the committed reports/."""
+    from emml.profiles import SCRATCH, is_scratch, refuse_committed
+
+    if out is None:
+        out = project_root() / (f"{SCRATCH}/reports" if is_scratch(profile) else "reports")
+    refuse_committed(profile, out, "report folder")
+    return Path(out)
+
+
+def _tex_caption(text: str) -> str:
+    return _tex_escape(text).replace("—", "---").replace("–", "--").replace("|", r"$\mid$")
+
+
+def table_results(table: Table, profile: str, results_root: str | Path | None = None) -> pd.DataFrame:
+    """The results rows of the table's runs under ``profile``: its own CSV, and the CSVs of the tables some of its
+    rows borrow runs from (`from_table`: Table 3's "DA Multi-Task" is Table 2's Dual-Attention)."""
+    from emml.profiles import profile_seeds
+
+    owners = dict.fromkeys([table.name, *(spec.table for spec in table.runs(profile_seeds(profile)))])
+    frames = [read_results(results_path(owner, profile, results_root)) for owner in owners]
+    frames = [f for f in frames if not f.empty]
+    if not frames:
+        return read_results(results_path(table.name, profile, results_root))
+    return pd.concat(frames, ignore_index=True).drop_duplicates("run_name")
 
 
 def report_table(
-    name: str, profile: str, results_root: str | Path | None = None, out: str | Path | None = None
+    name: str,
+    profile: str,
+    results_root: str | Path | None = None,
+    out: str | Path | None = None,
+    run_root: str | Path | None = None,
 ) -> dict:
-    """Write reports/<name>-<profile>.md and .tex; returns the cells, caption and paths (the --json output)."""
+    """Write reports/<name>-<profile>.md and .tex; returns the cells, caption, deviations, aggregate and paths (the
+    --json output). Runs' configs are read from their run dirs under ``run_root`` (default: the profile's)."""
+    from emml.report import deviations
+    from emml.report.aggregate import summary
+
     table = load_table(name)
+    out = reports_dir(profile, out)
     path = results_path(name, profile, results_root)
-    results = read_results(path)
+    results = table_results(table, profile, results_root)
     cells = build_cells(table, profile, results, paper_numbers(name))
     md_df, constant = layout(table, cells)
     text = caption(table, profile, cells, results, constant)
-    out = Path(out) if out is not None else project_root() / "reports"
+    runs = shown_runs(table, profile, cells, results, run_root)
+    devs = deviations.summarise(runs) if runs else None
+    agg = summary(table, cells)
     out.mkdir(parents=True, exist_ok=True)
     md_path, tex_path = out / f"{name}-{profile}.md", out / f"{name}-{profile}.tex"
     flat = md_df.copy()
     if isinstance(flat.columns, pd.MultiIndex):
         flat.columns = [" · ".join(c) for c in flat.columns]
     shown = path.relative_to(project_root()) if path.is_relative_to(project_root()) else path
-    md_path.write_text(f"# {name} ({profile})\n\n{text}\n\n{flat.to_markdown()}\n\nResults: `{shown}`\n")
+    md = [f"# {name} ({profile})", "", text, ""]
+    if devs is not None:
+        md += [deviations.markdown(devs), ""]
+    md += [flat.to_markdown(), ""]
+    if agg is not None:
+        agg_df = pd.DataFrame.from_dict(agg[0], orient="index")
+        agg_df.index.name = table.row_header
+        md += [agg_df.to_markdown(), "", agg[1], ""]
+    md += [f"Results: `{shown}`", ""]
+    md_path.write_text("\n".join(md))
     tex_df, _ = layout(table, cells, tex=True)
     tex_df.index = pd.Index([_tex_escape(str(i)) for i in tex_df.index], name=table.row_header)
+    full = text + (" " + deviations.sentence(devs) if devs is not None else "")
     tex = tex_df.reset_index().to_latex(
         index=False,
         escape=False,
-        caption=_tex_escape(text).replace("—", "---").replace("–", "--").replace("|", r"$\mid$"),
+        caption=_tex_caption(full),
         label=f"tab:ours-{name}-{profile}",
         multicolumn=True,
         multicolumn_format="c",
         column_format="l" + "c" * tex_df.shape[1],
     )
+    if agg is not None:
+        agg_tex = pd.DataFrame.from_dict(agg[0], orient="index")
+        agg_tex.index = pd.Index([_tex_escape(str(i)) for i in agg_tex.index], name=table.row_header)
+        agg_tex.columns = [_tex_escape(c) for c in agg_tex.columns]
+        tex += "\n" + agg_tex.reset_index().replace(MISSING, "---").to_latex(
+            index=False,
+            escape=False,
+            caption=_tex_caption(f"Aggregate of Table {name.removeprefix('table')} [{profile}]. {agg[1]}"),
+            label=f"tab:ours-{name}-{profile}-aggregate",
+            column_format="l" + "c" * agg_tex.shape[1],
+        )
     tex_path.write_text(tex)
     return {
         "table": name,
         "profile": profile,
         "results": str(path),
         "caption": text,
-        "cells": [{**asdict(c), "n": c.n} for c in cells],
+        "deviations": asdict(devs) if devs is not None else None,
+        "aggregate": {"rows": agg[0], "footer": agg[1]} if agg is not None else None,
+        "cells": [{**asdict(c), "n": c.n, "mean": c.mean} for c in cells],
         "paths": [str(md_path), str(tex_path)],
     }

@@ -23,6 +23,7 @@ from emml.config import DoomConfig  # noqa: E402
 from emml.envs.doom import MOVES  # noqa: E402
 from emml.envs.vector import make_env  # noqa: E402
 from emml.evaluate import obs_to_torch  # noqa: E402
+from emml.report.savefig import save  # noqa: E402
 
 CHANNEL_WORDS = ("red", "green", "torch", "pillar", "smallest", "tall", "armor")
 """The rows of the channel figure: colours, objects, a size word and a superlative (no aux label exists for it)."""
@@ -36,7 +37,11 @@ class Episode:
     task: str
     words: tuple[str, ...]
     x_sent: np.ndarray
-    """(V,) the sentence representation x_sent (Section 3), over the vocabulary."""
+    """(V,) x_sent as the fusion reads it (Section 3; Eq. 4's gate in Dual-Attention), per vocabulary channel; zeros
+    for a model without one."""
+    x_sent_source: str = "x_sent"
+    """'x_sent' (the sentence encoder's), 'type_gate' (the control's word-type gate, emml/models/type_gate.py, in
+    its place) or 'none' (the model has no sentence representation)."""
     frames: list[np.ndarray] = field(default_factory=list)
     """(H, W, 3) uint8 per step."""
     attention: list[np.ndarray] = field(default_factory=list)
@@ -63,12 +68,14 @@ def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0,
     env = make_env(cfg)
     try:
         obs, _ = env.reset(seed=seed)
-        _, x_sent = model.text_encoder(torch.as_tensor(obs["tokens"])[None].to(device))
+        x_sent = model.sentence_gate(torch.as_tensor(obs["tokens"])[None].to(device))  # what Eq. 4 reads
+        control = getattr(model.cfg, "control", "none")
         ep = Episode(
             sentence=env.episode.sentence.text,
             task=task,
             words=tuple(env.vocab.words),
             x_sent=np.zeros(len(env.vocab)) if x_sent is None else x_sent[0].cpu().numpy(),
+            x_sent_source="none" if x_sent is None else ("type_gate" if control == "type_gate" else "x_sent"),
             tokens=obs["tokens"].copy(),
         )
         state = model.initial_state(1, device)
@@ -97,17 +104,21 @@ def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0,
 
 
 def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure:
-    """The attention figure: on top x_sent over the sentence's words; then ``rows`` steps spread over the
-    episode, each with the frame, the frame under x_spat, the top answers of x_Ans, and the action taken."""
+    """The attention figure: on top x_sent per vocabulary channel, as in the paper's attention visualization (the
+    sentence's words in purple); then ``rows`` steps spread over the episode, each with the frame, the frame under
+    x_spat, the top answers of x_Ans, and the action taken."""
     steps = np.unique(np.linspace(0, len(ep.frames) - 1, min(rows, len(ep.frames))).round().astype(int))
     fig = plt.figure(figsize=(11, 1.9 * (len(steps) + 1)))
     grid = fig.add_gridspec(len(steps) + 1, 3, width_ratios=[1.6, 1.6, 1.2])
     top = fig.add_subplot(grid[0, :])
-    sent_words = [w for w in ep.sentence.split() if w in ep.words]
-    top.bar(range(len(sent_words)), [ep.x_sent[ep.words.index(w)] for w in sent_words], color="tab:purple")
-    top.set_xticks(range(len(sent_words)), sent_words)
+    in_sentence = set(ep.sentence.split())
+    colours = ["tab:purple" if w in in_sentence else "tab:gray" for w in ep.words]
+    top.bar(range(len(ep.words)), ep.x_sent, color=colours)  # every channel: a ReLU zeroes many of them
+    top.set_xticks(range(len(ep.words)), ep.words, rotation=60, fontsize=8)
     outcome = "success" if ep.success else "failure"
-    top.set_title(f"{ep.task.upper()} '{ep.sentence}' ({outcome}, {len(ep.frames)} steps): x_sent on its words")
+    shown = {"x_sent": "x_sent per channel", "type_gate": "the type_gate control's gate per channel (x_sent's place)"}
+    what = shown.get(ep.x_sent_source, "no x_sent in this model")
+    top.set_title(f"{ep.task.upper()} '{ep.sentence}' ({outcome}, {len(ep.frames)} steps): {what}", fontsize=10)
     for r, t in enumerate(steps, start=1):
         frame = ep.frames[t]
         ax = fig.add_subplot(grid[r, 0])
@@ -130,7 +141,7 @@ def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure
         ax.set_xlim(0, 1)
         ax.set_title("x_Ans (top 5)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save(fig, path, dpi=100)
     return fig
 
 
@@ -167,7 +178,7 @@ def channels_figure(
         axes[r, -1].axis("off")
     fig.suptitle(f"conv3 channels and aux labels, '{first.sentence}' (first frame)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save(fig, path, dpi=100)
     return fig, labels, channels
 
 

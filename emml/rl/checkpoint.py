@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from emml.diskspace import no_space_names
+
 
 def save_checkpoint(path: str | os.PathLike, payload: dict[str, Any]) -> Path:
     """Atomically write ``payload`` (anything ``torch.save`` accepts) to ``path``.
@@ -26,22 +28,23 @@ def save_checkpoint(path: str | os.PathLike, payload: dict[str, Any]) -> Path:
     Parent directories are created. Returns the final path.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            torch.save(payload, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp_name, path)
-    except BaseException:
-        # Orderly failure (exception, Ctrl-C): remove our temp file. A hard kill
-        # skips this and leaves the temp file, which is harmless.
+    with no_space_names(path):  # a full disk: one line naming the path; the last good checkpoint stays
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         try:
-            os.unlink(tmp_name)
-        except FileNotFoundError:
-            pass
-        raise
+            with os.fdopen(fd, "wb") as fh:
+                torch.save(payload, fh)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp_name, path)
+        except BaseException:
+            # Orderly failure (exception, Ctrl-C): remove our temp file. A hard kill
+            # skips this and leaves the temp file, which is harmless.
+            try:
+                os.unlink(tmp_name)
+            except FileNotFoundError:
+                pass
+            raise
     _fsync_dir(path.parent)
     return path
 

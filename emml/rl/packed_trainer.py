@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from contextlib import ExitStack
 
 import numpy as np
 import torch
@@ -25,6 +26,7 @@ from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.rl.trainer import RunResult, Trainer, _dtype, update_metrics
+from emml.runlock import hold_run
 from emml.tracking import Tracker
 
 SEED_ONLY = "seed"
@@ -57,6 +59,12 @@ class PackedTrainer:
         self.quiet = quiet
 
     def train(self) -> list[RunResult]:
+        with ExitStack() as held:
+            for t in self.trainers:  # every run's lock, before any checkpoint is read
+                held.enter_context(hold_run(t.dir))
+            return self._train()
+
+    def _train(self) -> list[RunResult]:
         saved = [t.saved() for t in self.trainers]  # each checkpoint read (and checked) once here
         finished = [t.finished(s) for t, s in zip(self.trainers, saved)]
         if any(finished):  # finished runs are skipped (and recorded); the rest train packed, or alone if one
@@ -75,22 +83,18 @@ class PackedTrainer:
                 f"packed runs must resume from the same update, found updates {sorted(updates)}: train them apart "
                 "(emml train --seed N) to the same update, or start them afresh"
             )
-        opened = [t.open(build=False) for t in self.trainers]
-        stacked = StackedModels([o[0] for o in opened]).to(self.device)
-        optimizer = make_optimizer(stacked.parameters_in_order(), self.cfg.ppo)
-        for r, o in enumerate(opened):
-            if o[1] is not None:
-                load_optimizer_state(optimizer, r, o[1])
-        update, frames = opened[0][2], opened[0][3]
-        try:
+        try:  # from the first MLflow run started (open), a failure ends every started run, never leaves it RUNNING
+            opened = [t.open(build=False) for t in self.trainers]
+            stacked = StackedModels([o[0] for o in opened]).to(self.device)
+            optimizer = make_optimizer(stacked.parameters_in_order(), self.cfg.ppo)
+            for r, o in enumerate(opened):
+                if o[1] is not None:
+                    load_optimizer_state(optimizer, r, o[1])
+            update, frames = opened[0][2], opened[0][3]
             finals = self._loop(stacked, optimizer, update, frames)
-        except (KeyboardInterrupt, SystemExit):
+        except BaseException as e:  # KILLED on Ctrl-C or a termination signal, else FAILED (Tracker.abort)
             for t in self.trainers:
-                t.tracker.finish("KILLED")
-            raise
-        except BaseException:
-            for t in self.trainers:
-                t.tracker.finish("FAILED")
+                t.tracker.abort(e)
             raise
         results = []
         for t, (metrics, frames), o in zip(self.trainers, finals, opened):
@@ -141,7 +145,7 @@ class PackedTrainer:
                     self._checkpoints(stacked, optimizer, update, frames)
         finals = []
         for r, t in enumerate(self.trainers):
-            final = t._eval(stacked.unstack(r), frames)
+            final = t._eval(stacked.unstack(r), frames, final=True)
             t._write_results(final, frames)
             finals.append((final, frames))
         self._checkpoints(stacked, optimizer, update, frames, finished=True)

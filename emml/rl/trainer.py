@@ -25,6 +25,7 @@ from tqdm import tqdm
 from emml import alloc
 from emml.config import TrainConfig
 from emml.diagnose import SCALARS, diagnose, summary_line
+from emml.diskspace import no_space_names
 from emml.envs.labels import channel_mask
 from emml.evaluate import evaluate
 from emml.models import build_model
@@ -36,6 +37,7 @@ from emml.rl.ppo import make_optimizer, model_forward, ppo_update
 from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
+from emml.runlock import hold_run
 from emml.tasks.language import load_dataset, resolve_vocabulary
 from emml.tracking import Tracker, project_path, project_root
 
@@ -44,6 +46,9 @@ CHECKPOINT = "checkpoint.pt"
 METRICS = "metrics.csv"
 """Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.tracking.Tracker.mirror_to)."""
 RESULTS = "results.json"
+EVAL_SEED = 10_000
+"""Episode seeds of every greedy evaluation of a run: EVAL_SEED, EVAL_SEED + 1, … (emml.evaluate), recorded as
+``eval_seed`` beside the score."""
 
 
 def git_sha() -> str:
@@ -85,6 +90,8 @@ def _check_same_config(saved: dict, current: dict, path: Path) -> None:
     ignore = {
         "frames",  # asking for more frames continues a run (finished or not) to the new target
         "eval_every",
+        "eval_episodes",  # how a run is measured, not what it is: the evaluations' size
+        "final_eval_episodes",
         "diagnose_episodes",
         "checkpoint_every",
         "log_every",
@@ -144,17 +151,21 @@ class Trainer:
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
+        with hold_run(self.dir):  # one process per run (RunLocked before anything is read or written)
+            return self._train()
+
+    def _train(self) -> RunResult:
         opened = self.open()
         if isinstance(opened, RunResult):
             return opened
         model, optimizer, update, frames, resumed = opened
+        self._consistent = (update, frames)
         try:
             metrics = self._loop(model, optimizer, update, frames)
-        except (KeyboardInterrupt, SystemExit):  # Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers)
-            self.tracker.finish("KILLED")
-            raise
-        except BaseException:
-            self.tracker.finish("FAILED")
+        except BaseException as e:  # KILLED on Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers), else FAILED
+            if isinstance(e, (KeyboardInterrupt, SystemExit)):
+                self._checkpoint_on_stop(model, optimizer)
+            self.tracker.abort(e)
             raise
         self.tracker.finish("FINISHED")
         return RunResult(self.dir, self.tracker.run_id, metrics.pop("_frames"), metrics, resumed=resumed)
@@ -240,7 +251,11 @@ class Trainer:
             if not self.quiet:
                 tqdm.write(f"resuming {cfg.run_name()} from frame {frames:,} (update {update}), MLflow run {run_id}")
         else:  # at once, so that a run killed before its first update resumes this MLflow run, not a second one
-            self._checkpoint(model, optimizer or make_optimizer(model.parameters(), cfg.ppo), update, frames, False)
+            try:
+                self._checkpoint(model, optimizer or make_optimizer(model.parameters(), cfg.ppo), update, frames, False)
+            except BaseException as e:  # a full disk, a run dir gone read-only: the run ends FAILED, not RUNNING
+                self.tracker.abort(e)
+                raise
         return model, optimizer, update, frames, saved is not None
 
     # --- the loop ---------------------------------------------------------------------------------------------
@@ -271,11 +286,13 @@ class Trainer:
                     t_learn = time.perf_counter()
                     last_value = sampler.last_value(model)
                     buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
+                    self._consistent = None  # the update changes the model and optimizer step by step
                     stats = ppo_update(
                         model_forward(model), optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux
                     )
                 update += 1
                 frames += B * T
+                self._consistent = (update, frames)
                 now = time.perf_counter()
                 seconds = sampler.timing | {"learn": now - t_learn}
                 for part, value in seconds.items():
@@ -300,7 +317,7 @@ class Trainer:
                 if update % cfg.checkpoint_every == 0 or update == cfg.num_updates:
                     self._checkpoint(model, optimizer, update, frames, finished=False)
             bar.close()
-        final = self._eval(model, frames)
+        final = self._eval(model, frames, final=True)
         self._checkpoint(model, optimizer, update, frames, finished=False)
         self._write_results(final, frames)
         self._checkpoint(model, optimizer, update, frames, finished=True)
@@ -308,8 +325,12 @@ class Trainer:
         return final
 
     # --- pieces -----------------------------------------------------------------------------------------------
-    def _eval(self, model, frames: int) -> dict:
-        acc = evaluate(model, self.cfg.env, self.cfg.eval_episodes, seed=10_000, device=self.device)
+    def _eval(self, model, frames: int, final: bool = False) -> dict:
+        """Greedy accuracies (logged under eval/): over `final_eval_episodes` per (task, split) for the run's score
+        (``final``), `eval_episodes` for the curves."""
+        t_start = time.perf_counter()
+        episodes = self.cfg.final_eval_episodes if final else self.cfg.eval_episodes
+        acc = evaluate(model, self.cfg.env, episodes, seed=EVAL_SEED, device=self.device)
         metrics = {f"eval/{k}": v for k, v in acc.items()}
         if self.cfg.diagnose_episodes and self.cfg.env.tasks != "eqa":
             n = self.cfg.diagnose_episodes
@@ -318,8 +339,16 @@ class Trainer:
             if not self.quiet:
                 tqdm.write(f"frames {frames:,} eval " + ", ".join(f"{k} {v:.2f}" for k, v in acc.items()))
                 tqdm.write(summary_line(diag))
+        metrics["perf/eval_s"] = time.perf_counter() - t_start  # what an evaluation costs (emml campaign's estimate)
         self.tracker.log_metrics(metrics, step=frames)
         return acc
+
+    def _checkpoint_on_stop(self, model, optimizer) -> None:
+        """A stopped run (Ctrl-C, SIGTERM) keeps the updates it finished since its last checkpoint: unless it stopped
+        inside an update (model and optimizer half-stepped), its state is that of its last whole update."""
+        at = getattr(self, "_consistent", None)
+        if at is not None and at[0] > getattr(self, "_saved_update", -1):
+            self._checkpoint(model, optimizer, *at, finished=False)
 
     def _checkpoint(self, model, optimizer, update: int, frames: int, finished: bool) -> None:
         """``optimizer``: the optimizer, or its state_dict (a packed run's slice, emml/rl/packed.py)."""
@@ -337,6 +366,7 @@ class Trainer:
                 "finished": finished,
             },
         )
+        self._saved_update = update
 
     def _write_results(self, metrics: dict, frames: int) -> None:
         cfg = self.cfg
@@ -351,18 +381,22 @@ class Trainer:
             "frames": frames,
             "git_sha": self.git_sha,
             "run_id": self.tracker.run_id,
-            "eval_episodes": cfg.eval_episodes,
+            "eval_episodes": cfg.final_eval_episodes,  # the score's: the final evaluation's
+            "eval_seed": EVAL_SEED,
             "metrics": metrics,
+            "config": cfg.to_dict(),  # what the run trained with: reports state its deviations from the paper
         }
         save_results(self.dir, payload, cfg)
 
 
-def save_results(directory: Path, payload: dict, cfg: TrainConfig) -> None:
-    """Write a run's results.json atomically, then upsert its row in the results CSV (`record_result`)."""
+def save_results(directory: Path, payload: dict, cfg: TrainConfig, record: bool = True) -> None:
+    """Write a run's results.json atomically, then (``record``) upsert its row in the results CSV (`record_result`)."""
     tmp = directory / (RESULTS + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2))
-    os.replace(tmp, directory / RESULTS)
-    record_result(payload, cfg)
+    with no_space_names(directory / RESULTS, tmp):
+        tmp.write_text(json.dumps(payload, indent=2))
+        os.replace(tmp, directory / RESULTS)
+    if record:
+        record_result(payload, cfg)
 
 
 def results_csv(cfg: TrainConfig) -> Path:
@@ -371,7 +405,10 @@ def results_csv(cfg: TrainConfig) -> Path:
 
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
     """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv (emml.results)."""
-    row = {k: v for k, v in payload.items() if k != "metrics"}
+    from emml.profiles import refuse_committed
+
+    refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results
+    row = {k: v for k, v in payload.items() if k not in ("metrics", "config")}
     row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, precision=cfg.precision, **payload["metrics"])
     return upsert_result(results_csv(cfg), row)
 

@@ -171,6 +171,25 @@ def test_aux_labels_line_up_with_bounding_boxes(make):
     assert env.aux_mask.sum() == len(vocab) - 2  # all but the two superlatives
 
 
+def test_scene_grids_give_each_actors_cells_in_scene_order(make):
+    """Easy: the five objects stand side by side, all in view: five non-empty grids, the referent's being
+    the 'target' observation; a word's aux channel is the union of the grids of the actors it describes."""
+    env = make(difficulty="easy", aux_labels=True)
+    obs, _ = env.reset(seed=4)
+    grids = env.scene_grids()
+    assert grids.shape == (5, *obs["target"].shape) and grids.dtype == np.uint8
+    assert np.array_equal(grids[env.episode.target], obs["target"])
+    assert all(g.sum() > 0 for g in grids)
+    for w in ("torch", "red", "armor"):
+        having = [i for i, name in enumerate(env.episode.scene) if w in env.dataset.actors[name].words()]
+        union = grids[having].max(axis=0) if having else np.zeros_like(obs["target"])
+        assert np.array_equal(obs["aux"][env.vocab.index(w)], union)
+    no_labels = make(difficulty="easy")
+    no_labels.reset(seed=4)
+    with pytest.raises(RuntimeError, match="aux_labels=True"):
+        no_labels.scene_grids()
+
+
 def test_labels_follow_the_conv_grid_not_an_even_partition():
     """conv3 has no padding: at 300 px its 17 cells are centred at 17.5 + 16k, so the last one looks at
     pixels 256..291, not at the last 17th of the frame (282..299)."""

@@ -73,3 +73,55 @@ def test_engines_starting_together_in_a_fresh_temp_dir_all_start(tmp_path, monke
         p.join(timeout=60)
     assert results == ["ok"] * n
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tmp"]
+
+
+OWNER = """
+import sys, time
+from emml.envs.doom import DoomEnv
+env = DoomEnv(height=60, width=108)
+env.reset(seed=0)
+print(env._engine.pid, env._engine.instance_id, flush=True)
+time.sleep(60)
+"""
+
+
+def test_engines_of_a_sigkilled_owner_are_swept_by_pid_and_start_time(no_leftovers):
+    import glob
+    import signal
+    import subprocess
+    import sys
+
+    from emml.envs.engine import records_dir, sweep_orphans
+
+    owner = subprocess.Popen([sys.executable, "-c", OWNER], stdout=subprocess.PIPE, text=True)
+    pid, instance = owner.stdout.readline().split()
+    record = records_dir() / f"{owner.pid}-{pid}"
+    assert record.exists() and int(pid) not in sweep_orphans()  # its owner lives: left alone
+    os.kill(owner.pid, signal.SIGKILL)  # no cleanup runs: the engine is orphaned, its shm files stay
+    owner.wait()
+    assert os.path.exists(f"/proc/{pid}") and glob.glob(f"/dev/shm/ViZDoom*{instance}")
+    assert sweep_orphans() == [int(pid)]
+    import time
+
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and os.path.exists(f"/proc/{pid}"):
+        time.sleep(0.05)
+    assert not glob.glob(f"/dev/shm/ViZDoom*{instance}") and not record.exists()
+    assert sweep_orphans() == []  # nothing twice
+
+
+def test_a_record_whose_pid_now_names_another_process_is_not_killed(tmp_path, monkeypatch):
+    import subprocess
+
+    import emml.envs.engine as engine
+
+    monkeypatch.setattr(engine.tempfile, "gettempdir", lambda: str(tmp_path))
+    other = subprocess.Popen(["sleep", "30"])
+    try:
+        engine.records_dir().mkdir(parents=True)
+        (engine.records_dir() / f"999999999-{other.pid}").write_text("1 -\n")  # dead owner, a start time not its
+        assert engine.sweep_orphans() == [] and other.poll() is None
+        assert list(engine.records_dir().iterdir()) == []
+    finally:
+        other.kill()
+        other.wait()

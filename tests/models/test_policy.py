@@ -261,7 +261,16 @@ def test_model_table():
     assert [r["name"] for r in rows] == list(MODELS)
     for r in rows:
         assert isinstance(r["parameters"], int) and r["parameters"] > 0
-        assert r["description"]
+        assert r["description"] and "{" not in r["description"]
+
+
+def test_the_description_says_the_x_s_the_code_computes():
+    from emml.models import describe
+
+    assert describe("dual_attention").endswith("x_S = h·w·vec(x_spat)")  # state_scale, the default
+    assert describe("dual_attention", state_scale=False).endswith("x_S = vec(x_spat)")  # the paper's
+    assert describe("dual_attention", state_temperature=0.25).endswith("x_S = h·w·softmax(scores / 0.25)")
+    assert describe("da_no_sa").endswith("x_S = vec(x_GA1)")
 
 
 def _labelled_obs(t=1, b=2, seed=0):

@@ -47,7 +47,7 @@ def test_plot_table_placeholder(tracking, tmp_path, placeholder_table):
 def test_curves_come_from_the_run_dir_when_mlflow_lacks_the_run_and_are_never_blanked(tracking, tmp_path):
     csv = tmp_path / "results" / "table3" / "quick.csv"
     csv.parent.mkdir(parents=True)
-    name = "dual_attention-easy-aux-s0-quick"
+    name = "da_no_sa-easy-aux-s0-quick"  # a run table3 trains itself: its run dir is under runs/table3
     pd.DataFrame([{"run_name": name, "run_id": "from-another-machine", "seed": 0, "frames": 2048}]).to_csv(csv)
     out = tmp_path / "reports"
     kw = dict(results_root=tmp_path / "results", out=out, run_root=tmp_path / "runs")
@@ -73,3 +73,40 @@ def test_no_curve_and_no_earlier_figure_writes_no_empty_figure(tracking, tmp_pat
     paths, notes = plot_table("table3", "quick", results_root=tmp_path / "results", out=out, run_root=tmp_path / "runs")
     assert paths == [] and not list(out.glob("*curves*"))  # an empty figure would read as "nothing learned"
     assert any("no figure written" in n for n in notes)
+
+
+def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(tracking, tmp_path, monkeypatch):
+    """The footer is read from the drawn run's saved config: change a field there and it changes."""
+    import json
+
+    import emml.report.curves as curves
+    from emml.profiles import profile_config
+    from emml.registry import load_table
+
+    footers = []
+    real = curves._footer
+    monkeypatch.setattr(curves, "_footer", lambda fig, text: (footers.append(text), real(fig, text)))
+    name = "dual_attention-easy-aux-s0-quick"
+    csv = tmp_path / "results" / "table3" / "quick.csv"
+    csv.parent.mkdir(parents=True)
+    pd.DataFrame([{"run_name": name, "run_id": "elsewhere", "seed": 0, "frames": 2048, "eval_episodes": 100}]).to_csv(
+        csv, index=False
+    )
+    spec = next(s for s in load_table("table3").runs([0]) if s.run_name("quick") == name)
+    run = tmp_path / "runs" / spec.table / name  # the folder of the table that trains it
+    run.mkdir(parents=True)
+    (run / "metrics.csv").write_text("step,key,value\n1024,train/success_sgn,0.25\n2048,train/success_sgn,0.5\n")
+    config = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
+    (run / "results.json").write_text(json.dumps({"config": config}))
+    kw = dict(results_root=tmp_path / "results", out=tmp_path / "reports", run_root=tmp_path / "runs")
+    paths, _ = plot_table("table3", "quick", **kw)
+    first = [p.read_bytes() for p in paths]
+    assert "input 84×150 (paper 168×300, App. A) [the run]" in footers[-1]
+    assert "x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5) [the run]" in footers[-1]
+    plot_table("table3", "quick", **kw)
+    assert [p.read_bytes() for p in paths] == first  # no date, no version stamped: make reports changes no byte
+    config["env"].update(height=168, width=300)
+    (run / "results.json").write_text(json.dumps({"config": config}))
+    plot_table("table3", "quick", **kw)
+    assert "input" not in footers[-1] and "x_S = h·w·vec(x_spat)" in footers[-1]
+    assert [p.read_bytes() for p in paths] != first

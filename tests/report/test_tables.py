@@ -1,14 +1,15 @@
-"""Paper-side-by-side tables on a FIXTURE of fake finished runs (a results CSV written in tmp_path: these numbers
-are made up for the test, never results)."""
+"""Paper-side-by-side tables on a FIXTURE of fake finished runs (a results CSV, and run dirs with the results.json of
+each run, written in tmp_path: these numbers are made up for the test, never results)."""
 
-import numpy as np
+import json
+import re
+
 import pandas as pd
 import pytest
-from scipy import stats
 
 from emml.profiles import profile_seeds
 from emml.registry import load_table
-from emml.report.tables import CI_SEED, MISSING, N_RESAMPLES, mean_ci, report_table
+from emml.report.tables import MISSING, report_table, reports_dir
 
 PROFILE = "quick"  # three seeds
 
@@ -47,45 +48,45 @@ def fake_results(table: str, root, drop: tuple[str, ...] = (), value=None) -> pd
     return df
 
 
-def test_mean_ci_matches_scipy_on_a_known_case():
-    mean, lo, hi = mean_ci([0.2, 0.4, 0.6])
-    assert mean == pytest.approx(0.4)
-    assert lo <= 0.4 <= hi
-    ref = stats.bootstrap(
-        (np.array([0.2, 0.4, 0.6]),),
-        np.mean,
-        method="percentile",
-        n_resamples=N_RESAMPLES,
-        rng=np.random.default_rng(CI_SEED),
-    ).confidence_interval
-    assert (lo, hi) == pytest.approx((ref.low, ref.high))
+def fake_run_dirs(table: str, run_root, change=None) -> None:
+    """FIXTURE: each declared run's dir with a results.json holding its config, as the trainer writes it;
+    ``change(spec, config_dict)`` edits a run's saved config first."""
+    for spec in load_table(table).runs(profile_seeds(PROFILE)):
+        config = spec.to_config(PROFILE).to_dict()
+        if change is not None:
+            change(spec, config)
+        folder = run_root / spec.table / spec.run_name(PROFILE)  # a borrowed row's runs are in their table's folder
+        folder.mkdir(parents=True)
+        (folder / "results.json").write_text(json.dumps({"run_name": folder.name, "config": config}))
 
 
-def test_mean_ci_single_seed_and_constant_values():
-    assert mean_ci([0.3]) == (0.3, None, None)
-    assert mean_ci([0.2, 0.2, 0.2]) == pytest.approx((0.2, 0.2, 0.2))
+def report(table: str, tmp_path, **kw) -> dict:
+    """report_table on the fixture's roots in tmp_path (never the checkout's runs/, results/, reports/)."""
+    roots = dict(results_root=tmp_path / "results", out=tmp_path / "reports", run_root=tmp_path / "runs")
+    return report_table(table, kw.pop("profile", PROFILE), **{**roots, **kw})
 
 
-def test_every_cell_filled(tmp_path):
+def test_every_cell_filled_with_each_seeds_value(tmp_path):
     fake_results("table2", tmp_path / "results")
-    rep = report_table("table2", PROFILE, results_root=tmp_path / "results", out=tmp_path / "reports")
+    rep = report("table2", tmp_path)
     assert len(rep["cells"]) == 56
     assert all(c["n"] == 3 and c["paper"] is not None for c in rep["cells"])
     cell = rep["cells"][0]  # Text only, Easy, No Aux, SGN: seeds 0.1 / 0.2 / 0.3
     assert (cell["row"], cell["difficulty"], cell["aux"], cell["metric"]) == ("Text only", "easy", False, "sgn_test")
-    assert cell["mean"] == pytest.approx(0.2) and cell["lo"] <= 0.2 <= cell["hi"]
+    assert cell["mean"] == pytest.approx(0.2) and cell["values"] == pytest.approx([0.1, 0.2, 0.3])
     md = (tmp_path / "reports" / "table2-quick.md").read_text()
     assert MISSING + r" \|" not in md
-    assert "0.20 [" in md and r"\| 0.86" in md  # ours [CI] | paper (escaped for GFM)
-    assert "differs from the paper's protocol" in md and "1,500,000–5,000,000 frames" in md
+    assert r"0.20 (0.10 · 0.20 · 0.30) \| 0.86" in md  # mean (each seed) | paper (escaped for GFM)
+    assert "[" not in md.split("| Model")[1].split("\n\n")[0]  # no bootstrap CI over three values in the cells
+    assert "not the paper's protocol" in md and "1,500,000–5,000,000 frames" in md
     tex = (tmp_path / "reports" / "table2-quick.tex").read_text()
-    assert r"\multicolumn" in tex and "Easy" in tex and r"$\mid$ 0.96" in tex
+    assert r"\multicolumn" in tex and "Easy" in tex and r"0.20 (0.10 · 0.20 · 0.30) $\mid$ 0.96" in tex
 
 
 def test_a_missing_run_is_shown_missing_not_zero(tmp_path):
     gone = "dual_attention-easy-aux-s0-quick", "dual_attention-easy-aux-s1-quick", "dual_attention-easy-aux-s2-quick"
     fake_results("table3", tmp_path / "results", drop=(*gone, "da_no_sa-easy-noaux-s2-quick"))
-    rep = report_table("table3", PROFILE, results_root=tmp_path / "results", out=tmp_path / "reports")
+    rep = report("table3", tmp_path)
     cells = {(c["row"], c["aux"], c["metric"]): c for c in rep["cells"]}
     multi = cells[("DA Multi-Task", True, "sgn_test")]
     assert multi["n"] == 0 and multi["mean"] is None
@@ -95,28 +96,133 @@ def test_a_missing_run_is_shown_missing_not_zero(tmp_path):
     md = (tmp_path / "reports" / "table3-quick.md").read_text()
     line = next(x for x in md.splitlines() if x.startswith("| DA Multi-Task"))
     assert line.count(f"{MISSING} \\| 0.96") == 1 and "0.00" not in line
-    assert "(n=2/3)" in md
+    assert "0.15 (0.10 · 0.20; n=2/3)" in md  # the seeds there, and how many of the declared
     assert "Setting: Easy" in md  # one difficulty: moved to the caption
 
 
-def test_single_seed_says_no_ci(tmp_path, monkeypatch):
-    fake_results("table3", tmp_path / "results")
+def test_one_seed_of_three_says_so_and_one_of_one_shows_the_value(tmp_path, monkeypatch):
+    fake_results("table3", tmp_path / "results", drop=tuple(f"da_no_sa-easy-aux-s{s}-quick" for s in (1, 2)))
+    md = (report("table3", tmp_path), (tmp_path / "reports" / "table3-quick.md").read_text())[1]
+    assert "0.10 (n=1/3)" in md
     monkeypatch.setattr("emml.profiles.profile_seeds", lambda profile: [0])
-    rep = report_table("table3", PROFILE, results_root=tmp_path / "results", out=tmp_path / "reports")
-    assert all(c["n"] == 1 and c["lo"] is None for c in rep["cells"])
-    assert "n=1 seed per cell, no CI" in rep["caption"]
+    rep = report("table3", tmp_path)
+    assert all(c["n"] == 1 for c in rep["cells"])
+    line = next(x for x in (tmp_path / "reports" / "table3-quick.md").read_text().splitlines() if "| w/o GA1" in x)
+    assert "0.10 \\|" in line and "(" not in line
 
 
-def test_no_results_at_all(tmp_path):
-    rep = report_table("table2", "smoke", results_root=tmp_path / "none", out=tmp_path / "reports")
+def test_no_results_at_all_shows_the_declared_deviations(tmp_path):
+    rep = report("table2", tmp_path, profile="smoke", results_root=tmp_path / "none")
     assert all(c["n"] == 0 for c in rep["cells"]) and "no finished runs yet" in rep["caption"]
+    md = (tmp_path / "reports" / "table2-smoke.md").read_text()
+    assert "input 60×108 (paper 168×300, App. A): all 28 runs" in md
+    assert "28 runs from the registry's config as declared (no run finished yet)" in md and rep["aggregate"] is None
+
+
+def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_path):
+    """Change a field in one run's saved config and the caption changes: nothing is written by hand."""
+    fake_results("table3", tmp_path / "results")
+    fake_run_dirs("table3", tmp_path / "runs")
+    rep = report("table3", tmp_path)
+    md = (tmp_path / "reports" / "table3-quick.md").read_text()
+    devs = dict(rep["deviations"]["deviations"])
+    assert devs["input 84×150 (paper 168×300, App. A)"] == "all 48 runs"
+    assert devs["frames 1.5M (paper 10M, §5.1)"] == "all 48 runs"
+    assert "- x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5): all but the w/o SA runs (42 of 48)" in md
+    assert "48 runs from their saved config" in md and "reward shaping" not in md  # the w/o RS row is the experiment
+    choices = dict(rep["deviations"]["choices"])
+    assert choices["wrong-object/answer reward 0 (paper silent: §5.1 names only +1 and -0.001 per step)"] == (
+        "all 48 runs"
+    )
+    assert choices["score: greedy, 100 episodes per task and split (paper silent on its evaluation size)"] == (
+        "all 48 runs"  # from the results rows (the evaluation the score came from), not the config
+    )
+    tex = (tmp_path / "reports" / "table3-quick.tex").read_text()
+    assert r"input 84×150 (paper 168×300, App. A) [all 48 runs]" in tex
+
+    def paper_input_unscaled(spec, config):
+        if spec.row == "DA Multi-Task" and spec.seed == 0:
+            config["env"].update(height=168, width=300)
+            config["model_options"] = {"state_scale": False}
+            config["env"]["wrong_reward"] = -0.2
+
+    (tmp_path / "runs").rename(tmp_path / "old-runs")
+    fake_run_dirs("table3", tmp_path / "runs", paper_input_unscaled)
+    rep = report("table3", tmp_path)
+    devs, choices = dict(rep["deviations"]["deviations"]), dict(rep["deviations"]["choices"])
+    assert devs["input 84×150 (paper 168×300, App. A)"].startswith("46 of 48 runs: ")
+    assert devs["x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5)"].startswith("40 of 48 runs: ")
+    wrong = "wrong-object/answer reward -0.2 (paper silent: §5.1 names only +1 and -0.001 per step)"
+    assert choices[wrong] == "2 of 48 runs: dual_attention-easy-aux-s0-quick, dual_attention-easy-noaux-s0-quick"
+    assert wrong in (tmp_path / "reports" / "table3-quick.md").read_text()
+
+
+def test_a_run_without_its_run_dir_falls_back_to_its_registry_config_and_says_so(tmp_path):
+    fake_results("table3", tmp_path / "results")
+    fake_run_dirs("table3", tmp_path / "runs")
+    gone = tmp_path / "runs" / "table3" / "da_no_sa-easy-aux-s0-quick"
+    (gone / "results.json").unlink()
+    gone.rmdir()
+    partial = tmp_path / "runs" / "table3" / "da_no_sa-easy-aux-s1-quick" / "results.json"
+    partial.write_text(json.dumps({"run_name": "da_no_sa-easy-aux-s1-quick"}))  # finished before configs were saved
+    rep = report("table3", tmp_path)
+    sources = rep["deviations"]["sources"]
+    assert "46 runs from their saved config" in sources
+    assert "1 run from the registry's config (their results.json has no config yet: `emml backfill-config`)" in sources
+    assert "1 run from the registry's config (no run dir here: reference rows of the results CSV)" in sources
+
+
+def test_the_aggregate_under_the_table(tmp_path):
+    """IQM per row and metric over its cells, P(Dual-Attention > row), reproducible to the digit."""
+
+    def value(spec):  # Dual-Attention ahead of every baseline in every cell
+        return 0.5 + 0.1 * spec.seed if spec.row == "Dual-Attention" else 0.1 * (spec.seed + 1)
+
+    fake_results("table2", tmp_path / "results", value=value)
+    rep = report("table2", tmp_path)
+    rows = rep["aggregate"]["rows"]
+    assert list(rows) == [r.label for r in load_table("table2").rows]
+    value, lo, hi = map(
+        float,
+        re.match(r"(\S+) \[(\S+), (\S+)\] \(n=12 in 4 cells\)", rows["Dual-Attention"]["SGN IQM [95% CI]"]).groups(),
+    )
+    assert value == 0.60 and 0.5 <= lo < value < hi <= 0.7  # IQM of 0.5 / 0.6 / 0.7 in 4 cells
+    assert rows["GA"]["SGN IQM [95% CI]"].startswith("0.20 [")
+    assert rows["GA"]["P(Dual-Attention > row), SGN"].startswith("1.00 [1.00, 1.00]")
+    assert rows["Dual-Attention"]["P(Dual-Attention > row), SGN"] == ""
+    md = (tmp_path / "reports" / "table2-quick.md").read_text()
+    assert "stratified-bootstrap" in md and "rliable" in md
+    first = md
+    report("table2", tmp_path)
+    assert (tmp_path / "reports" / "table2-quick.md").read_text() == first
+
+
+def test_a_report_written_twice_is_the_same_bytes(tmp_path):
+    fake_results("table2", tmp_path / "results")
+    fake_run_dirs("table2", tmp_path / "runs")
+    report("table2", tmp_path)
+    first = {p.name: p.read_bytes() for p in (tmp_path / "reports").iterdir()}
+    report("table2", tmp_path)
+    assert {p.name: p.read_bytes() for p in (tmp_path / "reports").iterdir()} == first
+
+
+def test_smoke_reports_are_not_written_under_the_committed_reports(tmp_path):
+    from emml.tracking import project_root
+
+    assert reports_dir("smoke") == project_root() / "scratch" / "reports"
+    assert reports_dir("quick") == project_root() / "reports"
+    committed = project_root() / "reports" / "table2-smoke.md"
+    before = committed.read_bytes() if committed.exists() else None
+    with pytest.raises(ValueError, match="the 'smoke' profile's numbers are not results"):
+        report("table2", tmp_path, profile="smoke", out=project_root() / "reports")
+    assert (committed.read_bytes() if committed.exists() else None) == before  # refused before writing anything
 
 
 def test_placeholder_shows_the_papers_numbers(tmp_path, placeholder_table):
-    rep = report_table(placeholder_table, PROFILE, results_root=tmp_path, out=tmp_path / "reports")
+    rep = report(placeholder_table, tmp_path, results_root=tmp_path)
     assert len(rep["cells"]) == 28 and "PLACEHOLDER" in rep["caption"]
     md = (tmp_path / "reports" / f"{placeholder_table}-quick.md").read_text()
     assert f"{MISSING} \\| 0.47" in md
     tex = tmp_path / "reports" / "table4-quick.tex"
-    report_table("table4", PROFILE, results_root=tmp_path, out=tmp_path / "reports")
+    report("table4", tmp_path, results_root=tmp_path)
     assert r"\textless{}known\_color\textgreater{}" in tex.read_text()

@@ -65,6 +65,12 @@ def test_the_attention_figure_has_a_row_per_step_with_the_models_arrays(checkpoi
     overlay = fig.axes[2].get_images()[1].get_array()  # first step row: frame, then frame + x_spat
     np.testing.assert_array_equal(np.asarray(overlay), ep.attention[0])
     assert "EQA" in fig.axes[0].get_title()
+    # the top panel: x_sent on every vocabulary channel, labelled, with the model's values (Eq. 4's gate)
+    bars = fig.axes[0].patches
+    assert len(bars) == len(ep.words) == model.vocab_size
+    assert [t.get_text() for t in fig.axes[0].get_xticklabels()] == list(ep.words)
+    x_sent = model.sentence_gate(torch.as_tensor(ep.tokens)[None])[0].detach().numpy()
+    np.testing.assert_allclose([b.get_height() for b in bars], x_sent, rtol=1e-6)
 
 
 def test_the_channel_figure_compares_aux_and_no_aux_channels(checkpoints, tmp_path, no_leftovers):
@@ -95,6 +101,8 @@ def test_cli_figures_and_videos(checkpoints, tmp_path, no_leftovers):
     assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["visualize", "attention", ck, "--task", "sgn", "--out", str(tmp_path), "--rows", "2"])
     assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["visualize", "attention", ck, "--task", "eqa", "--out", str(tmp_path), "--rows", "2"])
+    assert r.exit_code == 0 and len(list(tmp_path.glob("attention-eqa-*.png"))) == 1, r.output
     r = runner.invoke(app, ["video", ck, "--episodes", "1", "--out", str(tmp_path)])
     assert r.exit_code == 0, r.output
     gifs = sorted(tmp_path.glob("*.gif"))
@@ -118,12 +126,14 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
     from emml.report.index import write_reports
     from emml.rl.trainer import record_result
 
-    # the two smoke runs recorded as table2 rows, their run dirs where table2 keeps them
+    # the two smoke runs recorded as table2 rows of the demo profile (the index never lists smoke), their run dirs
+    # where table2 keeps them
     monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
     for aux, ckpt in checkpoints.items():
         model, cfg = load_model(ckpt)
         cfg.table, cfg.run_root, cfg.results_root = "table2", str(tmp_path / "runs"), str(tmp_path / "results")
-        name = f"dual_attention-easy-{'aux' if aux else 'noaux'}-s0-smoke"
+        cfg.profile = "demo"
+        name = f"dual_attention-easy-{'aux' if aux else 'noaux'}-s0-demo"
         shutil.copytree(ckpt.parent, tmp_path / "runs" / "table2" / name)
         payload = {
             "run_name": name,
@@ -132,7 +142,7 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
             "difficulty": "easy",
             "aux": aux,
             "seed": 0,
-            "profile": "smoke",
+            "profile": "demo",
             "frames": 64,
             "git_sha": "12e0077",
             "run_id": "x",
@@ -142,9 +152,9 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
         record_result(payload, cfg)
     index = write_reports(tmp_path / "reports", tmp_path / "results", tmp_path / "runs", log=lambda m: None)
     text = index.read_text()
-    assert "## Profile `smoke`" in text and "**table2** (2 runs, frames 64)" in text
-    assert "[table2-smoke.md](table2-smoke.md)" in text
-    assert "figures of the best Dual-Attention run `dual_attention-easy-aux-s0-smoke`" in text
-    run = "dual_attention-easy-aux-s0-smoke"
+    assert "## Profile `demo`" in text and "**table2** (2 runs, frames 64)" in text
+    assert "[table2-demo.md](table2-demo.md)" in text
+    assert "figures of the best Dual-Attention run `dual_attention-easy-aux-s0-demo`" in text
+    run = "dual_attention-easy-aux-s0-demo"
     for link in (f"channels-{run}.png", f"attention-sgn-{run}-s0.png", f"attention-eqa-{run}-s1.png"):
         assert f"({link})" in text and (tmp_path / "reports" / link).exists()

@@ -71,3 +71,25 @@ def test_rng_state_roundtrip(tmp_path):
     random.seed(99), np.random.seed(99), torch.manual_seed(99)
     set_rng_state(load_checkpoint(tmp_path / "r.pt", require=())["rng"])
     assert (random.random(), np.random.rand(), torch.rand(1).item()) == a
+
+
+def test_a_full_disk_is_one_line_naming_the_path_and_keeps_the_last_checkpoint(tmp_path, monkeypatch):
+    import errno
+
+    from emml.diskspace import NoSpaceError
+
+    path = tmp_path / "ckpt.pt"
+    save_checkpoint(path, {"step": 1})
+
+    def fills_the_disk(payload, fh):
+        fh.write(b"half a checkpoint")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(checkpoint.torch, "save", fills_the_disk)
+    with pytest.raises(NoSpaceError) as e:
+        save_checkpoint(path, {"step": 2})
+    assert str(e.value).startswith(f"no space left on {tmp_path} (writing ckpt.pt, left as it was): free some space")
+    assert "\n" not in str(e.value)
+    monkeypatch.undo()
+    assert [p.name for p in tmp_path.iterdir()] == ["ckpt.pt"]  # the temp file is gone
+    assert load_checkpoint(path, require=())["step"] == 1

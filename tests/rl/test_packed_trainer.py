@@ -50,3 +50,25 @@ def test_a_pack_refuses_runs_at_different_updates(tracking, no_leftovers):
     train(smoke(tracking, seed=0, frames=64, eval_episodes=1), quiet=True)
     with pytest.raises(ValueError, match="same update"):
         train_packed([smoke(tracking, seed=s, frames=128, eval_episodes=1) for s in (0, 1)], quiet=True)
+
+
+def test_a_pack_failing_as_it_opens_ends_every_started_run_failed(tracking, monkeypatch, no_leftovers):
+    """The second run's first checkpoint fails after the first run's MLflow run started: both end FAILED, neither
+    stays RUNNING (no engine has started yet)."""
+    import mlflow
+
+    from emml.rl import trainer
+
+    written, real = [], trainer.save_checkpoint
+
+    def second_fails(path, payload):
+        written.append(path)
+        if len(written) == 2:
+            raise RuntimeError("the second run's folder went away")
+        return real(path, payload)
+
+    monkeypatch.setattr(trainer, "save_checkpoint", second_fails)
+    with pytest.raises(RuntimeError, match="went away"):
+        train_packed([smoke(tracking, seed=s, frames=128, eval_episodes=1) for s in (0, 1)], quiet=True)
+    runs = mlflow.search_runs(experiment_names=["test"], output_format="list")
+    assert sorted(r.info.status for r in runs) == ["FAILED", "FAILED"]

@@ -15,8 +15,18 @@ from emml.config import TrainConfig
 from emml.evaluate import evaluate_checkpoint
 from emml.models import MODELS
 from emml.profiles import profile_config
-from emml.rl.checkpoint import load_checkpoint
-from emml.rl.trainer import CHECKPOINT, METRICS, RESULTS, ConfigMismatch, _check_same_config, run_dir, train
+from emml.results import read_results
+from emml.rl.checkpoint import load_checkpoint, save_checkpoint
+from emml.rl.trainer import (
+    CHECKPOINT,
+    METRICS,
+    RESULTS,
+    ConfigMismatch,
+    _check_same_config,
+    results_csv,
+    run_dir,
+    train,
+)
 from emml.tracking import metric_history, read_mirror
 
 
@@ -35,10 +45,12 @@ def test_every_model_trains_a_few_hundred_frames(model, tracking, no_leftovers):
     assert all(0.0 <= v <= 1.0 for v in result.metrics.values())
     saved = json.loads((result.run_dir / RESULTS).read_text())
     assert saved["frames"] == 128 and saved["profile"] == "smoke" and saved["git_sha"]
+    trained = load_checkpoint(result.run_dir / CHECKPOINT)["config"]  # what reports read the deviations from:
+    assert saved["config"] == json.loads(json.dumps(trained)) and trained["env"]["height"] == cfg.env.height
     import pandas as pd
 
     rows = pd.read_csv(os.path.join(tracking["results_root"], "test", "smoke.csv"))
-    assert rows["run_name"].tolist() == [cfg.run_name()]
+    assert rows["run_name"].tolist() == [cfg.run_name()] and "config" not in rows
     assert rows.loc[0, "frames"] == 128 and rows.loc[0, "seed"] == 0 and rows.loc[0, "model"] == model
     losses = metric_history(result.run_id, "losses/answer")
     assert len(losses) == 2  # one point per update (2 updates of 2 x 32 frames)
@@ -186,7 +198,7 @@ def test_a_failing_run_is_marked_failed(tracking, monkeypatch, no_leftovers):
 
 
 def test_eval_of_a_checkpoint_reproduces_its_numbers(tracking, no_leftovers):
-    cfg = smoke(tracking, frames=128, eval_episodes=3, seed=3)
+    cfg = smoke(tracking, frames=128, final_eval_episodes=3, seed=3)
     result = train(cfg, quiet=True)
     again = evaluate_checkpoint(result.run_dir / CHECKPOINT, episodes=3, seed=10_000)
     assert again == result.metrics
@@ -206,6 +218,10 @@ def test_eval_of_a_checkpoint_reproduces_its_numbers(tracking, no_leftovers):
         ({"model_options": {"control": "detectors"}}, "control"),  # a control reads the aux labels: needs aux
         ({"model_options": {"control": "oracle"}}, "control"),
         ({"envs_per_worker": 3}, "envs_per_worker=3 must be a positive divisor"),
+        ({"seed": -1}, r"seed=-1 must be >= 0"),
+        ({"table": "../x"}, r"table='../x' must be a plain name"),
+        ({"table": ""}, r"table='' must be a plain name"),
+        ({"frames": 63}, r"frames=63 is less than one update \(num_envs × num_steps = 64\); the minimum is 64"),
     ],
 )
 def test_bad_config_fails_before_any_compute(over, field, tracking, no_leftovers):
@@ -264,6 +280,37 @@ def test_a_field_added_after_a_checkpoint_reads_as_its_default(tracking):
         _check_same_config(older, smoke(tracking, precision="bf16").to_dict(), Path("checkpoint.pt"))
 
 
+def test_the_score_plays_final_eval_episodes_and_the_curve_eval_episodes(tracking, monkeypatch, no_leftovers):
+    """results.json and the results row hold the final evaluation over `final_eval_episodes` per (task, split), with
+    their count and seed; the curve's evaluations play `eval_episodes` (issue 33: 100 episodes are too noisy)."""
+    import emml.rl.trainer as trainer
+
+    played, real = [], trainer.evaluate
+    monkeypatch.setattr(
+        trainer, "evaluate", lambda m, env, n, **k: played.append((n, k["seed"])) or real(m, env, n, **k)
+    )
+    cfg = smoke(tracking, frames=128, eval_every=64, eval_episodes=1, final_eval_episodes=2)
+    result = train(cfg, quiet=True)
+    assert played == [(1, 10_000), (2, 10_000)]  # at 64 frames (the curve), then the score at 128
+    saved = json.loads((result.run_dir / RESULTS).read_text())
+    row = read_results(results_csv(cfg)).iloc[0]
+    assert (saved["eval_episodes"], saved["eval_seed"]) == (row["eval_episodes"], row["eval_seed"]) == (2, 10_000)
+
+
+def test_a_checkpoint_from_before_final_eval_episodes_resumes_and_finishes(tracking, no_leftovers):
+    """Evaluation size is not part of a run's identity: a checkpoint written before the field existed resumes, under
+    another eval_episodes too, and its score plays the new count."""
+    first = train(smoke(tracking, frames=64, eval_episodes=1, final_eval_episodes=1), quiet=True)
+    path = first.run_dir / CHECKPOINT
+    old = load_checkpoint(path)
+    config = {k: v for k, v in old["config"].items() if k != "final_eval_episodes"}
+    save_checkpoint(path, {**old, "config": config, "finished": False})
+    longer = train(smoke(tracking, frames=128, eval_episodes=2, final_eval_episodes=2), quiet=True)
+    assert longer.resumed and longer.run_id == first.run_id and longer.frames == 128
+    assert json.loads((longer.run_dir / RESULTS).read_text())["eval_episodes"] == 2
+    assert load_checkpoint(path)["finished"]
+
+
 LEARNING_QUESTIONS = ["what color is the pillar", "what color is the tall pillar", "what color is the short pillar"]
 
 
@@ -281,7 +328,7 @@ def test_learning_beats_chance(tracking, no_leftovers):
         frames=32768,
         num_envs=8,
         num_steps=32,
-        eval_episodes=40,
+        final_eval_episodes=40,
         checkpoint_every=50,
         **{"env.tasks": "eqa", "env.instructions": tuple(LEARNING_QUESTIONS), "ppo.lr": 1e-3},
     )
@@ -299,7 +346,7 @@ def demo_sgn(tracking, frames: int, seed: int, model_options: dict | None = None
         "table": "test",
         "frames": frames,
         "eval_every": 0,
-        "eval_episodes": 40,
+        "final_eval_episodes": 40,
         "diagnose_episodes": 20,
         "checkpoint_every": 1000,
         "env.tasks": "sgn",
@@ -395,3 +442,55 @@ def test_workers_hosting_several_envs_train_exactly_alike(tracking, no_leftovers
 
     params = {k: _params_after_512_frames(tracking, f"per_worker{k}", envs_per_worker=k) for k in (1, 2)}
     assert all(torch.equal(params[1][key], params[2][key]) for key in params[1])
+
+
+def test_smoke_numbers_are_not_recorded_under_the_committed_results(tmp_path):
+    from emml.rl.trainer import record_result
+    from emml.tracking import project_path
+
+    cfg = profile_config("smoke", "easy", {"results_root": "results", "table": "test"})
+    with pytest.raises(ValueError, match="the 'smoke' profile's numbers are not results"):
+        record_result({"run_name": cfg.run_name(), "metrics": {"sgn_test": 0.5}}, cfg)
+    assert not (project_path("results") / "test").exists()
+    assert profile_config("smoke").results_root == "scratch/results"  # where smoke numbers go by default
+
+
+@pytest.mark.parametrize("where", ["collect", "update"])
+def test_a_stopped_run_keeps_its_last_whole_update(tracking, monkeypatch, where, no_leftovers):
+    """Ctrl-C / SIGTERM between checkpoints: stopped while collecting, the run saves the updates it finished (its
+    model and optimizer are those of its last whole update); stopped inside an update, it keeps its last
+    checkpoint. Either way the MLflow run ends KILLED and a rerun resumes it."""
+    import mlflow
+
+    import emml.rl.trainer as trainer_module
+    from emml.rl.sampler import Sampler
+
+    calls = {"n": 0}
+    real_collect, real_update = Sampler.collect, trainer_module.ppo_update
+
+    def stop_on_third(real):
+        def wrapped(*args, **kwargs):
+            calls["n"] += 1
+            if calls["n"] == 3:
+                raise KeyboardInterrupt
+            return real(*args, **kwargs)
+
+        return wrapped
+
+    if where == "collect":
+        monkeypatch.setattr(Sampler, "collect", stop_on_third(real_collect))
+    else:
+        monkeypatch.setattr(trainer_module, "ppo_update", stop_on_third(real_update))
+    cfg = smoke(tracking, frames=512, checkpoint_every=100, eval_every=0)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, quiet=True)
+    saved = load_checkpoint(run_dir(cfg) / CHECKPOINT)
+    assert (saved["update"], saved["frames"]) == ((2, 128) if where == "collect" else (0, 0))
+    (run,) = mlflow.search_runs(experiment_names=["test"], output_format="list")
+    assert run.info.status == "KILLED"
+    monkeypatch.setattr(Sampler, "collect", real_collect)
+    monkeypatch.setattr(trainer_module, "ppo_update", real_update)
+    result = train(cfg, quiet=True)
+    assert result.resumed and result.frames == 512
+    steps = [s for s, _ in metric_history(result.run_id, "charts/update")]
+    assert steps == list(range(64, 513, 64))  # one value per step

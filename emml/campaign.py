@@ -1,0 +1,289 @@
+"""Campaigns: an ordered, resumable list of table runs (reproduce/campaigns/<name>.toml).
+
+A campaign file lists `[[steps]]` in the order they are to be trained; a step names a table, a profile, which of
+the table's runs (`only`: RunSpec fields, each one value or a list whose order orders the runs) and, optionally,
+`frames` (a step may train a profile to fewer frames than the profile's, e.g. the paper profile's first 1.5M).
+`emml campaign NAME` trains every unfinished run in that order through the table launcher (emml/launch.py), which
+skips finished runs and resumes interrupted ones; `--status` shows each run as done / running / interrupted / to do
+with its frames and an estimate of the time left, measured from this machine's own runs of the same profile.
+
+A run is "running" while a live process holds its lock (emml/runlock.py). A campaign is long: `emml campaign`
+runs it from a git worktree of the current commit (`pin_worktree`), so that editing the checkout cannot reach a
+running training and every row it writes keeps that commit's sha; the runs, results and MLflow store stay the
+checkout's.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import tomllib
+
+from emml.registry import REPRODUCE_DIR, RunSpec
+
+CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
+STEP_KEYS = ("name", "table", "profile", "only", "frames", "note")
+TOP_KEYS = ("title", "steps")
+STATES = ("done", "running", "interrupted", "to do")
+"""done: finished and recorded; running: a live process holds the run's lock; interrupted: a checkpoint to resume
+from; to do: nothing yet (or a reference row with no run dir here, which is trained again)."""
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of a campaign: some runs of one table under one profile."""
+
+    name: str
+    """Short label (shown by --status)."""
+    table: str
+    """Table name (reproduce/<table>.toml)."""
+    profile: str
+    """Profile (reproduce/profiles.toml)."""
+    only: dict = field(default_factory=dict)
+    """RunSpec field → value or list of values (emml.launch.select_runs); lists order the runs."""
+    frames: int | None = None
+    """Frames to train each run to, instead of the profile's (None: the profile's)."""
+    note: str = ""
+    """Why the step is there (free text)."""
+
+    def overrides(self) -> dict:
+        return {"frames": self.frames} if self.frames is not None else {}
+
+
+@dataclass(frozen=True)
+class Campaign:
+    name: str
+    path: Path
+    title: str
+    steps: tuple[Step, ...]
+
+
+@dataclass
+class RunStatus:
+    """One run of a campaign, as --status shows it."""
+
+    step: str
+    table: str
+    profile: str
+    run_name: str
+    state: str
+    """One of STATES."""
+    frames: int
+    """Frames trained so far (the run's metrics mirror; its row when done)."""
+    target: int
+    """Frames the step trains it to."""
+    holder: dict | None = None
+    """Who trains it (pid, host) when running."""
+    seconds_left: float | None = None
+    """Estimated seconds to finish it on this machine; None when no run of its profile was measured here."""
+
+
+def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
+    return sorted(p.stem for p in directory.glob("*.toml"))
+
+
+def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
+    """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
+    from emml.launch import ONLY_FIELDS, run_states, select_runs
+    from emml.profiles import load_profiles
+    from emml.registry import list_tables
+
+    path = directory / f"{name}.toml"
+    if not path.is_file():
+        known = ", ".join(list_campaigns(directory)) or "none"
+        raise ValueError(f"campaign {name!r} not found ({path}); known campaigns: {known}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"{path}: not valid TOML: {e}") from None
+    _check_keys(path, "top level", data, TOP_KEYS)
+    raw_steps = data.get("steps")
+    if not isinstance(raw_steps, list) or not raw_steps:
+        raise ValueError(f"{path}: 'steps' must be a non-empty array of tables ([[steps]])")
+    steps, tables, profiles = [], list_tables(), load_profiles()
+    for i, raw in enumerate(raw_steps):
+        where = f"steps[{i}]"
+        _check_keys(path, where, raw, STEP_KEYS)
+        for key in ("name", "table", "profile"):
+            if not isinstance(raw.get(key), str) or not raw[key]:
+                raise ValueError(f"{path}: {where}.{key} is required (a non-empty string)")
+        if raw["table"] not in tables:
+            raise ValueError(f"{path}: {where}.table={raw['table']!r} is unknown; allowed: {', '.join(tables)}")
+        if raw["profile"] not in profiles:
+            raise ValueError(f"{path}: {where}.profile={raw['profile']!r} is unknown; allowed: {', '.join(profiles)}")
+        only = raw.get("only", {})
+        if not isinstance(only, dict) or any(k not in ONLY_FIELDS for k in only):
+            raise ValueError(f"{path}: {where}.only must be a table of fields among {', '.join(ONLY_FIELDS)}")
+        frames = raw.get("frames")
+        if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
+            raise ValueError(f"{path}: {where}.frames={frames!r} must be a positive integer")
+        step = Step(raw["name"], raw["table"], raw["profile"], only, frames, raw.get("note", ""))
+        try:  # the selection names runs the table has (the values present are named otherwise)
+            select_runs(run_states(step.table, step.profile), step.only)
+        except ValueError as e:
+            raise ValueError(f"{path}: {where}.only: {e}") from None
+        steps.append(step)
+    return Campaign(name, path, str(data.get("title", name)), tuple(steps))
+
+
+def _check_keys(path: Path, where: str, data, allowed: tuple[str, ...]) -> None:
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: {where} must be a table")
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise ValueError(f"{path}: {where}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+
+
+def step_runs(step: Step, run_root: str | None = None, results_root: str | None = None) -> list[tuple[RunSpec, str]]:
+    """The step's runs in training order, each with its launcher state (emml.launch.STATES)."""
+    from emml.launch import run_states, select_runs, with_overrides
+
+    states = select_runs(run_states(step.table, step.profile, run_root, results_root), step.only)
+    return [(with_overrides(spec, step.overrides(), step.profile), state) for spec, state in states.values()]
+
+
+def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:
+    """Every run of the campaign in order (a run two steps share is listed once, at its first step)."""
+    from emml.rl.trainer import METRICS, run_dir
+    from emml.runlock import holder
+
+    out, seen = [], set()
+    speed = _Speed()
+    fields = {k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None}
+    for step in campaign.steps:
+        for spec, launch_state in step_runs(step, run_root, results_root):
+            cfg = spec.to_config(step.profile, **fields)
+            directory = run_dir(cfg)
+            if directory in seen:
+                continue
+            seen.add(directory)
+            target = cfg.num_updates * cfg.frames_per_update
+            who = holder(directory)
+            frames = _frames_logged(directory / METRICS)
+            if launch_state == "finished":
+                state, frames = "done", max(frames, target)
+            elif who is not None:
+                state = "running"
+            elif launch_state in ("partial", "unrecorded"):
+                state = "interrupted"
+            else:
+                state, frames = "to do", 0
+            left = None if state == "done" else speed.seconds(cfg, max(target - frames, 0))
+            out.append(RunStatus(step.name, step.table, step.profile, cfg.run_name(), state, frames, target, who, left))
+    return out
+
+
+def _frames_logged(metrics: Path) -> int:
+    """The last frame a run's metrics mirror holds (0 without one): read from its tail, cheaply."""
+    if not metrics.exists():
+        return 0
+    with open(metrics, "rb") as f:
+        f.seek(0, os.SEEK_END)
+        f.seek(max(0, f.tell() - 4096))
+        lines = f.read().decode(errors="replace").splitlines()[1:]
+    steps = [int(line.split(",", 1)[0]) for line in lines if line[:1].isdigit()]
+    return max(steps, default=0)
+
+
+class _Speed:
+    """This machine's measured cost of a profile: training frames/s (median `charts/fps` of its runs here) and the
+    seconds of one evaluation (median `perf/eval_s`), read from the run dirs' metrics mirrors."""
+
+    def __init__(self):
+        self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
+
+    def measured(self, cfg) -> tuple[float | None, float | None]:
+        from emml.rl.trainer import METRICS
+        from emml.tracking import project_path
+
+        key = (cfg.profile, cfg.model)
+        if key not in self._cache:
+            root = project_path(cfg.run_root)
+            same_model = sorted(root.glob(f"*/{cfg.model}-*-{cfg.profile}/{METRICS}"))
+            files = same_model or sorted(root.glob(f"*/*-{cfg.profile}/{METRICS}"))
+            fps, evals = [], []
+            for path in files[-6:]:  # the most recent few: enough for a median, cheap to read
+                for line in path.read_text().splitlines()[1:]:
+                    _, name, value = line.split(",", 2)
+                    if name == "charts/fps":
+                        fps.append(float(value))
+                    elif name == "perf/eval_s":
+                        evals.append(float(value))
+            self._cache[key] = (
+                statistics.median(fps) if fps else None,
+                statistics.median(evals) if evals else None,
+            )
+        return self._cache[key]
+
+    def seconds(self, cfg, frames_left: int) -> float | None:
+        fps, eval_s = self.measured(cfg)
+        if not fps:
+            return None
+        evals = frames_left // cfg.eval_every if cfg.eval_every else 0
+        final = getattr(cfg, "final_eval_episodes", cfg.eval_episodes) / max(cfg.eval_episodes, 1)
+        return frames_left / fps + (eval_s or 0.0) * (evals + final)
+
+
+def run_campaign(
+    campaign: Campaign,
+    run_root: str | None = None,
+    results_root: str | None = None,
+    device: str = "cpu",
+    jobs: int | None = None,
+    log: Callable[[str], None] = print,
+    train_fn: Callable | None = None,
+) -> list:
+    """Train every step's unfinished runs, step by step in the campaign's order (emml.launch.run_table per step);
+    returns the steps' LaunchReports. A failed run is reported and the campaign goes on, as a table does; a stop
+    (Ctrl-C, SIGTERM) ends it after the step it stopped (its report's `stopped`)."""
+    from emml.launch import run_table
+
+    reports = []
+    for i, step in enumerate(campaign.steps, 1):
+        log(f"[{campaign.name} {i}/{len(campaign.steps)}] {step.name}: {step.table} [{step.profile}]")
+        reports.append(
+            run_table(
+                step.table,
+                step.profile,
+                jobs=jobs,
+                run_root=run_root,
+                results_root=results_root,
+                device=device,
+                log=log,
+                only=step.only,
+                overrides=step.overrides(),
+                train_fn=train_fn,
+            )
+        )
+        if reports[-1].stopped:  # Ctrl-C / SIGTERM: no further step starts
+            break
+    return reports
+
+
+PIN_DIR = ".campaign"
+"""Under the project root (git-ignored): the worktrees campaigns run from, one per commit."""
+
+
+def pin_worktree(root: Path, log: Callable[[str], None] = print) -> Path:
+    """A git worktree of `root`'s HEAD at <root>/.campaign/<sha>/ (made once per commit); uncommitted changes are not
+    in it, and a warning says so."""
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, check=True).stdout.strip()
+
+    try:
+        sha = git("rev-parse", "HEAD")
+    except (OSError, subprocess.CalledProcessError) as e:
+        raise ValueError(f"{root} is not a git checkout ({e}); run the campaign with --no-pin") from None
+    if git("status", "--porcelain", "--untracked-files=no"):
+        log(f"warning: uncommitted changes in {root} are not in the campaign's code (it runs commit {sha[:7]})")
+    tree = root / PIN_DIR / sha[:12]
+    if not (tree / "pyproject.toml").exists():
+        subprocess.run(["git", "worktree", "prune"], cwd=root, capture_output=True)
+        git("worktree", "add", "--detach", str(tree), sha)
+    return tree

@@ -1,0 +1,277 @@
+"""What the paper fixes, and where it is silent but our choice changes what a run learns: one declared list, compared
+with a run's saved config (`TrainConfig.to_dict()`, kept in its results.json) so that every report states the
+deviations in force for the runs it shows (emml/report/deviations.py), never a hand-written list.
+
+Pure Python at import (no torch): `resolve` looks the model's options up in emml.models only when called.
+Sources name the paper's passages: "App. A" (hyperparameters), "§5.1" (the Doom training protocol), "App. C" (the
+House), "Eq. N" (the Dual-Attention unit), "'Auxiliary Task'" (the paragraph of that name).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+
+PAPER_FRAMES = {"easy": 10_000_000, "hard": 50_000_000, "house": 50_000_000}
+"""§5.1: 10M frames in Easy, 50M in Hard; App. C: 50M in the House."""
+PAPER_MAX_STEPS = {"easy": 210, "hard": 210, "house": 420}
+"""§5.1: episodes of at most 210 steps; App. C: 420 in the House."""
+
+
+def count(n) -> str:
+    """1500000 → '1.5M', 163840 → '163,840', 512 → '512'."""
+    n = int(n)
+    if n >= 1_000_000 and n % 100_000 == 0:
+        return f"{n / 1_000_000:g}M"
+    return f"{n:,}"
+
+
+def _plain(value) -> str:
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+@dataclass(frozen=True)
+class PaperValue:
+    """A setting the paper states: a run whose value differs deviates from the paper."""
+
+    label: str
+    """How a caption names it ('input', 'frames')."""
+    fields: tuple[str, ...]
+    """Dotted fields of the resolved config (`resolve`): 'env.height', 'ppo.lr', 'model.state_scale'."""
+    paper: Callable[[dict], tuple]
+    """The paper's values of `fields` for a run (resolved config → values; frames depend on the difficulty)."""
+    source: str | Callable[[dict], str]
+    """Where the paper states it (resolved config → text where it depends on the run)."""
+    show: Callable[[tuple], str] = lambda v: " / ".join(map(_plain, v))
+    """Values → text ('84×150')."""
+    applies: Callable[[dict], bool] = lambda c: True
+    """Whether the setting exists for a run (x_S of Dual-Attention, aux labels of an aux run)."""
+
+    def deviation(self, cfg: dict) -> str | None:
+        """'input 84×150 (paper 168×300, App. A)', or None when the run follows the paper here."""
+        if not self.applies(cfg):
+            return None
+        ours, paper = tuple(cfg[f] for f in self.fields), self.paper(cfg)
+        if ours == paper:
+            return None
+        source = self.source(cfg) if callable(self.source) else self.source
+        return f"{self.label} {self.show(ours)} (paper {self.show(paper)}, {source})"
+
+
+@dataclass(frozen=True)
+class OurChoice:
+    """A point where the paper is silent (or contradicts itself) and the value changes what a run learns: stated for
+    every run it applies to, with the run's value."""
+
+    label: str
+    """How a caption names it."""
+    fields: tuple[str, ...]
+    """Dotted fields of the resolved config."""
+    note: str
+    """What the paper says (or does not)."""
+    show: Callable[[tuple, dict], str] = lambda v, c: " / ".join(map(_plain, v))
+    """(values, resolved config) → text."""
+    applies: Callable[[dict], bool] = lambda c: True
+    """Whether the point exists for a run."""
+
+    def statement(self, cfg: dict) -> str | None:
+        """'wrong-object/answer reward 0 (paper silent: …)', or None when the point does not apply to the run."""
+        if not self.applies(cfg):
+            return None
+        return f"{self.label} {self.show(tuple(cfg[f] for f in self.fields), cfg)} ({self.note})"
+
+
+def _spatial_map(cfg: dict) -> bool:
+    """Dual-Attention with its spatial map (every variant but w/o SA): x_S is the map of Eq. 2."""
+    return cfg["model.name"] == "dual_attention" and cfg["model.spatial_attention"]
+
+
+def _protocol(cfg: dict) -> str:
+    """Where the paper gives a run's training protocol: §5.1 for Doom, App. C for the House."""
+    return "App. C" if cfg["env.difficulty"] == "house" else "§5.1"
+
+
+def _x_s(v: tuple) -> str:
+    return "h·w·vec(x_spat)" if v[0] else "vec(x_spat)"
+
+
+def _aux_words(v: tuple, cfg: dict) -> str:
+    """The aux labels' words against the default: every vocabulary word but the dataset's superlatives."""
+    from emml.tasks.language import load_dataset, resolve_vocabulary
+
+    words, vocabulary = v
+    dataset = load_dataset(cfg["env.dataset"])
+    vocab = resolve_vocabulary(vocabulary, dataset).words
+    superlatives = set(dataset.word_groups["superlatives"])
+    default = [w for w in vocab if w not in superlatives]
+    if words is None or list(words) == default:
+        return f"for {len(default)} of {len(vocab)} words: all but the superlatives, function words all-zero"
+    return f"for {len(words)} of {len(vocab)} words: {', '.join(words)}; function words all-zero"
+
+
+PAPER: tuple[PaperValue, ...] = (
+    PaperValue("input", ("env.height", "env.width"), lambda c: (168, 300), "App. A", lambda v: f"{v[0]}×{v[1]}"),
+    PaperValue(
+        "frames",
+        ("frames",),
+        lambda c: (PAPER_FRAMES[c["env.difficulty"]],),
+        _protocol,
+        lambda v: count(v[0]),
+    ),
+    PaperValue(
+        "actors × horizon",
+        ("num_envs", "num_steps"),
+        lambda c: (8, 128),
+        "App. A",
+        lambda v: f"{v[0]} × {v[1]}",
+    ),
+    PaperValue(
+        "episode limit",
+        ("env.max_steps",),
+        lambda c: (PAPER_MAX_STEPS[c["env.difficulty"]],),
+        _protocol,
+        lambda v: f"{v[0]} steps",
+    ),
+    PaperValue(
+        "rewards",
+        ("env.success_reward", "env.step_reward"),
+        lambda c: (1.0, -0.001),
+        "§5.1",
+        lambda v: f"{v[0]:+g} success, {v[1]:g} per step",
+    ),
+    PaperValue("reward shaping", ("env.shaping",), lambda c: (True,), "§5.1"),
+    PaperValue("PPO clip", ("ppo.clip_coef",), lambda c: (0.2,), "App. A"),
+    PaperValue("PPO epochs", ("ppo.epochs",), lambda c: (4,), "App. A"),
+    PaperValue("PPO minibatches", ("ppo.minibatches",), lambda c: (1,), "App. A: a single batch"),
+    PaperValue("discount", ("ppo.gamma",), lambda c: (0.99,), "App. A"),
+    PaperValue("learning rate", ("ppo.lr",), lambda c: (2.5e-4,), "App. A"),
+    PaperValue("word embedding / GRU", ("model.embed_dim", "model.gru_text"), lambda c: (32, 32), "App. A"),
+    PaperValue("policy hidden size", ("model.hidden",), lambda c: (128,), "App. A"),
+    PaperValue(
+        "PACMAN window",
+        ("model.pacman_frames",),
+        lambda c: (5,),
+        "App. A, 'Baseline details'",
+        lambda v: f"{v[0]} frames",
+        lambda c: c["model.name"] == "pacman",
+    ),
+    PaperValue("x_S =", ("model.state_scale",), lambda c: (False,), "text after Eq. 5", _x_s, _spatial_map),
+    PaperValue(
+        "x_S read at temperature",
+        ("model.state_temperature",),
+        lambda c: (None,),
+        "Eq. 2's map as is",
+        lambda v: "1" if v[0] is None else f"{v[0]:g} (gradient stopped)",
+        _spatial_map,
+    ),
+    PaperValue(
+        "diagnostic control",
+        ("model.control",),
+        lambda c: ("none",),
+        "not the paper's model",
+        lambda v: "none" if v[0] == "none" else f"'{v[0]}' (privileged labels)",
+    ),
+)
+"""Every setting the paper states that a config can change, with where it states it."""
+
+CHOICES: tuple[OurChoice, ...] = (
+    OurChoice(
+        "wrong-object/answer reward",
+        ("env.wrong_reward",),
+        "paper silent: §5.1 names only +1 and -0.001 per step",
+    ),
+    OurChoice(
+        "shaping",
+        ("env.shaping_coef",),
+        "paper: 'a small reward proportional to the decrease in distance', §5.1",
+        lambda v, c: f"{v[0]:g} per map unit",
+        lambda c: c["env.shaping"],
+    ),
+    OurChoice(
+        "aux labels",
+        ("env.aux_words", "env.vocabulary"),
+        "paper silent on function words, 'Auxiliary Task'",
+        _aux_words,
+        lambda c: c["aux"],
+    ),
+    OurChoice(
+        "aux label cells:",
+        ("env.label_grid",),
+        "paper silent",
+        lambda v, c: {"receptive_field": "conv3 receptive-field centres", "even": "an even partition of the frame"}[
+            v[0]
+        ],
+        lambda c: c["aux"],
+    ),
+    OurChoice(
+        "x_I =",
+        ("model.x_image",),
+        "paper: sigmoid in App. A, ReLU in the text after Eq. 2",
+        lambda v, c: f"{v[0]}(conv3)",
+    ),
+    OurChoice("frame skip", ("env.frame_skip",), "paper silent", lambda v, c: f"{v[0]} tics a step"),
+    OurChoice(
+        "score:",
+        ("score_episodes",),
+        "paper silent on its evaluation size",
+        lambda v, c: f"greedy, {v[0]:,} episodes per task and split",
+    ),
+    OurChoice(
+        "precision",
+        ("precision",),
+        "paper silent; fp32 elsewhere",
+        lambda v, c: f"{v[0]} convolutions",
+        lambda c: c["precision"] != "fp32",
+    ),
+)
+"""The points where the paper is silent or contradicts itself and our choice matters (docs/fidelity.md)."""
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in d.items():
+        if isinstance(value, dict) and key in ("env", "ppo"):
+            out.update(_flatten(value, f"{key}."))
+        else:
+            out[prefix + key] = value
+    return out
+
+
+def resolve(saved: dict) -> dict:
+    """A saved config (`TrainConfig.to_dict()`, possibly from an older version) flattened to dotted fields, with the
+    fields it predates at today's defaults and the model's effective options under 'model.*' (its registry entry
+    and overrides, emml.models.model_config). 'score_episodes': the final evaluation's episodes
+    (`final_eval_episodes`, or `eval_episodes` for a run saved before that field existed)."""
+    from emml.config import TrainConfig, env_config_class
+    from emml.models import model_config
+
+    env = saved.get("env", {})
+    defaults = TrainConfig(env=env_config_class(env.get("difficulty", "easy"))()).to_dict()
+    cfg = {**_flatten(defaults), **_flatten(saved)}
+    options = dict(saved.get("model_options") or {})
+    model = model_config(cfg["model"], **options)
+    cfg.update({f"model.{f.name}": getattr(model, f.name) for f in fields(model)})
+    cfg["score_episodes"] = saved.get("final_eval_episodes", saved.get("eval_episodes", cfg["eval_episodes"]))
+    return cfg
+
+
+def deviations(cfg: dict, skip: frozenset[str] = frozenset()) -> list[str]:
+    """The run's deviations from the paper (resolved config); settings whose fields are all in ``skip`` (the
+    overrides that define the table row, e.g. 'w/o Reward Shaping') are the experiment, not a deviation."""
+    out = []
+    for p in PAPER:
+        if set(p.fields) <= skip:
+            continue
+        line = p.deviation(cfg)
+        if line is not None:
+            out.append(line)
+    return out
+
+
+def choices(cfg: dict) -> list[str]:
+    """Our choices in force for the run where the paper is silent."""
+    return [s for c in CHOICES if (s := c.statement(cfg)) is not None]

@@ -1,0 +1,133 @@
+"""Pre-flight: what a run needs from the machine, checked in seconds before any engine, model or MLflow run starts —
+the tracking store reachable and writable, the run and results folders writable, the results CSV readable. Without
+it, an unreachable store failed after ~100 s of MLflow's connection retries with a traceback that never named it,
+and a read-only results folder after the whole training. Each failure is one line naming the URI or the path
+(PreflightError, a ValueError: the CLI prints it and exits 2). Nothing is created: probes are removed at once."""
+
+from __future__ import annotations
+
+import os
+import socket
+import sqlite3
+import tempfile
+import urllib.error
+import urllib.request
+from pathlib import Path
+from urllib.parse import urlparse
+
+from emml.config import TrainConfig
+from emml.tracking import _sqlite_path, tracking_uri
+
+STORE_TIMEOUT_S = 5.0
+"""The longest a store check waits (a lock held by another writer, a server that does not answer)."""
+SQLITE_HEADER = b"SQLite format 3\x00"
+"""The first 16 bytes of every SQLite database file."""
+DB_PORTS = {"postgresql": 5432, "mysql": 3306, "mssql": 1433}
+"""Default ports of the database servers MLflow can track in (the URI's scheme before any '+driver')."""
+
+
+class PreflightError(ValueError):
+    """A run could not write its results: the message names the store or the path, and why (one line)."""
+
+
+def check_train(*cfgs: TrainConfig, timeout: float = STORE_TIMEOUT_S) -> None:
+    """Everything ``cfgs`` (validated) write to, before the first of them starts (`emml train`, `emml run`): the
+    store once, then each run's directory, and each results folder and the results CSV its runs will upsert."""
+    from emml.results import read_results
+    from emml.rl.trainer import results_csv, run_dir
+
+    check_store(timeout=timeout)
+    for cfg in cfgs:
+        check_writable(f"run_root={cfg.run_root!r}", run_dir(cfg))
+    for csv, cfg in {results_csv(c): c for c in cfgs}.items():  # a table's runs share one CSV: read once
+        check_writable(f"results_root={cfg.results_root!r}", csv.parent)
+        read_results(csv)  # ResultsError (a ValueError) names the file and the line
+
+
+def check_writable(what: str, path: str | os.PathLike) -> Path:
+    """The folder ``path`` is, or would be created in, takes a new file (a probe, created and deleted); returns
+    that folder. ``what`` names the setting in the message, e.g. "run_root='runs'"."""
+    folder = Path(path)
+    try:
+        while not folder.exists():  # the nearest folder that exists: the rest is made by the writer
+            folder = folder.parent
+    except OSError as e:
+        raise PreflightError(f"{what}: cannot look into {folder} ({e.strerror})") from None
+    if not folder.is_dir():
+        raise PreflightError(f"{what}: {folder} is not a directory")
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".emml-preflight-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise PreflightError(f"{what}: cannot create files in {folder} ({e.strerror})") from None
+    return folder
+
+
+def check_store(uri: str | None = None, timeout: float = STORE_TIMEOUT_S) -> None:
+    """The MLflow tracking store (``uri``, default $MLFLOW_TRACKING_URI or the project's sqlite file) answers
+    within ``timeout`` seconds and, where that can be told without a client (sqlite, a file store), takes
+    writes. Other schemes (databricks, …) are left to MLflow."""
+    uri = uri or tracking_uri()
+    where = f"MLflow store {uri}"
+    scheme = urlparse(uri).scheme.split("+")[0]
+    if uri in ("databricks", "databricks-uc"):  # a profile of the Databricks CLI, not a path
+        return
+    if scheme == "sqlite":
+        db = _sqlite_path(uri)
+        if db is not None:  # None: in memory
+            _check_sqlite(where, db, timeout)
+    elif scheme in ("", "file"):
+        check_writable(where, urlparse(uri).path if scheme else uri)
+    elif scheme in ("http", "https"):
+        _check_server(where, uri, timeout)
+    elif scheme in DB_PORTS:
+        parsed = urlparse(uri)
+        _check_socket(where, parsed.hostname or "localhost", parsed.port or DB_PORTS[scheme], timeout)
+
+
+def _check_sqlite(where: str, db: Path, timeout: float) -> None:
+    check_writable(where, db.parent)  # SQLite writes its journal beside the database
+    if not db.exists():
+        return  # MLflow creates it
+    if not db.is_file():
+        raise PreflightError(f"{where}: {db} is not a file")
+    try:
+        with open(db, "r+b") as f:
+            head = f.read(len(SQLITE_HEADER))
+    except OSError as e:
+        raise PreflightError(f"{where}: {db} cannot be opened for writing ({e.strerror})") from None
+    if head and head != SQLITE_HEADER:  # an empty file is an empty database
+        raise PreflightError(f"{where}: {db} is not an SQLite database")
+    con = None
+    try:
+        con = sqlite3.connect(f"{db.as_uri()}?mode=rw", uri=True, timeout=timeout)
+        con.execute("SELECT count(*) FROM sqlite_master").fetchone()
+    except sqlite3.OperationalError as e:
+        if "locked" not in str(e):  # locked: another writer, which the tracker waits for
+            raise PreflightError(f"{where}: {db} cannot be read ({e})") from None
+    except sqlite3.DatabaseError as e:
+        raise PreflightError(f"{where}: {db} is a damaged SQLite database ({e})") from None
+    finally:
+        if con is not None:
+            con.close()
+
+
+def _check_server(where: str, uri: str, timeout: float) -> None:
+    """An MLflow server answers its health endpoint (what it does with writes cannot be told without a run)."""
+    try:
+        with urllib.request.urlopen(f"{uri.rstrip('/')}/health", timeout=timeout):
+            pass
+    except urllib.error.HTTPError as e:
+        if e.code >= 500:
+            raise PreflightError(f"{where}: the server answers with an error ({e.code} {e.reason})") from None
+    except (urllib.error.URLError, OSError) as e:
+        reason = getattr(e, "reason", e)
+        raise PreflightError(f"{where}: cannot be reached ({reason}; waited up to {timeout:g} s)") from None
+
+
+def _check_socket(where: str, host: str, port: int, timeout: float) -> None:
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as e:
+        raise PreflightError(f"{where}: cannot connect to {host}:{port} ({e}; waited up to {timeout:g} s)") from None

@@ -1,0 +1,144 @@
+"""The deviations from the paper in force for the runs a report shows, read from the runs' own configs (their
+results.json, emml/report/saved_config.py) against the declared list of emml/fidelity.py, and grouped: a line said
+once with the runs it holds for ("all 4 runs", "the Easy runs (3)"), never written by hand."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from emml import fidelity
+
+SAVED, NO_CONFIG, REFERENCE, DECLARED = "saved", "no saved config", "reference", "declared"
+"""Where a run's config came from: its results.json; the registry because its results.json has no config yet
+(`emml backfill-config`); the registry because the run dir is not here (a reference row of the results CSV); the
+registry for a run not finished yet (a table with no finished runs shows the deviations it is declared with)."""
+
+
+@dataclass
+class ShownRun:
+    """A run a report shows, with the config its deviations are read from."""
+
+    name: str
+    """Run name (`TrainConfig.run_name`)."""
+    attrs: dict
+    """What a group of runs can be named by: row, difficulty, aux (the RunSpec's)."""
+    config: dict
+    """The resolved config (`emml.fidelity.resolve`)."""
+    source: str
+    """SAVED, NO_CONFIG, REFERENCE or DECLARED."""
+    skip: frozenset = field(default_factory=frozenset)
+    """Fields the run's table row sets on purpose (its overrides, e.g. 'env.shaping' for 'w/o Reward Shaping'): the
+    experiment, not a deviation."""
+
+
+def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None, declared: bool = False) -> ShownRun:
+    """A run of the registry with its config: from runs/<table>/<run>/results.json when there, else the config its
+    RunSpec gives under ``profile`` (saying why). ``row``: its results CSV row, whose `eval_episodes` is the size
+    of the evaluation its score came from (a re-scored run's differs from its config's)."""
+    from emml.report.saved_config import saved_config
+    from emml.tracking import project_path
+
+    name = spec.run_name(profile)
+    run_dir = project_path(run_root) / spec.table / name
+    saved = saved_config(run_dir)
+    if saved is not None:
+        source = SAVED
+    else:
+        source = DECLARED if declared else NO_CONFIG if run_dir.exists() else REFERENCE
+        saved = spec.to_config(profile).to_dict()
+    skip = frozenset(k.replace("model_options.", "model.") for k in spec.overrides)
+    attrs = {"row": spec.row, "difficulty": spec.difficulty, "aux": spec.aux}
+    config = fidelity.resolve(saved)
+    if row is not None and row.get("eval_episodes") is not None:
+        config["score_episodes"] = int(row["eval_episodes"])
+    return ShownRun(name, attrs, config, source, skip)
+
+
+_ATTR_TEXT = {
+    "difficulty": lambda v: {"easy": "Easy", "hard": "Hard", "house": "House"}.get(v, v),
+    "aux": lambda v: "Aux" if v else "No-Aux",
+    "row": str,
+}
+
+
+def _by_attribute(group: set[str], runs: list[ShownRun]) -> str | None:
+    """'the Easy runs', 'the GA and FiLM runs': ``group`` named by the values of one attribute, when it is exactly the
+    runs having them; None when no attribute does."""
+    for attr in ("difficulty", "aux", "row"):
+        values = {r.attrs[attr] for r in runs if r.name in group}
+        if {r.name for r in runs if r.attrs[attr] in values} == group:
+            return "the " + " and ".join(_ATTR_TEXT[attr](v) for v in sorted(values, key=str)) + " runs"
+    return None
+
+
+def who(group: list[ShownRun], runs: list[ShownRun]) -> str:
+    """The runs of ``group`` named as briefly as ``runs`` allow: 'all 4 runs', 'the Easy runs (28 of 56)', 'all but
+    the w/o SA runs (42 of 48)', else their names."""
+    names = {r.name for r in group}
+    if len(names) == len(runs):
+        return {1: "the run", 2: "both runs"}.get(len(runs), f"all {len(runs)} runs")
+    count = f"({len(names)} of {len(runs)})"
+    texts = []
+    if (text := _by_attribute(names, runs)) is not None:
+        texts.append(f"{text} {count}")
+    if (text := _by_attribute({r.name for r in runs} - names, runs)) is not None:
+        texts.append(f"all but {text} {count}")
+    if texts:
+        return min(texts, key=len)
+    listed = sorted(names)
+    more = f" and {len(listed) - 4} more" if len(listed) > 4 else ""
+    return f"{len(listed)} of {len(runs)} runs: {', '.join(listed[:4])}{more}"
+
+
+def grouped(runs: list[ShownRun], lines_of) -> list[tuple[str, str]]:
+    """(line, who) for every distinct line ``lines_of(run)`` gives, in the order they first appear."""
+    holders: dict[str, list[ShownRun]] = {}
+    for run in runs:
+        for line in lines_of(run):
+            holders.setdefault(line, []).append(run)
+    return [(line, who(group, runs)) for line, group in holders.items()]
+
+
+@dataclass
+class Deviations:
+    """What a report says about the runs it shows."""
+
+    deviations: list[tuple[str, str]]
+    """(line, which runs): where the runs differ from what the paper states."""
+    choices: list[tuple[str, str]]
+    """(line, which runs): our choices in force where the paper is silent."""
+    sources: str
+    """Where the configs came from, in words."""
+
+
+def summarise(runs: list[ShownRun]) -> Deviations:
+    """Deviations and choices of ``runs``, grouped, with where their configs came from."""
+    devs = grouped(runs, lambda r: fidelity.deviations(r.config, r.skip))
+    choices = grouped(runs, lambda r: fidelity.choices(r.config))
+    counts = {s: sum(r.source == s for r in runs) for s in (SAVED, NO_CONFIG, REFERENCE, DECLARED)}
+    words = {
+        SAVED: "their saved config (runs/<table>/<run>/results.json)",
+        NO_CONFIG: "the registry's config (their results.json has no config yet: `emml backfill-config`)",
+        REFERENCE: "the registry's config (no run dir here: reference rows of the results CSV)",
+        DECLARED: "the registry's config as declared (no run finished yet)",
+    }
+    parts = [f"{n} run{'s' if n > 1 else ''} from {words[s]}" for s, n in counts.items() if n]
+    return Deviations(devs, choices, "; ".join(parts))
+
+
+def markdown(d: Deviations) -> str:
+    """The deviations as Markdown lists (under a table's caption)."""
+    out = ["**Deviations from the paper** (each run's config against the paper's values, `emml/fidelity.py`):", ""]
+    out += [f"- {line}: {holders}" for line, holders in d.deviations] or ["- none"]
+    out += ["", "**Where the paper is silent**, our choices in force:", ""]
+    out += [f"- {line}: {holders}" for line, holders in d.choices] or ["- none"]
+    out += ["", f"Configs: {d.sources}."]
+    return "\n".join(out)
+
+
+def sentence(d: Deviations) -> str:
+    """The deviations in one paragraph (a LaTeX caption, a figure's footer)."""
+    devs = "; ".join(f"{line} [{holders}]" for line, holders in d.deviations) or "none"
+    ours = "; ".join(f"{line} [{holders}]" for line, holders in d.choices) or "none"
+    return f"Deviations from the paper: {devs}. Where the paper is silent, ours: {ours}. Configs: {d.sources}."

@@ -1,0 +1,154 @@
+"""Re-score a finished run with the final-evaluation protocol (issue 33): its checkpoint played greedily over
+`final_eval_episodes` per (task, split) from the episode seed `EVAL_SEED` (§5.1's accuracy, emml/evaluate.py), its
+results.json metrics and results-table row rewritten. The training provenance stays (run_name, frames, seed,
+git_sha, run_id); the row adds the code that scored it (`scored_sha`), the episodes and their seed.
+
+Runs finished before issue 33 were scored over the profile's `eval_episodes` (quick: 100), too few to compare
+runs (docs/fidelity.md, "Trainer"). Re-scoring is idempotent: a run whose results.json already holds the asked
+protocol is not played again, its row is only (re)recorded (`--force` plays it again).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from emml.config import TrainConfig
+from emml.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
+from emml.rl.checkpoint import load_checkpoint
+from emml.rl.trainer import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, save_results
+from emml.runlock import hold_run
+
+
+class NotFinished(ValueError):
+    """The run's checkpoint is not at the end of its training: there is no final score to replace."""
+
+
+class NoProvenance(ValueError):
+    """The run has neither a results.json nor a results-table row of this training to take its provenance from."""
+
+
+@dataclass
+class Rescored:
+    """One re-scored run."""
+
+    run_dir: Path
+    """The run directory (its checkpoint.pt and results.json)."""
+    before: dict
+    """Its metrics before, with the episodes and seed they were measured on ('eval_episodes', 'eval_seed')."""
+    after: dict
+    """Its metrics now, likewise."""
+    played: bool
+    """False when results.json already held this protocol: nothing played, the row recorded again."""
+    csv: Path | None
+    """The results table whose row was upserted; None when not recorded (``record=False``)."""
+
+
+def rescore(
+    run: Path,
+    episodes: int = 0,
+    seed: int = EVAL_SEED,
+    record: bool = True,
+    force: bool = False,
+    results_root: str | None = None,
+    device: str = "cpu",
+) -> Rescored:
+    """Re-score the finished run at ``run`` (its directory or its checkpoint) over ``episodes`` per (task, split)
+    (0: its config's `final_eval_episodes`; a checkpoint from before the field reads its default) from episode seed
+    ``seed``. Writes results.json atomically, then (``record``) upserts the row of its results table (the
+    checkpoint's `results_root`, or ``results_root``). Nothing is written unless every score was measured."""
+    from emml.evaluate import evaluate_checkpoint
+
+    rdir = Path(run) if Path(run).is_dir() else Path(run).parent
+    if not (rdir / CHECKPOINT).is_file():
+        raise FileNotFoundError(f"{run}: no run directory with a {CHECKPOINT}")
+    with hold_run(rdir):  # no training of this run meanwhile (emml/runlock.py)
+        ckpt = load_checkpoint(rdir / CHECKPOINT)
+        cfg = TrainConfig.from_dict(ckpt["config"])
+        if results_root is not None:
+            cfg.results_root = results_root
+        check_finished(rdir, ckpt, cfg)
+        payload = training_record(rdir, ckpt, cfg)
+        episodes = episodes or cfg.final_eval_episodes
+        before = _protocol(payload)
+        played = force or (payload.get("eval_episodes"), payload.get("eval_seed")) != (episodes, seed)
+        if played:
+            scores = evaluate_checkpoint(rdir / CHECKPOINT, episodes, seed, device=device)
+            payload = training_record(rdir, ckpt, cfg)  # read again: keys written meanwhile (minutes) are kept
+            payload = {
+                **{k: v for k, v in payload.items() if k != "metrics"},
+                "eval_episodes": episodes,
+                "eval_seed": seed,
+                "scored_sha": git_sha(),
+                "metrics": {**payload["metrics"], **scores},  # other columns (Table 4's transfer scores) stay
+            }
+        if played or record:
+            save_results(rdir, payload, cfg, record=record)
+    return Rescored(rdir, before, _protocol(payload), played, results_csv(cfg) if record else None)
+
+
+def check_finished(rdir: Path, ckpt: dict, cfg: TrainConfig) -> None:
+    """NotFinished unless the checkpoint holds the whole run its config asks for."""
+    target = cfg.num_updates * cfg.frames_per_update
+    if not (ckpt.get("finished") and ckpt["frames"] >= target):
+        raise NotFinished(
+            f"{rdir} holds an unfinished run (frame {ckpt['frames']:,} of {target:,}): only a finished run's score "
+            "is replaced; finish it first (`emml train` with its options resumes it)"
+        )
+
+
+def training_record(rdir: Path, ckpt: dict, cfg: TrainConfig) -> dict:
+    """The run's results.json payload; when absent, rebuilt from its row in the results table (a run dir whose
+    results.json was not kept). Either must describe this checkpoint's training (run_id, frames), else
+    NoProvenance."""
+    path = rdir / RESULTS
+    if path.exists():
+        payload = json.loads(path.read_text())
+        _same_training(payload, ckpt, path)
+        return payload
+    table = results_csv(cfg)
+    rows = read_results(table)
+    rows = rows[rows["run_name"] == cfg.run_name()]
+    if rows.empty:
+        raise NoProvenance(
+            f"{rdir} has no {RESULTS} and {table} has no row {cfg.run_name()!r}: the training's provenance (its "
+            "git sha) is unknown, so it is not re-scored"
+        )
+    row = rows.iloc[0].to_dict()
+    _same_training(row, ckpt, table)
+    identity = {*TEXT, *INTEGER, *LATE_INTEGER, *BOOLEAN}
+    payload = {
+        "run_name": cfg.run_name(),
+        "table": cfg.table,
+        "model": cfg.model,
+        "difficulty": cfg.env.difficulty,
+        "aux": cfg.aux,
+        "seed": cfg.seed,
+        "profile": cfg.profile,
+        "frames": ckpt["frames"],
+        "git_sha": row["git_sha"],
+        "run_id": ckpt["run_id"],
+        "eval_episodes": int(row["eval_episodes"]),
+        "config": json.loads(json.dumps(ckpt["config"])),  # what the run trained with, as _write_results keeps it
+    }
+    if pd.notna(row.get("eval_seed")):
+        payload["eval_seed"] = int(row["eval_seed"])
+    if row.get("scored_sha"):
+        payload["scored_sha"] = row["scored_sha"]
+    payload["metrics"] = {k: float(v) for k, v in row.items() if k not in identity and pd.notna(v)}
+    return payload
+
+
+def _same_training(record: dict, ckpt: dict, where: Path) -> None:
+    if (str(record["run_id"]), int(record["frames"])) != (str(ckpt["run_id"]), ckpt["frames"]):
+        raise NoProvenance(
+            f"{where} describes another training of this run (run id {record['run_id']}, {int(record['frames']):,} "
+            f"frames) than its checkpoint (run id {ckpt['run_id']}, {ckpt['frames']:,} frames): not re-scored"
+        )
+
+
+def _protocol(payload: dict) -> dict:
+    return {**payload["metrics"], "eval_episodes": payload.get("eval_episodes"), "eval_seed": payload.get("eval_seed")}

@@ -1,0 +1,133 @@
+"""Campaigns with the launcher's fake trainer (no training here): steps train in the declared order, finished runs
+are skipped on a rerun, --status shows done / running / to do with frames, a bad file fails naming the file and the
+key before any run, and the pinned worktree holds the commit the campaign runs."""
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from emml.campaign import load_campaign, pin_worktree, run_campaign, status
+from emml.runlock import hold_run
+from tests.test_launch import calls, fake_train
+
+CAMPAIGN = """
+title = "a test campaign"
+
+[[steps]]
+name = "first"
+table = "table3"
+profile = "smoke"
+only = { row = ["w/o GA2", "w/o SA"], aux = true }
+
+[[steps]]
+name = "second"
+table = "table2"
+profile = "smoke"
+only = { model = "ga", difficulty = "easy", aux = [true, false] }
+frames = 128
+"""
+
+
+@pytest.fixture
+def campaigns(tmp_path):
+    folder = tmp_path / "campaigns"
+    folder.mkdir()
+    (folder / "mine.toml").write_text(CAMPAIGN)
+    return folder
+
+
+def test_steps_train_in_order_and_a_rerun_skips_what_is_finished(tracking, campaigns):
+    plan = load_campaign("mine", campaigns)
+    roots = (tracking["run_root"], tracking["results_root"])
+    before = status(plan, *roots)
+    assert [(r.step, r.run_name, r.state) for r in before] == [
+        ("first", "da_no_ga2-easy-aux-s0-smoke", "to do"),
+        ("first", "da_no_sa-easy-aux-s0-smoke", "to do"),
+        ("second", "ga-easy-aux-s0-smoke", "to do"),
+        ("second", "ga-easy-noaux-s0-smoke", "to do"),
+    ]
+    assert before[2].target == 128 and before[0].target == 512  # a step's frames, else the profile's
+    reports = run_campaign(plan, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
+    assert [c[0] for c in calls(tracking)] == [r.run_name for r in before]  # the declared order
+    assert [len(r.done) for r in reports] == [2, 2]
+    trained = Path(tracking["run_root"]) / "calls.txt"
+    trained.unlink()
+    again = run_campaign(plan, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
+    assert calls(tracking) == [] and [len(r.skipped) for r in again] == [2, 2]
+    assert {r.state for r in status(plan, *roots)} == {"done"}
+
+
+def test_status_shows_a_run_held_by_a_live_process_as_running(tracking, campaigns):
+    plan = load_campaign("mine", campaigns)
+    roots = (tracking["run_root"], tracking["results_root"])
+    run = Path(tracking["run_root"]) / "table2" / "ga-easy-aux-s0-smoke"
+    with hold_run(run):
+        (run / "metrics.csv").write_text("step,key,value\n64,charts/fps,100.0\n128,charts/fps,100.0\n")
+        rows = {r.run_name: r for r in status(plan, *roots)}
+    held = rows["ga-easy-aux-s0-smoke"]
+    assert held.state == "running" and held.frames == 128 and held.holder["pid"] > 0
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('[[steps]]\nname = "a"\ntable = "table7"\nprofile = "smoke"\n', r"steps\[0\].table='table7' is unknown"),
+        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "huge"\n', r"steps\[0\].profile='huge' is unknown"),
+        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nonly = { modle = "ga" }\n', r"only must be"),
+        (
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nonly = { model = "gpt" }\n',
+            r"model=gpt: no run",
+        ),
+        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nframes = 0\n', r"frames=0 must be a positive"),
+        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nepochs = 3\n', r"unknown key\(s\) epochs"),
+        ("title = 'x'\n", r"'steps' must be a non-empty array"),
+    ],
+)
+def test_a_bad_campaign_fails_naming_the_file_and_the_key(campaigns, text, message):
+    (campaigns / "bad.toml").write_text(text)
+    with pytest.raises(ValueError, match=message) as e:
+        load_campaign("bad", campaigns)
+    assert "bad.toml" in str(e.value)
+    with pytest.raises(ValueError, match="known campaigns: bad, mine"):
+        load_campaign("nope", campaigns)
+
+
+def test_the_reference_campaign_loads():
+    plan = load_campaign("reference")
+    assert plan.steps[0].table == "table2" and any(s.profile == "paper" and s.frames for s in plan.steps)
+
+
+def test_the_pinned_worktree_holds_the_commit_and_is_made_once(tmp_path):
+    def git(*args):
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "pyproject.toml").write_text("[project]\nname='x'\n")
+    git("add", "pyproject.toml")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "one")
+    said = []
+    tree = pin_worktree(tmp_path, log=said.append)
+    assert (tree / "pyproject.toml").exists() and said == []
+    (tmp_path / "pyproject.toml").write_text("[project]\nname='y'\n")  # an edit after the pin
+    assert pin_worktree(tmp_path, log=said.append) == tree
+    assert "name='x'" in (tree / "pyproject.toml").read_text()
+    assert said and "uncommitted changes" in said[0]
+
+
+def test_cli_status_and_an_unknown_campaign(tracking):
+    import json
+
+    from typer.testing import CliRunner
+
+    from emml.cli import app
+
+    runner = CliRunner()
+    result = runner.invoke(app, ["campaign", "nope", "--status"])
+    assert result.exit_code == 2 and "known campaigns: reference" in result.output
+    roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
+    result = runner.invoke(app, ["campaign", "reference", "--status", *roots])
+    assert result.exit_code == 0, result.output
+    assert "table2-aux-s0 (table2 [quick]): 0/7 done" in result.output and "to do" in result.output
+    rows = json.loads(runner.invoke(app, ["campaign", "reference", "--status", "--json", *roots]).output)
+    assert rows[0]["run_name"] == "concat-easy-aux-s0-quick" and rows[0]["state"] == "to do"

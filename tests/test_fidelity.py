@@ -1,0 +1,62 @@
+"""emml/fidelity.py: the declared settings of the paper, compared with a config."""
+
+import pytest
+
+from emml import fidelity
+from emml.profiles import profile_config
+
+
+def test_every_declared_field_is_a_field_of_the_resolved_config():
+    cfg = fidelity.resolve(profile_config("paper").to_dict())
+    for entry in (*fidelity.PAPER, *fidelity.CHOICES):
+        assert set(entry.fields) <= set(cfg), entry.label
+
+
+@pytest.mark.parametrize("difficulty", ["easy", "hard", "house"])
+def test_the_paper_profile_deviates_only_where_we_chose_to(difficulty):
+    cfg = fidelity.resolve(profile_config("paper", difficulty, model="dual_attention", aux=True).to_dict())
+    assert fidelity.deviations(cfg) == ["x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5)"]
+    unscaled = profile_config("paper", difficulty, {"model_options.state_scale": False}, model="dual_attention")
+    assert fidelity.deviations(fidelity.resolve(unscaled.to_dict())) == []
+    assert fidelity.deviations(fidelity.resolve(profile_config("paper", difficulty, model="ga").to_dict())) == []
+
+
+def test_the_quick_profile_names_its_input_frames_and_sources():
+    easy = fidelity.deviations(fidelity.resolve(profile_config("quick", "easy", model="ga").to_dict()))
+    assert easy == ["input 84×150 (paper 168×300, App. A)", "frames 1.5M (paper 10M, §5.1)"]
+    house = fidelity.deviations(fidelity.resolve(profile_config("quick", "house", model="ga").to_dict()))
+    assert "frames 5M (paper 50M, App. C)" in house
+
+
+def test_a_changed_field_is_a_deviation_unless_the_row_sets_it():
+    saved = profile_config("paper", model="ga").to_dict()
+    saved["env"]["shaping"] = False
+    saved["ppo"]["lr"] = 1e-4
+    cfg = fidelity.resolve(saved)
+    assert fidelity.deviations(cfg) == [
+        "reward shaping off (paper on, §5.1)",
+        "learning rate 0.0001 (paper 0.00025, App. A)",
+    ]
+    assert fidelity.deviations(cfg, frozenset({"env.shaping"})) == ["learning rate 0.0001 (paper 0.00025, App. A)"]
+
+
+def test_our_choices_follow_the_config():
+    saved = profile_config("paper", model="dual_attention", aux=True).to_dict()
+    choices = fidelity.choices(fidelity.resolve(saved))
+    assert "wrong-object/answer reward 0 (paper silent: §5.1 names only +1 and -0.001 per step)" in choices
+    assert any(c.startswith("aux labels for 20 of 22 words: all but the superlatives") for c in choices)
+    saved["env"].update(wrong_reward=-0.2, label_grid="even", aux_words=["red", "pillar"])
+    choices = fidelity.choices(fidelity.resolve(saved))
+    assert "wrong-object/answer reward -0.2 (paper silent: §5.1 names only +1 and -0.001 per step)" in choices
+    assert "aux label cells: an even partition of the frame (paper silent)" in choices
+    assert any(c.startswith("aux labels for 2 of 22 words: red, pillar") for c in choices)
+    no_aux = fidelity.choices(fidelity.resolve(profile_config("paper", model="dual_attention").to_dict()))
+    assert not any(c.startswith("aux label") for c in no_aux)
+
+
+def test_a_config_saved_before_a_field_existed_reads_it_as_the_run_did():
+    saved = profile_config("quick", model="dual_attention").to_dict()
+    for key in ("precision", "compile", "envs_per_worker", "final_eval_episodes"):
+        saved.pop(key, None)
+    cfg = fidelity.resolve(saved)
+    assert cfg["precision"] == "fp32" and cfg["score_episodes"] == saved["eval_episodes"]

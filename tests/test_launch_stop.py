@@ -1,0 +1,96 @@
+"""Stopping a table launch (issue 36): Ctrl-C (SIGINT to the whole process group, as a terminal sends it) or
+SIGTERM to the launcher alone ends it within seconds: no queued run starts, the runs in progress end (their trainer
+sees the stop), no worker process is left, the parent MLflow run ends KILLED, and one line says how to resume."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+LAUNCH = textwrap.dedent(
+    """
+    import json, sys
+    from emml.launch import run_table
+    from tests.test_launch_stop import slow_train
+    report = run_table("table3", "smoke", jobs=2, run_root=sys.argv[1], results_root=sys.argv[2],
+                       train_fn=slow_train, log=lambda m: None)
+    print(json.dumps([report.stopped, len(report.not_started), report.parent_run_id]), flush=True)
+    """
+)
+
+
+def slow_train(cfg, quiet=False, parent_run_id=None):
+    """Stands in for the trainer: says it started, trains for a minute unless stopped, says how it ended."""
+    log = Path(cfg.run_root) / "log.txt"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "a") as f:
+        f.write(f"start {cfg.run_name()}\n")
+    try:
+        time.sleep(60)
+    except BaseException as e:
+        with open(log, "a") as f:
+            f.write(f"stopped {cfg.run_name()} {type(e).__name__}\n")
+        raise
+
+
+def _children(pid: int) -> set[int]:
+    out = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.add(int(stat.parent.name))
+    return out
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+def test_a_stopped_launch_starts_nothing_more_and_leaves_no_worker(tracking, how):
+    from emml.tracking import find_runs
+
+    runs, results = Path(tracking["run_root"]), Path(tracking["results_root"])
+    proc = subprocess.Popen(
+        [sys.executable, "-c", LAUNCH, str(runs), str(results)],
+        cwd=Path(__file__).resolve().parent.parent,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group: the "terminal" the Ctrl-C comes from
+    )
+    log = runs / "log.txt"
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not log.exists() or log.read_text().count("start") < 2):
+        time.sleep(0.2)
+    assert log.read_text().count("start") == 2, "two runs should be training"
+    workers = _children(proc.pid)
+    t0 = time.monotonic()
+    if how == "ctrl-c":
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        os.kill(proc.pid, signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert time.monotonic() - t0 < 10, "the stop took too long"
+    lines = log.read_text().splitlines()
+    assert len([x for x in lines if x.startswith("start")]) == 2  # no queued run started
+    assert len([x for x in lines if x.startswith("stopped")]) == 2  # both runs saw the stop
+    why, left, parent = json.loads(out.splitlines()[-1])
+    assert left == 16, out + err  # every run of the table is still to finish
+    assert why == ("Ctrl-C" if how == "ctrl-c" else "signal SIGTERM")
+    left = set(workers)  # the run processes, the forkserver, multiprocessing's resource tracker
+    deadline = time.monotonic() + 5
+    while left and time.monotonic() < deadline:
+        left = {
+            w for w in left if Path(f"/proc/{w}/stat").exists() and ") Z " not in Path(f"/proc/{w}/stat").read_text()
+        }
+        time.sleep(0.1)
+    assert not left, [Path(f"/proc/{w}/cmdline").read_bytes()[:120] for w in left]
+    parent_run = next(r for r in find_runs("table3") if r["run_id"] == parent)
+    assert parent_run["status"] == "KILLED"
+    assert "Traceback" not in err
