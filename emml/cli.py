@@ -893,6 +893,7 @@ def campaign(
         args += [x for kv in roots.items() for x in kv] + (["--json"] if as_json else [])
         env = {**os.environ, "PYTHONPATH": str(tree), "MLFLOW_TRACKING_URI": tracking_uri()}
         typer.echo(f"{name}: training from {tree} (commit {tree.name})")
+        os.chdir(tree)  # `python -m` puts the working directory first on sys.path: the tree's emml, not this one's
         os.execve(sys.executable, args, env)
     _use_tcmalloc()
     try:

@@ -131,3 +131,32 @@ def test_cli_status_and_an_unknown_campaign(tracking):
     assert "table2-aux-s0 (table2 [quick]): 0/7 done" in result.output and "to do" in result.output
     rows = json.loads(runner.invoke(app, ["campaign", "reference", "--status", "--json", *roots]).output)
     assert rows[0]["run_name"] == "concat-easy-aux-s0-quick" and rows[0]["state"] == "to do"
+
+
+def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_path, monkeypatch):
+    import os
+
+    from typer.testing import CliRunner
+
+    import emml.campaign
+    from emml.cli import app
+    from emml.tracking import project_path
+
+    monkeypatch.chdir(os.getcwd())  # restored after the test: the command changes directory before it execs
+    tree = tmp_path / "tree"
+    tree.mkdir()
+    monkeypatch.setattr(emml.campaign, "pin_worktree", lambda root, log: tree)
+    seen = {}
+
+    def execve(path, args, env):
+        seen.update(cwd=os.getcwd(), args=args, env=env)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(os, "execve", execve)
+    result = CliRunner().invoke(app, ["campaign", "reference"])
+    assert result.exit_code == 0, result.output
+    assert seen["cwd"] == str(tree) and seen["env"]["PYTHONPATH"] == str(tree)  # `-m` reads the cwd first
+    args = seen["args"]
+    assert args[args.index("--run-root") + 1] == str(project_path("runs"))  # the checkout's, not the tree's
+    assert args[args.index("--results-root") + 1] == str(project_path("results"))
+    assert "--no-pin" in args and seen["env"]["MLFLOW_TRACKING_URI"]
