@@ -19,7 +19,7 @@ import pandas as pd
 from emml.config import TrainConfig
 from emml.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
 from emml.rl.checkpoint import load_checkpoint
-from emml.rl.trainer import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, save_results
+from emml.rl.trainer import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, save_results
 from emml.runlock import hold_run
 
 
@@ -121,13 +121,7 @@ def training_record(rdir: Path, ckpt: dict, cfg: TrainConfig) -> dict:
     _same_training(row, ckpt, table)
     identity = {*TEXT, *INTEGER, *LATE_INTEGER, *BOOLEAN}
     payload = {
-        "run_name": cfg.run_name(),
-        "table": cfg.table,
-        "model": cfg.model,
-        "difficulty": cfg.env.difficulty,
-        "aux": cfg.aux,
-        "seed": cfg.seed,
-        "profile": cfg.profile,
+        **run_identity(cfg),
         "frames": ckpt["frames"],
         "git_sha": row["git_sha"],
         "run_id": ckpt["run_id"],

@@ -371,13 +371,7 @@ class Trainer:
     def _write_results(self, metrics: dict, frames: int) -> None:
         cfg = self.cfg
         payload = {
-            "run_name": cfg.run_name(),
-            "table": cfg.table,
-            "model": cfg.model,
-            "difficulty": cfg.env.difficulty,
-            "aux": cfg.aux,
-            "seed": cfg.seed,
-            "profile": cfg.profile,
+            **run_identity(cfg),
             "frames": frames,
             "git_sha": self.git_sha,
             "run_id": self.tracker.run_id,
@@ -387,6 +381,19 @@ class Trainer:
             "config": cfg.to_dict(),  # what the run trained with: reports state its deviations from the paper
         }
         save_results(self.dir, payload, cfg)
+
+
+def run_identity(cfg: TrainConfig) -> dict:
+    """What names a run in its results.json and results row (its provenance follows: frames, git sha, run id)."""
+    return {
+        "run_name": cfg.run_name(),
+        "table": cfg.table,
+        "model": cfg.model,
+        "difficulty": cfg.env.difficulty,
+        "aux": cfg.aux,
+        "seed": cfg.seed,
+        "profile": cfg.profile,
+    }
 
 
 def save_results(directory: Path, payload: dict, cfg: TrainConfig, record: bool = True) -> None:
