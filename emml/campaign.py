@@ -89,7 +89,7 @@ def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
 
 def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
-    from emml.launch import ONLY_FIELDS, run_states, select_runs
+    from emml.launch import ONLY_FIELDS, select_runs
     from emml.profiles import load_profiles
     from emml.registry import list_tables
 
@@ -124,7 +124,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
             raise ValueError(f"{path}: {where}.frames={frames!r} must be a positive integer")
         step = Step(raw["name"], raw["table"], raw["profile"], only, frames, raw.get("note", ""))
         try:  # the selection names runs the table has (the values present are named otherwise)
-            select_runs(run_states(step.table, step.profile), step.only)
+            select_runs(_declared(step.table, step.profile), step.only)
         except ValueError as e:
             raise ValueError(f"{path}: {where}.only: {e}") from None
         steps.append(step)
@@ -139,24 +139,44 @@ def _check_keys(path: Path, where: str, data, allowed: tuple[str, ...]) -> None:
         raise ValueError(f"{path}: {where}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(allowed)}")
 
 
-def step_runs(step: Step, run_root: str | None = None, results_root: str | None = None) -> list[tuple[RunSpec, str]]:
-    """The step's runs in training order, each with its launcher state (emml.launch.STATES)."""
+def _declared(table: str, profile: str) -> dict:
+    """Run name → (RunSpec, None) for the table's runs under the profile: what a selection is checked against,
+    without reading any run dir."""
+    from emml.profiles import profile_seeds
+    from emml.registry import load_table
+
+    return {spec.run_name(profile): (spec, None) for spec in load_table(table).runs(profile_seeds(profile))}
+
+
+def step_runs(
+    step: Step, run_root: str | None = None, results_root: str | None = None, states: dict | None = None
+) -> list[tuple[RunSpec, str]]:
+    """The step's runs in training order, each with its launcher state (emml.launch.STATES); ``states``: the table's
+    run_states when already read (several steps of one table and profile read them once)."""
     from emml.launch import run_states, select_runs, with_overrides
 
-    states = select_runs(run_states(step.table, step.profile, run_root, results_root), step.only)
-    return [(with_overrides(spec, step.overrides(), step.profile), state) for spec, state in states.values()]
+    if states is None:
+        states = run_states(step.table, step.profile, run_root, results_root)
+    return [
+        (with_overrides(spec, step.overrides(), step.profile), state)
+        for spec, state in select_runs(states, step.only).values()
+    ]
 
 
 def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:
     """Every run of the campaign in order (a run two steps share is listed once, at its first step)."""
+    from emml.launch import run_states
     from emml.rl.trainer import METRICS, run_dir
     from emml.runlock import holder
 
-    out, seen = [], set()
+    out, seen, read = [], set(), {}
     speed = _Speed()
     fields = {k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None}
     for step in campaign.steps:
-        for spec, launch_state in step_runs(step, run_root, results_root):
+        key = (step.table, step.profile)
+        if key not in read:  # run_states reads every run dir's checkpoint: once per table and profile
+            read[key] = run_states(step.table, step.profile, run_root, results_root)
+        for spec, launch_state in step_runs(step, run_root, results_root, read[key]):
             cfg = spec.to_config(step.profile, **fields)
             directory = run_dir(cfg)
             if directory in seen:

@@ -842,10 +842,9 @@ def run_table(
 
 def _stopped_line(report, again: str) -> str:
     """The one line a stopped launch ends with: what stopped, what was left, and the command that resumes it."""
-    interrupted = len(report.not_started) and "the runs in progress ended KILLED (resumable from their checkpoints), "
     return (
-        f"stopped by {report.stopped}: {len(report.done)} runs finished, {interrupted or ''}"
-        f"{len(report.not_started)} not finished; resume with: {again}"
+        f"stopped by {report.stopped}: {len(report.done)} runs finished, {len(report.unfinished)} not (those in "
+        f"progress ended KILLED, resumable from their checkpoints); resume with: {again}"
     )
 
 

@@ -1,4 +1,4 @@
-"""Launch every run of a table: a local process pool, or Slurm through submitit.
+"""Launch every run of a table: local processes (one per run, at most `jobs` at a time), or Slurm through submitit.
 
 Before fanning out, the MLflow experiment and one parent run per (table, profile) are created (one writer; the
 sqlite store dislikes concurrent creation), and every child run is tagged with `mlflow.parentRunId`. Runs already
@@ -65,8 +65,8 @@ class LaunchReport:
     stopped: str | None = None
     """Why the launch stopped early (Ctrl-C, SIGTERM): no queued run started, the runs in progress ended KILLED;
     None when it ran to the end."""
-    not_started: list[str] = field(default_factory=list)
-    """Runs left unstarted by a stop (the next launch trains them)."""
+    unfinished: list[str] = field(default_factory=list)
+    """After a stop: the runs it left unfinished, stopped or never started (the next launch trains them)."""
 
 
 def run_states(name: str, profile: str, run_root: str | None = None, results_root: str | None = None) -> dict:
@@ -82,16 +82,17 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
     recorded_in: dict[Path, set[str]] = {}  # per results CSV: a row may borrow another table's runs (from_table)
     for spec in table.runs(profile_seeds(profile)):
         cfg = spec.to_config(profile, **fields)
-        if results_csv(cfg) not in recorded_in:
-            results = read_results(results_csv(cfg))
+        csv = results_csv(cfg)
+        if csv not in recorded_in:
+            results = read_results(csv)
             if table.transfer is not None:  # a transfer run is recorded once its scores are in the row
                 from emml.transfer import metric_column
 
                 columns = [metric_column(x) for x in spec.instructions]
                 complete = set(columns) <= set(results.columns)
                 results = results[results[columns].notna().all(axis=1)] if complete else results.iloc[:0]
-            recorded_in[results_csv(cfg)] = set(results["run_name"])
-        recorded = recorded_in[results_csv(cfg)]
+            recorded_in[csv] = set(results["run_name"])
+        recorded = recorded_in[csv]
         rname, rdir = cfg.run_name(), run_dir(cfg)
         done = (rdir / CHECKPOINT).exists() and (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT)
         if rname in recorded:
@@ -198,7 +199,7 @@ def run_table(
     selects each and orders the runs by it). `overrides` (dotted TrainConfig fields, e.g. {'frames': 1_500_000})
     apply to every run on top of its table's: a campaign's step trains the paper profile to fewer frames.
 
-    backend 'local': `jobs` concurrent runs (default: half the cores) in a forkserver process pool, each with
+    backend 'local': `jobs` concurrent runs (default: half the cores), each in its own forkserver process with
     cores // jobs torch threads; jobs=1 runs in this process. backend 'slurm': one submitit job per run on
     `partition` with `time_min` minutes, `gpus` GPUs and `cpus` CPUs each (`slurm_cluster`='local'/'debug' runs
     submitit's local executors, for tests); returns after submission unless `wait`. `train_fn` replaces the
@@ -255,7 +256,7 @@ def run_table(
         set_run_status(report.parent_run_id, "KILLED")
         finished = set(report.done) | set(report.failed)
         report.stopped = "Ctrl-C" if isinstance(e, KeyboardInterrupt) else f"signal {_signal_name(e)}"
-        report.not_started = [spec.run_name(profile) for spec in todo if spec.run_name(profile) not in finished]
+        report.unfinished = [spec.run_name(profile) for spec in todo if spec.run_name(profile) not in finished]
         return report
     except BaseException:  # a broken pool: the parent run ends, never stays RUNNING
         set_run_status(report.parent_run_id, "FAILED")

@@ -189,6 +189,6 @@ def test_an_interrupted_launch_ends_its_parent_run_and_says_what_is_left(trackin
         train_fn=interrupted,
         log=lambda m: None,
     )
-    assert report.stopped == "Ctrl-C" and len(report.not_started) == 16 and report.done == []
+    assert report.stopped == "Ctrl-C" and len(report.unfinished) == 16 and report.done == []
     (parent,) = find_runs("table3", {"emml.role": "parent"})
     assert parent["status"] == "KILLED"  # not RUNNING forever

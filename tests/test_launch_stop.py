@@ -20,7 +20,7 @@ LAUNCH = textwrap.dedent(
     from tests.test_launch_stop import slow_train
     report = run_table("table3", "smoke", jobs=2, run_root=sys.argv[1], results_root=sys.argv[2],
                        train_fn=slow_train, log=lambda m: None)
-    print(json.dumps([report.stopped, len(report.not_started), report.parent_run_id]), flush=True)
+    print(json.dumps([report.stopped, len(report.unfinished), report.parent_run_id]), flush=True)
     """
 )
 
