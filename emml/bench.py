@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from emml.config import DoomConfig
+from emml.env_kinds import GYM_ENVS
 from emml.envs.doom import DoomEnv
 from emml.envs.vector import make_env, make_vector_env
 
@@ -73,7 +74,7 @@ def bench_env(config: DoomConfig, steps: int = 2000, vector_steps: int = 2000) -
     HouseConfig measures the House env (Appendix C) the same way."""
     rng = np.random.default_rng(0)
     out: dict = {"height": config.height, "width": config.width, "render": "x".join(map(str, config.render_size()))}
-    out["env"] = "house" if config.difficulty == "house" else "doom"
+    out["env"] = GYM_ENVS[config.GYM_ID].name
     for aux in (False, True):
         cfg = type(config)(**{**config.to_dict(), "aux_labels": aux})
         env = make_env(cfg)
@@ -112,6 +113,9 @@ class MemoryTracker:
         self.history.append((step, dict(metrics)))
 
     def finish(self, status: str = "FINISHED") -> None:
+        pass
+
+    def abort(self, exc: BaseException) -> None:  # the trainer's error propagates; nothing is stored to end
         pass
 
     def mirror_to(self, path) -> None:  # the run dir's metrics.csv: a benchmark keeps nothing

@@ -25,6 +25,7 @@ from pathlib import Path
 import tomllib
 
 from emml.registry import REPRODUCE_DIR, RunSpec
+from emml.runs import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
 STEP_KEYS = ("name", "table", "profile", "only", "frames", "note")
@@ -166,8 +167,8 @@ def step_runs(
 def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:
     """Every run of the campaign in order (a run two steps share is listed once, at its first step)."""
     from emml.launch import run_states
-    from emml.rl.trainer import METRICS, run_dir
     from emml.runlock import holder
+    from emml.runs import METRICS, run_dir
 
     out, seen, read = [], set(), {}
     speed = _Speed()
@@ -194,7 +195,7 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
             else:
                 state, frames = "to do", 0
             left = None if state == "done" else speed.seconds(cfg, max(target - frames, 0))
-            out.append(RunStatus(step.name, step.table, step.profile, cfg.run_name(), state, frames, target, who, left))
+            out.append(RunStatus(step.name, step.table, step.profile, run_name(cfg), state, frames, target, who, left))
     return out
 
 
@@ -218,7 +219,7 @@ class _Speed:
         self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
 
     def measured(self, cfg) -> tuple[float | None, float | None]:
-        from emml.rl.trainer import METRICS
+        from emml.runs import METRICS
         from emml.tracking import project_path
 
         key = (cfg.profile, cfg.model)

@@ -7,6 +7,9 @@ from pathlib import Path
 
 import typer
 
+from emml.env_kinds import DOOM_ID, ENV_KINDS, GYM_ENVS, kinds_of
+from emml.runs import run_name
+
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
@@ -26,9 +29,26 @@ def _fail(message: str) -> None:
 
 
 @app.callback()
-def _check_project_files() -> None:
+def _check_project_files(
+    plugins: list[str] = typer.Option(
+        [],
+        "--plugin",
+        help="A plugin registering models of your own: a .py file, a package folder or a dotted module (repeatable; "
+        "added to EMML_PLUGINS for the processes the command starts). README: 'Compare your own model'.",
+    ),
+) -> None:
     """Every command reads reproduce/profiles.toml: a broken one is named in one line before anything runs; and
-    every command first ends the engines that killed emml processes left (emml/envs/engine.py, sweep_orphans)."""
+    every command first ends the engines that killed emml processes left (emml/envs/engine.py, sweep_orphans).
+    Plugins (--plugin, EMML_PLUGINS) load first, so that a bad one is named in one line (emml/plugins.py)."""
+    import os
+
+    from emml.plugins import ENV_VAR, PluginError, add_plugins
+
+    if plugins or os.environ.get(ENV_VAR):
+        try:
+            add_plugins(plugins)
+        except PluginError as e:
+            _fail(str(e))
     from emml.profiles import ProfileError, load_profiles
 
     try:
@@ -44,7 +64,7 @@ def _check_project_files() -> None:
 
 def _check_checkpoint(path: Path) -> None:
     """Fail with one line naming the path unless it holds an emml checkpoint (before any engine starts)."""
-    from emml.rl.checkpoint import CheckpointError, load_checkpoint
+    from emml.checkpoint import CheckpointError, load_checkpoint
 
     try:
         load_checkpoint(path)
@@ -103,10 +123,37 @@ def tasks_show(
     _echo(data, as_json, "\n".join(lines))
 
 
+_ENV_HELP = " | ".join(e.name for e in GYM_ENVS.values()) + " (house: the House domain, Appendix C)"
+_DOOM_DIFFICULTY_HELP = " | ".join(kinds_of(DOOM_ID)) + " (doom only)"
+_DIFFICULTY_HELP = " | ".join(ENV_KINDS) + " (house: the House domain, Appendix C)"
+
+
+def _gym_id(env_name: str) -> str:
+    """The gym id of an ``--env`` name (emml/env_kinds.py), or fail naming the allowed names."""
+    ids = {e.name: e.gym_id for e in GYM_ENVS.values()}
+    if env_name not in ids:
+        _fail(f"--env={env_name!r} is not allowed; choose one of {', '.join(map(repr, ids))}")
+    return ids[env_name]
+
+
+def _env_config(gym_id: str, difficulty: str, **fields):
+    """(difficulty, validated config) of the env ``gym_id``: an env that plays one kind (the House) plays it
+    whatever ``difficulty`` says; a bad value fails with the field's name."""
+    from emml.config import ENV_CONFIGS
+
+    kinds = kinds_of(gym_id)
+    if len(kinds) == 1:
+        difficulty = kinds[0]
+    try:
+        return difficulty, ENV_CONFIGS[gym_id](difficulty=difficulty, **fields).validate()
+    except ValueError as e:
+        _fail(str(e))
+
+
 @app.command()
 def oracle(
-    env_name: str = typer.Option("doom", "--env", help="doom | house (the House domain, Appendix C)"),
-    difficulty: str = typer.Option("easy", help="easy | hard (doom only)"),
+    env_name: str = typer.Option("doom", "--env", help=_ENV_HELP),
+    difficulty: str = typer.Option("easy", help=_DOOM_DIFFICULTY_HELP),
     task: str = typer.Option("sgn", help="sgn | eqa | both"),
     split: str = typer.Option("train", help="train | test"),
     episodes: int = typer.Option(100, min=1),
@@ -118,27 +165,15 @@ def oracle(
 ):
     """Accuracy of the scripted expert (privileged state): every episode must be solvable."""
     from emml.agents.oracle import run_oracle
-    from emml.config import DoomConfig
-    from emml.envs.doom import DoomEnv
     from emml.envs.engine import install_signal_handlers
+    from emml.envs.vector import make_env
 
     install_signal_handlers()
-    if env_name not in ("doom", "house"):
-        _fail(f"--env={env_name!r} is not allowed; choose one of 'doom', 'house'")
-    if env_name == "house":
-        if video is not None:
-            _fail("--video records Doom episodes only; leave it out with --env house")
-        from emml.config import HouseConfig
-        from emml.envs.house import HouseEnv
-
-        difficulty, make, config_cls = "house", HouseEnv, HouseConfig
-    else:
-        make, config_cls = DoomEnv, DoomConfig
-    try:
-        cfg = config_cls(difficulty=difficulty, tasks=task, split=split, height=height, width=width).validate()
-    except ValueError as e:
-        _fail(str(e))
-    env = make(cfg)
+    gym_id = _gym_id(env_name)
+    if video is not None and gym_id != DOOM_ID:
+        _fail(f"--video records Doom episodes only; leave it out with --env {env_name}")
+    difficulty, cfg = _env_config(gym_id, difficulty, tasks=task, split=split, height=height, width=width)
+    env = make_env(cfg)
     try:
         result = run_oracle(env, episodes, seed)
     finally:
@@ -158,32 +193,20 @@ def oracle(
 
 @bench_app.command("env")
 def bench_env(
-    env_name: str = typer.Option("doom", "--env", help="doom | house (the House domain, Appendix C)"),
+    env_name: str = typer.Option("doom", "--env", help=_ENV_HELP),
     height: int = 168,
     width: int = 300,
-    difficulty: str = typer.Option("easy", help="easy | hard (doom only)"),
+    difficulty: str = typer.Option("easy", help=_DOOM_DIFFICULTY_HELP),
     interpolation: str = typer.Option("linear", help="linear | area | nearest"),
     steps: int = typer.Option(2000, min=100),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Raw ViZDoom vs our env (labels off/on), and the vector env with 1 and 2 workers."""
     from emml.bench import bench_env as run
-    from emml.config import DoomConfig
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()
-    if env_name not in ("doom", "house"):
-        _fail(f"--env={env_name!r} is not allowed; choose one of 'doom', 'house'")
-    if env_name == "house":
-        from emml.config import HouseConfig
-
-        config_cls, difficulty = HouseConfig, "house"
-    else:
-        config_cls = DoomConfig
-    try:
-        cfg = config_cls(height=height, width=width, difficulty=difficulty, interpolation=interpolation).validate()
-    except ValueError as e:
-        _fail(str(e))
+    _, cfg = _env_config(_gym_id(env_name), difficulty, height=height, width=width, interpolation=interpolation)
     result = run(cfg, steps=steps, vector_steps=steps)
     text = [f"{env_name} env bench at {width}x{height} (render {result['render']}):"]
     for key in ("labels_off", "labels_on"):
@@ -216,9 +239,11 @@ def bench_train_cmd(
     from emml.bench import PARTS, bench_train
     from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
+    from emml.rl.hardware import check_hardware
 
     try:
         cfg = profile_config(profile, "easy", _parse_sets(sets), model=model, aux=aux, device=device).validate()
+        check_hardware(cfg)  # bench runs the model without a Trainer: what this machine can run, before compute
     except ValueError as e:
         _fail(str(e))
     if part not in PARTS:
@@ -263,10 +288,11 @@ def _child_bench_args(profile: str, updates: int, sets: list[str], variants: lis
     """`bench train` options for child processes, after validating the config of every variant here: bad input
     fails before any child starts."""
     from emml.profiles import profile_config
+    from emml.rl.hardware import check_hardware
 
     for extra in variants:
         try:
-            profile_config(profile, "easy", {**_parse_sets(sets), **extra}).validate()
+            check_hardware(profile_config(profile, "easy", {**_parse_sets(sets), **extra}).validate())
         except ValueError as e:
             _fail(str(e))
     return ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]
@@ -331,7 +357,12 @@ def models(
         rows = model_table(len(vocab), height, width, 210)
     except ValueError as e:
         _fail(str(e))
-    _echo(rows, as_json, "\n".join(f"{r['name']:<18} {r['parameters']:>10,}  {r.get('description', '')}" for r in rows))
+    plugin = {r["name"]: f"  (plugin {r['source']})" if r["source"] != "emml" else "" for r in rows}
+    _echo(
+        rows,
+        as_json,
+        "\n".join(f"{r['name']:<18} {r['parameters']:>10,}  {r['description']}{plugin[r['name']]}" for r in rows),
+    )
 
 
 def _use_tcmalloc() -> None:
@@ -364,7 +395,7 @@ def _parse_sets(sets: list[str]) -> dict:
 @app.command()
 def train(
     model: str = typer.Option("dual_attention", help="Model registry name (emml models)."),
-    difficulty: str = typer.Option("easy", help="easy | hard | house (the House domain, Appendix C)"),
+    difficulty: str = typer.Option("easy", help=_DIFFICULTY_HELP),
     aux: bool = typer.Option(False, "--aux/--no-aux", help="Train with the auxiliary task."),
     profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
     seed: int = 0,
@@ -382,6 +413,7 @@ def train(
     seeds of it in one process, each written as its own run."""
     from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
+    from emml.rl.hardware import check_hardware
 
     overrides = _parse_sets(sets)
     if frames:
@@ -395,7 +427,7 @@ def train(
             profile_config(profile, difficulty, overrides, model=model, aux=aux, seed=s, table=table, device=device)
             for s in seeds
         ]
-        cfg = cfgs[0].validate()
+        cfg = check_hardware(cfgs[0].validate())  # the values, then what this machine can run (emml/rl/hardware.py)
         if pack_seeds:
             from emml.rl.packed_trainer import check_packable
 
@@ -413,11 +445,11 @@ def train(
             err=True,
         )
     install_signal_handlers()
+    from emml.checkpoint import CheckpointError
     from emml.diskspace import NoSpaceError
-    from emml.rl.checkpoint import CheckpointError
-    from emml.rl.trainer import ConfigMismatch
     from emml.rl.trainer import train as run
     from emml.runlock import RunLocked
+    from emml.runs import ConfigMismatch
 
     if pack_seeds:
         from emml.rl.packed_trainer import train_packed
@@ -428,7 +460,7 @@ def train(
             _fail(str(e))
         data = [{"run_dir": str(r.run_dir), "run_id": r.run_id, "frames": r.frames, **r.metrics} for r in results]
         text = [
-            f"{c.run_name()} after {r.frames:,} frames: " + ", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items())
+            f"{run_name(c)} after {r.frames:,} frames: " + ", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items())
             for c, r in zip(cfgs, results)
         ]
         _echo(data, as_json, "\n".join(text))
@@ -449,7 +481,7 @@ def train(
         data,
         as_json,
         ("already finished: " if result.skipped else "")
-        + f"{cfg.run_name()} after {result.frames:,} frames: "
+        + f"{run_name(cfg)} after {result.frames:,} frames: "
         + ", ".join(f"{k} {v:.3f}" for k, v in result.metrics.items())
         + f"\n  run dir {result.run_dir}",
     )
@@ -471,7 +503,7 @@ def eval_checkpoint(
 ):
     """Greedy accuracy of a checkpoint on SGN/EQA train/test (reproducible under --seed)."""
     from emml.envs.engine import install_signal_handlers
-    from emml.evaluate import evaluate_checkpoint
+    from emml.runs import evaluate_checkpoint
 
     _check_checkpoint(checkpoint)
     install_signal_handlers()
@@ -497,10 +529,10 @@ def rescore_runs(
 ):
     """Re-score finished runs with the final-evaluation protocol (issue 33): results.json's metrics and the
     results-table row rewritten, training provenance kept, scored_sha / eval_episodes / eval_seed recorded."""
+    from emml.checkpoint import load_checkpoint
     from emml.config import TrainConfig
     from emml.envs.engine import install_signal_handlers
     from emml.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
-    from emml.rl.checkpoint import load_checkpoint
     from emml.runlock import RunLocked
 
     for run in runs:  # every run checked before any is played
@@ -583,22 +615,33 @@ def diagnose(
     ),
     step0_episodes: int = typer.Option(100, min=0, help="Resets for the actor's sensitivity to the target slot."),
     eqa_episodes: int = typer.Option(10, min=0, help="Greedy episodes per EQA question (0: no EQA table)."),
+    sgn_outcomes: int = typer.Option(
+        0, min=0, help="Greedy SGN episodes per split, seeded as `emml eval`: how each ends, per instruction (0: none)."
+    ),
+    split: str = typer.Option("both", help="The SGN splits of --sgn-outcomes: train | test | both."),
     control: str = typer.Option(None, help="Play under a diagnostic control instead of the run's: " + _CONTROLS),
     seed: int = 20_000,
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Why a model does (not) follow instructions: attention on the target, per-word detector AP, and how much
     the first move depends on where the target stands (emml/diagnose.py); per EQA question its accuracy, answers,
-    where the attention sits and the GA2 gate per channel (emml/diagnose_eqa.py)."""
+    where the attention sits and the GA2 gate per channel (emml/diagnose_eqa.py); per SGN instruction its success
+    and how its episodes end: target, wrong object (which), time-out (emml/diagnose_sgn.py)."""
     from emml.diagnose import diagnose_checkpoint, summary_line
     from emml.diagnose_eqa import eqa_table
+    from emml.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
     from emml.envs.engine import install_signal_handlers
+    from emml.tasks.language import check_choice
 
     _check_checkpoint(checkpoint)
     install_signal_handlers()
     try:
+        check_choice("split", split, ("train", "test", "both"))
         result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed, eqa_episodes, control)
-    except ValueError as e:  # a control the model cannot take
+        if sgn_outcomes:
+            splits = ("train", "test") if split == "both" else (split,)
+            result["sgn_outcomes"] = diagnose_sgn_checkpoint(checkpoint, sgn_outcomes, splits=splits, control=control)
+    except ValueError as e:  # a control the model cannot take, a split that is not one
         _fail(str(e))
     lines = []
     if episodes:
@@ -611,12 +654,14 @@ def diagnose(
         ]
     if "eqa" in result:
         lines += ([""] if lines else []) + [eqa_table(result["eqa"])]
+    if "sgn_outcomes" in result:
+        lines += ([""] if lines else []) + [sgn_table(result["sgn_outcomes"])]
     _echo(result, as_json, "\n".join(lines))
 
 
 def _models(*paths: Path) -> list[tuple[str, object, object]]:
     """(label, model, config) per checkpoint, each checked first; the label says aux or no aux and the run."""
-    from emml.evaluate import load_model
+    from emml.runs import load_model
 
     out = []
     for path in paths:
@@ -775,7 +820,9 @@ def list_experiments(
 
 @app.command("run")
 def run_table(
-    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5 (reproduce/<table>.toml)"),
+    table: str = typer.Argument(
+        ..., help="table2 | table3 | table4 | table5 (reproduce/<table>.toml), or a table file of your own (x.toml)"
+    ),
     profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
     backend: str = typer.Option("local", help="local (process pool) | slurm (submitit)"),
     jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores; cuda: and what GPU memory holds)."),
@@ -803,14 +850,14 @@ def run_table(
             _fail(f"--only {item!r}: expected FIELD=VALUE, e.g. --only difficulty=easy")
         selection[key.strip()] = value.strip()
     try:
-        placeholder = load_table(table).placeholder
+        loaded = load_table(table)  # a .toml path: its name is the file's stem (emml.registry.own_table)
     except ValueError as e:
         _fail(str(e))
-    if backend == "local" and not placeholder:
+    if backend == "local" and not loaded.placeholder:
         _use_tcmalloc()  # ~2x CPU training speed; the pool's workers inherit LD_PRELOAD
     try:
         report = launch(
-            table,
+            loaded.name,
             profile,
             backend=backend,
             jobs=jobs or None,
@@ -827,7 +874,10 @@ def run_table(
         _fail(str(e))
     data = asdict(report)
     if report.stopped:
-        again = " ".join(["emml run", table, "--profile", profile, *(f"--only {o}" for o in only)])
+        from emml.plugins import configured
+
+        plugins = [f"--plugin {p}" for p in configured()]  # a model of one's own needs its plugin to resume
+        again = " ".join(["emml", *plugins, "run", table, "--profile", profile, *(f"--only {o}" for o in only)])
         _echo(data, as_json, _stopped_line(report, again))
         raise typer.Exit(130)
     _echo(
@@ -941,7 +991,7 @@ def _status_text(plan, rows) -> str:
 
 @app.command()
 def report(
-    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5"),
+    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5, or a table file of your own (x.toml)"),
     profile: str = typer.Option("quick", help="smoke | demo | quick | paper"),
     curves: bool = typer.Option(True, "--curves/--no-curves", help="Also plot training curves (needs MLflow)."),
     out: Path = typer.Option(None, help="Output folder (default: reports/)."),
@@ -957,6 +1007,10 @@ def report(
     if curves:  # they read MLflow
         _check_store()
     try:
+        if table.endswith(".toml"):  # a table of one's own: reported by its name, the file's stem
+            from emml.registry import own_table
+
+            table = own_table(table)
         data = report_table(table, profile, out=_out(out) if out else None)
     except ValueError as e:
         _fail(str(e))

@@ -1,20 +1,41 @@
 """Dataclass configs. Every field has a docstring with its unit and source (paper section, or 'our choice' with
 the reason, collected in docs/fidelity.md). `validate()` fails before any compute with the field's name and the
-allowed values."""
+allowed values.
+
+Configs are leaves: this module imports no other layer of `emml` but the leaves `emml.geometry` and
+`emml.env_kinds` (and, until the model registry is a lower layer, `emml.models` for the model names, in
+`validate()`). What the machine can run (a C++ compiler for `compile`, native bf16 for `precision`, a CUDA device)
+is checked where training starts, not here: `emml.rl.hardware.check_hardware`."""
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import asdict, dataclass, field, fields
 from typing import ClassVar
 
-from emml.tasks.language import VOCABULARY_SOURCES, check_choice
+from emml.env_kinds import DOOM_ID, ENV_KINDS, HOUSE_ID, kinds_of
 
 PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 """A table or profile name: it becomes a folder or file name, so no path separator, no leading dot."""
 
 RESOLUTIONS_16_9 = ((256, 144), (320, 180), (400, 225), (512, 288), (640, 360), (800, 450), (1024, 576))
 """ViZDoom's 16:9 screen resolutions (width, height), the aspect of the paper's 300×168 input."""
+
+VOCABULARY_SOURCES = ("all", "train_instructions")
+"""Names a run's `DoomConfig.vocabulary` may give instead of a word list (`Vocabulary.from_dataset`, emml/tasks)."""
+
+COMPILE = ("off", "on", "auto")
+"""Values of TrainConfig.compile (emml/rl/compiled.py)."""
+
+PRECISIONS = ("fp32", "bf16")
+"""Values of TrainConfig.precision (emml/rl/precision.py)."""
+
+
+def check_choice(field: str, value, allowed) -> None:
+    """Raise a ValueError naming the field and its allowed values."""
+    if value not in allowed:
+        raise ValueError(f"{field}={value!r} is not allowed; choose one of {', '.join(map(repr, allowed))}")
 
 
 @dataclass
@@ -77,8 +98,10 @@ class DoomConfig:
     dataset: str = "doom"
     """Which tasks/<name>.toml."""
 
-    DIFFICULTIES: ClassVar[tuple[str, ...]] = ("easy", "hard")
-    """The allowed `difficulty` values (not a field)."""
+    GYM_ID: ClassVar[str] = DOOM_ID
+    """The environment this class configures (not a field); it plays the kinds of emml/env_kinds.py with this id."""
+    DIFFICULTIES: ClassVar[tuple[str, ...]] = kinds_of(DOOM_ID)
+    """The allowed `difficulty` values (not a field): Easy and Hard (§4)."""
 
     def validate(self) -> DoomConfig:
         check_choice("difficulty", self.difficulty, self.DIFFICULTIES)
@@ -140,16 +163,21 @@ class HouseConfig(DoomConfig):
     dataset: str = "house"
     """Table 8 (emml/tasks/house.toml)."""
 
-    DIFFICULTIES: ClassVar[tuple[str, ...]] = ("house",)
+    GYM_ID: ClassVar[str] = HOUSE_ID
+    DIFFICULTIES: ClassVar[tuple[str, ...]] = kinds_of(HOUSE_ID)
 
 
-ENV_DIFFICULTIES = ("easy", "hard", "house")
-"""Where a run trains: Doom Easy, Doom Hard (§4), or the House (Appendix C, emml/House-v0)."""
+ENV_CONFIGS: dict[str, type[DoomConfig]] = {c.GYM_ID: c for c in (DoomConfig, HouseConfig)}
+"""The config class of each environment, by gym id."""
+ENV_DIFFICULTIES = tuple(ENV_KINDS)
+"""Where a run trains: Doom Easy, Doom Hard (§4), or the House (Appendix C): the kinds of emml/env_kinds.py."""
 
 
 def env_config_class(difficulty: str) -> type[DoomConfig]:
-    """The environment config a difficulty needs: HouseConfig for 'house' (Appendix C), DoomConfig otherwise."""
-    return HouseConfig if difficulty == "house" else DoomConfig
+    """The environment config a difficulty needs: the class of its kind's gym id (HouseConfig for 'house',
+    Appendix C); DoomConfig for a value that is no kind, so that `validate` names it."""
+    kind = ENV_KINDS.get(difficulty)
+    return ENV_CONFIGS[kind.gym_id] if kind is not None else DoomConfig
 
 
 def match_env_class(env: DoomConfig) -> DoomConfig:
@@ -175,6 +203,66 @@ def config_from_dict(cls, values: dict):
         raise ValueError(f"unknown {cls.__name__} field(s) {unknown}; known fields: {sorted(known)}")
     fixed = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
     return cls(**fixed)
+
+
+@dataclass
+class PPOConfig:
+    """Hyper-parameters of the PPO update (paper appendix A unless noted)."""
+
+    clip_coef: float = 0.2
+    """Surrogate clipping epsilon (PPO Eq. 7). Paper: 0.2."""
+    gamma: float = 0.99
+    """Discount factor. Paper: 0.99."""
+    gae_lambda: float = 0.95
+    """GAE lambda (Schulman et al. 2016). Paper silent -- our choice (PPO paper's Atari value)."""
+    epochs: int = 4
+    """Optimisation epochs per rollout. Paper: 4."""
+    minibatches: int = 1
+    """Minibatches per epoch, split along the env axis so recurrent sequences stay whole. Paper: 1 ("single batch")."""
+    lr: float = 2.5e-4
+    """Adam learning rate. Paper: 2.5e-4 (constant; no annealing mentioned)."""
+    ent_coef: float = 0.01
+    """Entropy-bonus coefficient on the move distribution. Paper silent -- our choice (PPO paper's Atari value)."""
+    vf_coef: float = 0.5
+    """Value-loss coefficient (value loss is 0.5 * MSE). Paper silent -- our choice (CleanRL default)."""
+    max_grad_norm: float = 0.5
+    """Global gradient-norm clip. Paper silent -- our choice (CleanRL default)."""
+    norm_adv: bool = True
+    """Normalise advantages per minibatch to zero mean / unit std. Paper silent -- our choice (CleanRL default)."""
+    clip_vloss: bool = False
+    """Use PPO2-style clipped value loss. Paper silent -- our choice (off; Andrychowicz et al. 2021: no benefit)."""
+    answer_coef: float = 1.0
+    """Weight of the supervised answer cross-entropy. Paper silent on the weight -- our choice."""
+    aux_coef: float = 1.0
+    """Weight of the spatial auxiliary binary cross-entropy. Paper silent on the weight -- our choice."""
+    adam_eps: float = 1e-5
+    """Adam epsilon. Paper silent -- our choice (CleanRL/baselines PPO value)."""
+
+    def validate(self) -> PPOConfig:
+        """Raise ValueError naming the first out-of-range field; return self."""
+        positive = ("clip_coef", "lr", "max_grad_norm", "adam_eps")
+        non_negative = ("ent_coef", "vf_coef", "answer_coef", "aux_coef")
+        unit = ("gamma", "gae_lambda")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in ("norm_adv", "clip_vloss"):
+                if not isinstance(v, bool):
+                    raise ValueError(f"PPOConfig.{f.name} must be a bool, got {v!r}")
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"PPOConfig.{f.name} must be a finite number, got {v!r}")
+            if f.name in ("epochs", "minibatches"):
+                if not isinstance(v, int) or v < 1:
+                    raise ValueError(f"PPOConfig.{f.name} must be an integer >= 1, got {v!r}")
+            elif f.name in positive and not v > 0:
+                raise ValueError(f"PPOConfig.{f.name} must be > 0, got {v!r}")
+            elif f.name in non_negative and not v >= 0:
+                raise ValueError(f"PPOConfig.{f.name} must be >= 0, got {v!r}")
+            elif f.name in unit and not 0.0 <= v <= 1.0:
+                raise ValueError(f"PPOConfig.{f.name} must be in [0, 1], got {v!r}")
+        if not self.clip_coef < 1.0:
+            raise ValueError(f"PPOConfig.clip_coef must be in (0, 1), got {self.clip_coef!r}")
+        return self
 
 
 @dataclass
@@ -259,19 +347,43 @@ class TrainConfig:
     project root unless absolute."""
     env: DoomConfig = field(default_factory=DoomConfig)
     """The environment (its aux_labels follows `aux`): a HouseConfig when its difficulty is 'house'."""
-    ppo: object = None
-    """PPOConfig (emml/rl/ppo.py); None: the paper's defaults."""
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    """The PPO update's hyper-parameters (the paper's defaults)."""
     model_options: dict = field(default_factory=dict)
     """Overrides of the model registry entry's ModelConfig fields."""
 
-    def __post_init__(self):
-        if self.ppo is None:
-            from emml.rl.ppo import PPOConfig
+    RUNTIME: ClassVar[tuple[str, ...]] = (
+        "frames",  # asking for more frames continues a run (finished or not) to the new target
+        "eval_every",
+        "eval_episodes",  # how a run is measured, not what it is: the evaluations' size
+        "final_eval_episodes",
+        "diagnose_episodes",
+        "checkpoint_every",
+        "log_every",
+        "threads",
+        "asynchronous",
+        "env_groups",  # how the actors are stepped, not what they do
+        "envs_per_worker",
+        "acting_threads",
+        "max_engine_restarts",
+        "engine_restart_window",
+        "device",
+        "compile",
+        "run_root",
+        "results_root",
+    )
+    """How a run runs, not what it is: every other field is its identity (`identity`, emml/runs.py), which names
+    its run dir and must match for a rerun to resume it."""
 
+    def __post_init__(self):
+        if self.ppo is None:  # callers that passed None for the defaults
             self.ppo = PPOConfig()
         self.env.aux_labels = self.aux
 
     def validate(self) -> TrainConfig:
+        """The fields' values, before any compute (what this machine can run: `emml.rl.hardware.check_hardware`)."""
+        # upward, and ignored by the layers contract (pyproject.toml) until the model registry, which imports torch,
+        # has a name list below the configs; local so that importing the configs imports no torch
         from emml.models import model_config
 
         model_config(self.model, **self.model_options)  # names the model and any unknown option
@@ -311,9 +423,10 @@ class TrainConfig:
         if self.envs_per_worker < 1 or group % self.envs_per_worker:
             k = self.envs_per_worker
             raise ValueError(f"envs_per_worker={k!r} must be a positive divisor of num_envs / env_groups = {group}")
-        from emml.rl.compiled import check_compile
-
-        check_compile(self.compile, self.device)
+        if self.compile not in COMPILE:
+            raise ValueError(f"compile={self.compile!r}: allowed values are {', '.join(COMPILE)}")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision={self.precision!r}: allowed values are {', '.join(PRECISIONS)}")
         control = self.model_options.get("control", "none")
         if control == "type_gate":
             raise ValueError(
@@ -332,14 +445,6 @@ class TrainConfig:
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
-        if self.device.startswith("cuda"):
-            import torch
-
-            if not torch.cuda.is_available():
-                raise ValueError("device='cuda' but torch sees no CUDA device; use device='cpu'")
-        from emml.rl.precision import check_precision
-
-        check_precision(self.precision, self.device)
         return self
 
     @property
@@ -352,7 +457,7 @@ class TrainConfig:
         """Derived: updates to reach `frames` (rounded up)."""
         return -(-self.frames // self.frames_per_update)
 
-    def run_name(self) -> str:
+    def spelled_name(self) -> str:
         """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, model options,
         precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
@@ -366,6 +471,10 @@ class TrainConfig:
             parts.append(self.precision)
         return "-".join([*parts, f"s{self.seed}", self.profile])
 
+    def identity(self) -> dict:
+        """`to_dict` less the `RUNTIME` fields: what the run is (emml/runs.py names and resumes runs by it)."""
+        return {k: v for k, v in self.to_dict().items() if k not in self.RUNTIME}
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["ppo"] = asdict(self.ppo)
@@ -374,8 +483,6 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, values: dict) -> TrainConfig:
         """Inverse of to_dict (unknown keys are rejected by name)."""
-        from emml.rl.ppo import PPOConfig
-
         values = dict(values)
         env_values = values.pop("env", {})
         env = config_from_dict(env_config_class(env_values.get("difficulty", "easy")), env_values)
@@ -397,7 +504,7 @@ def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") ->
             if section not in ("env", "ppo", "model_options"):
                 raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo', 'model_options'")
             if section == "model_options":
-                from emml.models.config import ModelConfig
+                from emml.models.config import ModelConfig  # upward: as in TrainConfig.validate
 
                 known = [f.name for f in fields(ModelConfig)]
                 if name not in known:

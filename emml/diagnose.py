@@ -24,9 +24,9 @@ import numpy as np
 import torch
 
 from emml.config import DoomConfig
+from emml.env_kinds import ENV_KINDS
 from emml.envs.doom import DoomEnv
-from emml.envs.vector import make_env
-from emml.evaluate import eval_settings, obs_to_torch
+from emml.evaluate import eval_settings, obs_to_torch, playing
 
 
 def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
@@ -80,15 +80,12 @@ def diagnose(
 
     ``episodes`` sampled episodes (at most ``max_frames`` frames) give the attention and detector figures;
     ``step0_episodes`` resets give the actor's sensitivity (Easy and House, where the spawn is fixed; None in Hard)."""
-    was_training = model.training
-    model.eval()
     # a run restricted to some instructions is diagnosed on its SGN training ones (all of them if it has none)
     chosen = {(task, split): sents for task, split, sents in eval_settings(env_cfg)}.get(("sgn", "train"))
     cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=chosen)
     gen = torch.Generator().manual_seed(seed)
-    env = make_env(cfg)
     probs, labels, attn, target = [], [], [], []
-    try:
+    with playing(model, cfg) as (env,):  # eval mode; on the way out the engine ended and the mode restored
         for i in range(episodes):
             obs, _ = env.reset(seed=seed + i)
             state, start = model.initial_state(1, device), _starts(1, device)
@@ -106,10 +103,8 @@ def diagnose(
                 done = terminated or truncated
         aux_mask = env.aux_mask
         words = env.vocab.words
-        easy = env_cfg.difficulty in ("easy", "house") and step0_episodes  # a fixed spawn: slots are comparable
-        step0 = _step0(model, env, step0_episodes, seed + episodes, device) if easy else None
-    finally:
-        env.close()
+        fixed = ENV_KINDS[env_cfg.difficulty].fixed_spawn and step0_episodes  # a fixed spawn: slots are comparable
+        step0 = _step0(model, env, step0_episodes, seed + episodes, device) if fixed else None
     result: dict = {"frames": len(labels)}
     target_a = np.stack(target).astype(bool)
     seen = target_a.reshape(len(target_a), -1).any(1)
@@ -129,7 +124,6 @@ def diagnose(
     result["detector_ap"] = float(np.mean(list(per_word.values()))) if per_word else None
     result["detector_ap_words"] = per_word
     result.update(step0 or {"actor_sensitivity": None, "step0_moves": {}})
-    model.train(was_training)
     return result
 
 
@@ -154,11 +148,11 @@ def diagnose_checkpoint(
     eqa_episodes: int = 0,
     control: str | None = None,
 ) -> dict:
-    """Rebuild a checkpoint's model (its own config and vocabulary, ``control`` as in `emml.evaluate.load_model`)
+    """Rebuild a checkpoint's model (its own config and vocabulary, ``control`` as in `emml.runs.load_model`)
     and diagnose it: the SGN figures above (none when ``episodes`` is 0) and, with ``eqa_episodes``, the EQA
     per-question ones under "eqa" (emml/diagnose_eqa.py)."""
     from emml.diagnose_eqa import diagnose_eqa
-    from emml.evaluate import load_model
+    from emml.runs import load_model
 
     model, cfg = load_model(path, control=control)
     result = diagnose(model, cfg.env, episodes, step0_episodes, seed) if episodes else {}

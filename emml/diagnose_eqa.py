@@ -30,8 +30,7 @@ import torch
 
 from emml.config import DoomConfig
 from emml.envs.doom import MOVES
-from emml.envs.vector import make_env
-from emml.evaluate import eval_settings, play
+from emml.evaluate import eval_settings, play, playing
 from emml.tasks.language import Dataset, Vocabulary, load_dataset
 
 NO_ANSWER = "(no answer)"
@@ -143,12 +142,8 @@ def _play(model, cfg: DoomConfig, plan, device, batch: int) -> tuple[list[dict],
                 rec["x_on"] = (x_image.reshape(len(x_image), -1) @ cells.T).T / cells.sum(1, keepdims=True)
         records[k] = rec
 
-    envs = [make_env(cfg) for _ in range(min(batch, len(plan)))]
-    try:
+    with playing(model, cfg, min(batch, len(plan))) as envs:
         outcomes = play(model, envs, plan, device, on_step)
-    finally:
-        for env in envs:
-            env.close()
     return [records[k] for k in range(len(plan))], outcomes
 
 
@@ -172,14 +167,12 @@ def diagnose_eqa(
     if not settings:
         result["note"] = "the run is not scored on EQA"
         return result
-    was_training = model.training
-    model.eval()
     vocab = Vocabulary(tuple(env_cfg.vocabulary)) if env_cfg.vocabulary else Vocabulary.from_dataset(dataset)
     words = vocab.words
     groups = dataset.word_groups
     content = {w for g in ("colors", "objects", "sizes", "superlatives") for w in groups[g]}
     result["channels"] = [w for w in words if w in content]  # the text table's gate columns
-    try:
+    with playing(model, env_cfg, 0):  # eval mode for the gates read below too; restored on the way out
         for split, chosen in settings:
             questions = chosen or tuple(s.text for s in dataset.select("eqa", split))
             cfg = dataclasses.replace(env_cfg, tasks="eqa", split=split, aux_labels=True, instructions=chosen)
@@ -196,8 +189,6 @@ def diagnose_eqa(
                     question, split, [records[k] for k in ks], [outcomes[k] for k in ks], gate, words, dataset
                 )
                 result["questions"].append(row)
-    finally:
-        model.train(was_training)
     if result["questions"] and result["questions"][0]["attended"] is None:
         result["attention_note"] = "no spatial attention x_spat in this model: attention columns n/a"
     return result

@@ -8,6 +8,7 @@ seeds ``seed, seed+1, …`` so that a checkpoint's numbers are reproducible.
 from __future__ import annotations
 
 import dataclasses
+from contextlib import contextmanager
 
 import numpy as np
 import torch
@@ -48,26 +49,36 @@ def eval_settings(env_cfg: DoomConfig) -> list[tuple[str, str, tuple[str, ...] |
     return out
 
 
+@contextmanager
+def playing(model, cfg: DoomConfig, n: int = 1, make=make_env):
+    """The envelope of every greedy play (evaluation, diagnostics, transfer scores, figures): the model in eval
+    mode and ``n`` envs of ``cfg`` (made by ``make``); on the way out, error or not, every env made is closed
+    (its engine ended) and the model's mode restored."""
+    was_training = model.training
+    model.eval()
+    envs = []
+    try:
+        for _ in range(n):
+            envs.append(make(cfg))
+        yield envs
+    finally:
+        for env in envs:
+            env.close()
+        model.train(was_training)
+
+
 @torch.no_grad()
 def evaluate(
     model, env_cfg: DoomConfig, episodes: int, seed: int = 10_000, device="cpu", batch: int = 8
 ) -> dict[str, float]:
     """Accuracy per '<task>_<split>' over ``episodes`` greedy episodes each."""
-    was_training = model.training
-    model.eval()
     results = {}
     # the diagnostic controls (and label-fed detectors) read the privileged labels; a real model plays without them
     labels = bool(getattr(model, "reads_labels", False))
     for task, split, instructions in eval_settings(env_cfg):
         cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
-        n_envs = min(batch, episodes)
-        envs = [make_env(cfg) for _ in range(n_envs)]
-        try:
+        with playing(model, cfg, min(batch, episodes)) as envs:
             results[f"{task}_{split}"] = _run(model, envs, episodes, seed, device)
-        finally:
-            for env in envs:
-                env.close()
-    model.train(was_training)
     return results
 
 
@@ -117,35 +128,3 @@ def play(model, envs, plan: list[tuple[int, dict | None]], device, on_step=None)
                     active[i] = False
         episode_start = torch.as_tensor(starts, device=device).unsqueeze(0)
     return outcomes
-
-
-def load_model(path, device: str = "cpu", control: str | None = None):
-    """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary; ``control`` (one of
-    `emml.models.config.CONTROLS`) replaces the run's diagnostic control, for evaluation (same weights)."""
-    from emml.config import TrainConfig
-    from emml.models import build_model
-    from emml.rl.checkpoint import load_checkpoint
-
-    ckpt = load_checkpoint(path)
-    cfg = TrainConfig.from_dict(ckpt["config"])
-    if control is not None:
-        cfg.model_options = {**cfg.model_options, "control": control}
-    env = cfg.env
-    model = build_model(cfg.model, len(ckpt["vocabulary"]), env.height, env.width, env.max_steps, **cfg.model_options)
-    model.load_state_dict(ckpt["model"])
-    if model.cfg.control == "type_gate":  # the word-type gate needs the run's words and the dataset's types
-        from emml.models.type_gate import TypeGate
-        from emml.tasks.language import load_dataset
-
-        model.type_gate = TypeGate(tuple(ckpt["vocabulary"]), load_dataset(env.dataset))
-    return model.to(device), cfg
-
-
-def evaluate_checkpoint(
-    path, episodes: int, seed: int = 10_000, device: str = "cpu", control: str | None = None
-) -> dict[str, float]:
-    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily; ``control``
-    as in `load_model`."""
-    model, cfg = load_model(path, device, control)
-    torch.manual_seed(seed)
-    return evaluate(model, cfg.env, episodes, seed=seed, device=device)

@@ -12,10 +12,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
-PAPER_FRAMES = {"easy": 10_000_000, "hard": 50_000_000, "house": 50_000_000}
-"""§5.1: 10M frames in Easy, 50M in Hard; App. C: 50M in the House."""
-PAPER_MAX_STEPS = {"easy": 210, "hard": 210, "house": 420}
-"""§5.1: episodes of at most 210 steps; App. C: 420 in the House."""
+from emml.env_kinds import ENV_KINDS
+
+PAPER_FRAMES = {k.name: k.paper_frames for k in ENV_KINDS.values()}
+"""§5.1: 10M frames in Easy, 50M in Hard; App. C: 50M in the House (emml/env_kinds.py)."""
+PAPER_MAX_STEPS = {k.name: k.paper_max_steps for k in ENV_KINDS.values()}
+"""§5.1: episodes of at most 210 steps; App. C: 420 in the House (emml/env_kinds.py)."""
 
 
 def count(n) -> str:
@@ -92,7 +94,7 @@ def _spatial_map(cfg: dict) -> bool:
 
 def _protocol(cfg: dict) -> str:
     """Where the paper gives a run's training protocol: §5.1 for Doom, App. C for the House."""
-    return "App. C" if cfg["env.difficulty"] == "house" else "§5.1"
+    return ENV_KINDS[cfg["env.difficulty"]].source
 
 
 def _x_s(v: tuple) -> str:

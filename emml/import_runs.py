@@ -13,25 +13,20 @@ imported run (`stored_run` in Tracker.start): no second run either.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-RESULTS = "results.json"
-METRICS = "metrics.csv"
-CHECKPOINT = "checkpoint.pt"
-MARKERS = (RESULTS, METRICS, CHECKPOINT)
-"""Files any of which makes a folder a run dir (emml/rl/trainer.py writes them)."""
+from emml.runs import CHECKPOINT, METRICS, RESULTS, RUN_FILES, RunDirError, read_results
+
+MARKERS = RUN_FILES
+"""Files any of which makes a folder a run dir (emml/runs.py)."""
 HEADER = "step,key,value"
 IMPORTED_FROM = "emml.imported_from"
 """Tag of an imported run: its run dir, relative to the project root when under it."""
 NOT_TAGS = ("run_name", "run_id", "metrics", "config")
 """results.json keys that are not tags: the run name, the id (tag ``IMPORTED_RUN_ID``), the score and config."""
 
-
-class RunDirError(ValueError):
-    """A run dir whose results.json or metrics.csv cannot be imported (the message names the file)."""
 
 
 @dataclass
@@ -78,20 +73,6 @@ def run_dirs(paths: Iterable[Path]) -> list[Path]:
         elif p.is_dir():
             found.update(f.parent for m in MARKERS for f in p.rglob(m))
     return sorted(found)
-
-
-def read_results(path: Path) -> dict:
-    """A run's results.json; RunDirError naming the file unless it is a JSON object with 'run_id' and 'table'."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except json.JSONDecodeError as e:
-        raise RunDirError(f"{path}: not JSON ({e.msg}, line {e.lineno} column {e.colno})") from None
-    if not isinstance(data, dict):
-        raise RunDirError(f"{path}: not a JSON object")
-    missing = [k for k in ("run_id", "table") if not data.get(k)]
-    if missing:
-        raise RunDirError(f"{path}: no {' and no '.join(map(repr, missing))}")
-    return data
 
 
 def read_points(path: Path) -> list[tuple[int, str, float]]:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from emml.registry import RunSpec, load_table
+from emml.runs import run_name
 from emml.tracking import project_path
 
 BACKENDS = ("local", "slurm")
@@ -74,7 +75,7 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
 
     from emml.profiles import profile_seeds
     from emml.results import read_results
-    from emml.rl.trainer import CHECKPOINT, RESULTS, results_csv, run_dir
+    from emml.runs import CHECKPOINT, RESULTS, results_csv, run_dir
 
     table = load_table(name)
     fields = _roots(run_root, results_root)
@@ -93,7 +94,7 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
                 results = results[results[columns].notna().all(axis=1)] if complete else results.iloc[:0]
             recorded_in[csv] = set(results["run_name"])
         recorded = recorded_in[csv]
-        rname, rdir = cfg.run_name(), run_dir(cfg)
+        rname, rdir = run_name(cfg), run_dir(cfg)
         done = (rdir / CHECKPOINT).exists() and (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT)
         if rname in recorded:
             state = "finished" if done else "partial" if (rdir / CHECKPOINT).exists() else "reference"
@@ -147,7 +148,7 @@ def with_overrides(spec: RunSpec, overrides: dict, profile: str) -> RunSpec:
 
 
 def _finished(path: Path) -> bool:
-    from emml.rl.checkpoint import load_checkpoint
+    from emml.checkpoint import load_checkpoint
 
     try:
         return bool(load_checkpoint(path, require=()).get("finished"))
@@ -172,7 +173,7 @@ def _train_one(spec: RunSpec, profile: str, fields: dict, parent_run_id: str | N
         from emml.transfer import record_transfer
 
         record_transfer(cfg, spec.transfer.words, spec.instructions, spec.transfer.detector)
-    return cfg.run_name()
+    return run_name(cfg)
 
 
 def run_table(
@@ -228,9 +229,10 @@ def run_table(
     report.skipped = [rname for rname, (_, state) in states.items() if state == "finished"]
     if todo:  # each run's config, the store, the run and results folders, the results CSV: before the parent run
         from emml.preflight import check_train
+        from emml.rl.hardware import check_hardware
 
         roots = _roots(run_root, results_root)
-        check_train(*(spec.to_config(profile, **roots, device=device).validate() for spec in todo))
+        check_train(*(check_hardware(spec.to_config(profile, **roots, device=device).validate()) for spec in todo))
     log(f"{name} [{profile}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
     if not todo:
         return report

@@ -34,7 +34,7 @@ def check_train(*cfgs: TrainConfig, timeout: float = STORE_TIMEOUT_S) -> None:
     """Everything ``cfgs`` (validated) write to, before the first of them starts (`emml train`, `emml run`): the
     store once, then each run's directory, and each results folder and the results CSV its runs will upsert."""
     from emml.results import read_results
-    from emml.rl.trainer import results_csv, run_dir
+    from emml.runs import results_csv, run_dir
 
     check_store(timeout=timeout)
     for cfg in cfgs:

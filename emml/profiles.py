@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import os
 from pathlib import Path
 
 import tomllib
 
 from emml.config import TrainConfig, apply_overrides, match_env_class
+from emml.env_kinds import ENV_KINDS
 
 PROFILES_FILE = Path(__file__).resolve().parent.parent / "reproduce" / "profiles.toml"
+PROFILES_ENV = "EMML_PROFILES"
+"""Environment variable naming another profiles file (a researcher's own profiles; the tests' shorter smoke): the
+processes a command starts (one per run) read the same file."""
+
+
+def profiles_file() -> Path:
+    """The profiles file in force: $EMML_PROFILES when set, else reproduce/profiles.toml."""
+    return Path(os.environ.get(PROFILES_ENV) or PROFILES_FILE)
 
 
 class ProfileError(ValueError):
@@ -18,7 +29,24 @@ class ProfileError(ValueError):
 
 def load_profiles(path: Path | None = None) -> dict[str, dict]:
     """Every profile of the file, each checked against TrainConfig (names and types) before anything uses it."""
-    path = path or PROFILES_FILE
+    path = Path(path or profiles_file())
+    try:
+        stamp = path.stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    if stamp is not None and _LOADED.get(path, (None,))[0] == stamp:  # every run's name reads its profile
+        return copy.deepcopy(_LOADED[path][1])
+    profiles = _load_profiles(path)
+    if stamp is not None:
+        _LOADED[path] = (stamp, copy.deepcopy(profiles))
+    return profiles
+
+
+_LOADED: dict[Path, tuple[int, dict]] = {}
+"""Profiles files read and checked, by path: (modification time, profiles)."""
+
+
+def _load_profiles(path: Path) -> dict[str, dict]:
     try:
         with open(path, "rb") as f:
             profiles = tomllib.load(f)
@@ -53,11 +81,12 @@ def profile_config(profile: str, difficulty: str = "easy", overrides: dict | Non
     values = {k: v for k, v in profiles[profile].items() if k not in fields}  # the caller's fields win
     values.pop("seeds", None)
     hard_frames = values.pop("frames_hard", values.get("frames"))
-    if difficulty in ("hard", "house"):  # §5.1: 50M frames in Hard; Appendix C: 50M in the House
+    kind = ENV_KINDS.get(difficulty)  # an unknown difficulty fails in validate(), naming it
+    if kind is not None and kind.frames_key == "frames_hard":  # §5.1: 50M frames in Hard; Appendix C: in the House
         values["frames"] = hard_frames
     cfg = TrainConfig(profile=profile, **fields)
     cfg.env = match_env_class(dataclasses.replace(cfg.env, difficulty=difficulty))
-    apply_overrides(cfg, values, source=f"{PROFILES_FILE} [{profile}]")
+    apply_overrides(cfg, values, source=f"{profiles_file()} [{profile}]")
     apply_overrides(cfg, overrides or {})
     return cfg
 

@@ -4,7 +4,7 @@ A table file reads like the paper's table (Chaplot et al. 2019, arXiv:1902.01385
 model, optionally with config overrides), `[columns]` its columns (difficulties × aux × metrics). Each
 (row, difficulty, aux) is a *setting*; a setting is trained once per seed of the profile (reproduce/profiles.toml).
 A row with `metric_overrides` trains one setting per metric (Table 3's "DA Single-Task": SGN cells from SGN-only
-runs, EQA cells from EQA-only runs). Run names derive from the config (`TrainConfig.run_name`), and two runs of a
+runs, EQA cells from EQA-only runs). Run names derive from the config (`emml.runs.run_name`), and two runs of a
 table may not share one. A malformed file fails with the file, the key and what is wrong.
 """
 
@@ -16,12 +16,14 @@ from pathlib import Path
 import tomllib
 
 from emml.config import TrainConfig, apply_overrides
+from emml.env_kinds import ENV_KINDS
+from emml.runs import run_name
 
 REPRODUCE_DIR = Path(__file__).resolve().parent.parent / "reproduce"
 """reproduce/: profiles.toml, table*.toml and paper/table*.csv."""
 STATUSES = ("active", "placeholder")
-DIFFICULTIES = ("easy", "hard", "house")
-"""Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C)."""
+DIFFICULTIES = tuple(ENV_KINDS)
+"""Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C): emml/env_kinds.py."""
 METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
 """Results columns a cell may read (written by the trainer's greedy evaluation)."""
 TRANSFER_METRICS = ("sgn_transfer",)
@@ -91,7 +93,7 @@ class RunSpec:
         )
 
     def run_name(self, profile: str) -> str:
-        return self.to_config(profile).run_name()
+        return run_name(self.to_config(profile))
 
 
 @dataclass(frozen=True)
@@ -223,10 +225,31 @@ def list_tables(directory: Path = REPRODUCE_DIR) -> list[str]:
     return sorted(p.stem for p in directory.glob("table*.toml"))
 
 
+OWN_TABLES: dict[str, Path] = {}
+"""Tables of one's own loaded from a .toml path in this process (`load_table('./my_table.toml')`): name (the file's
+stem) -> file, so that loading them again by name (the launcher, reports) finds them."""
+
+
+def own_table(path: str | Path) -> str:
+    """The name of the table file at `path` (a researcher's own .toml, anywhere), remembered in `OWN_TABLES`."""
+    file = Path(path).expanduser().resolve()
+    if not file.is_file():
+        raise ValueError(f"table file {path}: no such file")
+    if file.suffix != ".toml":
+        raise ValueError(f"table file {path}: a table file ends in .toml")
+    if file.stem in list_tables() and file != table_path(file.stem).resolve():
+        raise ValueError(f"table file {path}: {file.stem!r} is a table of reproduce/; rename the file")
+    OWN_TABLES[file.stem] = file
+    return file.stem
+
+
 def load_table(name: str, path: Path | None = None) -> Table:
-    """Load and validate reproduce/<name>.toml (or `path`)."""
+    """Load and validate reproduce/<name>.toml (or `path`); `name` may also be the path of a .toml file of one's
+    own (its name is then the file's stem, `own_table`)."""
+    if path is None and name.endswith(".toml"):
+        name = own_table(name)
     if path is None:
-        path = table_path(name)
+        path = OWN_TABLES.get(name) or table_path(name)
         if not path.exists():
             raise ValueError(f"table={name!r} is unknown; choose one of {', '.join(map(repr, list_tables()))}")
     try:
@@ -259,10 +282,10 @@ def _section(path: Path, name: str, raw, keys: tuple[str, ...], required: tuple[
 
 def _model_name(path: Path, key: str, value) -> str:
     """A model registry name (`emml models`)."""
-    from emml.models import MODELS
+    from emml.models import MODELS, PLUGIN_HINT
 
     if value not in MODELS:
-        raise _err(path, key, f"unknown model {value!r}; known models: {', '.join(MODELS)}")
+        raise _err(path, key, f"unknown model {value!r}; known models: {', '.join(MODELS)}; {PLUGIN_HINT}")
     return value
 
 

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from emml.checkpoint import load_checkpoint
 from emml.config import TrainConfig
 from emml.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
-from emml.rl.checkpoint import load_checkpoint
-from emml.rl.trainer import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, save_results
 from emml.runlock import hold_run
+from emml.runs import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, run_name, save_results
 
 
 class NotFinished(ValueError):
@@ -60,7 +60,7 @@ def rescore(
     (0: its config's `final_eval_episodes`; a checkpoint from before the field reads its default) from episode seed
     ``seed``. Writes results.json atomically, then (``record``) upserts the row of its results table (the
     checkpoint's `results_root`, or ``results_root``). Nothing is written unless every score was measured."""
-    from emml.evaluate import evaluate_checkpoint
+    from emml.runs import evaluate_checkpoint
 
     rdir = Path(run) if Path(run).is_dir() else Path(run).parent
     if not (rdir / CHECKPOINT).is_file():
@@ -111,10 +111,10 @@ def training_record(rdir: Path, ckpt: dict, cfg: TrainConfig) -> dict:
         return payload
     table = results_csv(cfg)
     rows = read_results(table)
-    rows = rows[rows["run_name"] == cfg.run_name()]
+    rows = rows[rows["run_name"] == run_name(cfg)]
     if rows.empty:
         raise NoProvenance(
-            f"{rdir} has no {RESULTS} and {table} has no row {cfg.run_name()!r}: the training's provenance (its "
+            f"{rdir} has no {RESULTS} and {table} has no row {run_name(cfg)!r}: the training's provenance (its "
             "git sha) is unknown, so it is not re-scored"
         )
     row = rows.iloc[0].to_dict()

@@ -123,22 +123,15 @@ def evaluate_instructions(
 ) -> dict[str, float]:
     """Greedy success per instruction, ``episodes`` each (instruction i plays seeds seed + i·episodes + j)."""
     from emml.envs.doom import DoomEnv
-    from emml.evaluate import play
+    from emml.evaluate import play, playing
 
     instructions = list(instructions)
     plan = [
         (seed + i * episodes + j, {"sentence": text}) for i, text in enumerate(instructions) for j in range(episodes)
     ]
     cfg = dataclasses.replace(env_cfg, instructions=tuple(instructions))
-    was_training = model.training
-    model.eval()
-    envs = [DoomEnv(cfg) for _ in range(min(batch, len(plan)))]
-    try:
+    with playing(model, cfg, min(batch, len(plan)), make=DoomEnv) as envs:
         outcomes = play(model, envs, plan, device)
-    finally:
-        for env in envs:
-            env.close()
-        model.train(was_training)
     per = defaultdict(list)
     for (_, options), success in zip(plan, outcomes):
         per[options["sentence"]].append(success)
@@ -156,7 +149,7 @@ def transfer_checkpoint(
 ) -> dict[str, float]:
     """Table 4 on one checkpoint: append detectors for ``words`` and score each SGN test instruction holding a new
     word (or the given ``instructions``) over ``episodes`` greedy episodes, without fine-tuning."""
-    from emml.evaluate import load_model
+    from emml.runs import load_model
     from emml.tasks.language import load_dataset
 
     model, cfg = load_model(path, device)
@@ -183,7 +176,7 @@ def record_transfer(cfg, words, instructions, detector: str = "labels", seed: in
     there are not recomputed."""
     import json
 
-    from emml.rl.trainer import CHECKPOINT, RESULTS, record_result, run_dir, save_results
+    from emml.runs import CHECKPOINT, RESULTS, record_result, run_dir, save_results
 
     rdir = run_dir(cfg)
     payload = json.loads((rdir / RESULTS).read_text())

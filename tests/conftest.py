@@ -15,57 +15,86 @@ SMOKE = {"height": 60, "width": 108}
 """The smoke profile's input size: every code path, cheaply (conv3 grid 2×5)."""
 
 
+def _become_subreaper() -> None:
+    """Adopt the orphans of this session's descendants (Linux PR_SET_CHILD_SUBREAPER): an engine whose owner a test
+    killed stays ours, so `engine_pids` counts it, while another pytest session's or a background training's
+    engines, never ours, are not counted (two sessions may run side by side: pytest-xdist, or a helper's run)."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0)  # 36 = PR_SET_CHILD_SUBREAPER
+    except (OSError, AttributeError):
+        pass
+
+
+_become_subreaper()
+
+
+def _stat(pid: int) -> list[str]:
+    """The fields of /proc/PID/stat after the command name: state, ppid, ... (empty where gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return []
+
+
 def _ancestors(pid: int) -> set[int]:
     out = set()
     while pid > 1 and pid not in out:
         out.add(pid)
         try:
-            with open(f"/proc/{pid}/stat") as f:
-                pid = int(f.read().rsplit(")", 1)[1].split()[1])
-        except (OSError, ValueError, IndexError):
+            pid = int(_stat(pid)[1])
+        except (ValueError, IndexError):
             break
     return out
 
 
-def engine_pids() -> set[int]:
-    """Every running ViZDoom engine on the machine (tests run one at a time, so all of them are ours), except
-    those of an emml learner running beside the tests (a training in the background: its evaluations start
-    engines at any time). An orphaned engine (its owner gone) is always counted."""
-    from emml.rl.contention import other_learners
-
-    others = set(other_learners())
-    pids = set()
-    for comm in glob.glob("/proc/[0-9]*/comm"):
-        try:
-            with open(comm) as f:
-                if f.read().strip() == "vizdoom":
-                    pid = int(comm.split("/")[2])
-                    with open(f"/proc/{pid}/stat") as f:
-                        if f.read().rsplit(")", 1)[1].split()[0] != "Z" and not (others & _ancestors(pid)):
-                            pids.add(pid)
-        except (OSError, ValueError):
-            continue
-    return pids
-
-
-def shm_files() -> list[str]:
-    """Every engine's shared-memory file, except those of a learner's engines beside the tests (engine_pids)."""
-    from emml.rl.contention import other_learners
-
-    others, foreign = set(other_learners()), set()
+def _engines() -> dict[int, bool]:
+    """Every live ViZDoom engine on the machine -> whether it is this session's (a descendant of this process,
+    orphans included: `_become_subreaper`). This session's dead engines are reaped on the way."""
+    me, out = os.getpid(), {}
     for comm in glob.glob("/proc/[0-9]*/comm"):
         try:
             with open(comm) as f:
                 if f.read().strip() != "vizdoom":
                     continue
             pid = int(comm.split("/")[2])
-            if others & _ancestors(pid):
-                with open(f"/proc/{pid}/cmdline", "rb") as f:
-                    argv = f.read().decode(errors="replace").split("\0")
-                if "+viz_instance_id" in argv[:-1]:
-                    foreign.add(argv[argv.index("+viz_instance_id") + 1])
         except (OSError, ValueError):
             continue
+        stat = _stat(pid)
+        if not stat:
+            continue
+        if stat[0] in ("Z", "X"):
+            if stat[1] == str(me):  # an adopted orphan that exited: ours to reap (subprocess and multiprocessing
+                try:  # wait on the pids they started, never on an adopted one)
+                    os.waitpid(pid, os.WNOHANG)
+                except ChildProcessError:
+                    pass
+            continue
+        out[pid] = me in _ancestors(pid)
+    return out
+
+
+def engine_pids() -> set[int]:
+    """The running ViZDoom engines this test session started (its descendants' and their orphans): engines of a
+    training or another pytest session beside it are not counted."""
+    return {pid for pid, ours in _engines().items() if ours}
+
+
+def shm_files() -> list[str]:
+    """Every engine's shared-memory file, except those of live engines that are not this session's (`engine_pids`)."""
+    foreign = set()
+    for pid, ours in _engines().items():
+        if ours:
+            continue
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                argv = f.read().decode(errors="replace").split("\0")
+        except OSError:
+            continue
+        if "+viz_instance_id" in argv[:-1]:
+            foreign.add(argv[argv.index("+viz_instance_id") + 1])
     return [p for p in glob.glob("/dev/shm/ViZDoom*") if not any(i in p for i in foreign)]
 
 
@@ -84,7 +113,8 @@ def no_leftovers():
 
 
 def pytest_configure(config):
-    os.environ.setdefault("MLFLOW_TRACKING_URI", "sqlite:////tmp/emml-tests-mlflow.db")
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")  # one store per worker: sqlite takes one writer at a time
+    os.environ.setdefault("MLFLOW_TRACKING_URI", f"sqlite:////tmp/emml-tests-mlflow-{worker}.db")
 
 
 @pytest.fixture

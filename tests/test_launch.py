@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from emml.checkpoint import save_checkpoint
 from emml.launch import run_states, run_table
-from emml.rl.checkpoint import save_checkpoint
-from emml.rl.trainer import CHECKPOINT, RESULTS, record_result, run_dir
+from emml.runs import CHECKPOINT, RESULTS, record_result, run_dir, run_name
 from emml.tracking import Tracker, find_runs
 
 PROFILE = "smoke"  # one seed: table3 has 16 runs
@@ -19,11 +19,11 @@ def fake_train(cfg, quiet=False, parent_run_id=None):
     calls = Path(cfg.run_root) / "calls.txt"
     calls.parent.mkdir(parents=True, exist_ok=True)
     with open(calls, "a") as f:
-        f.write(f"{cfg.run_name()} {parent_run_id} {cfg.threads}\n")
+        f.write(f"{run_name(cfg)} {parent_run_id} {cfg.threads}\n")
     if cfg.model == "da_no_ga1" and cfg.aux:
         raise RuntimeError("boom")
     payload = {
-        "run_name": cfg.run_name(),
+        "run_name": run_name(cfg),
         "table": cfg.table,
         "frames": cfg.frames,
         "seed": cfg.seed,

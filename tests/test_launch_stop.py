@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from emml.runs import run_name
+
 LAUNCH = textwrap.dedent(
     """
     import json, sys
@@ -30,12 +32,12 @@ def slow_train(cfg, quiet=False, parent_run_id=None):
     log = Path(cfg.run_root) / "log.txt"
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "a") as f:
-        f.write(f"start {cfg.run_name()}\n")
+        f.write(f"start {run_name(cfg)}\n")
     try:
         time.sleep(60)
     except BaseException as e:
         with open(log, "a") as f:
-            f.write(f"stopped {cfg.run_name()} {type(e).__name__}\n")
+            f.write(f"stopped {run_name(cfg)} {type(e).__name__}\n")
         raise
 
 

@@ -6,6 +6,7 @@ from typer.testing import CliRunner
 import emml.profiles
 from emml.cli import app
 from emml.profiles import PROFILES_FILE, ProfileError, load_profiles, profile_config
+from emml.runs import run_name
 
 
 def test_the_committed_profiles_load_and_keep_their_types():
@@ -73,7 +74,7 @@ def test_the_house_gets_its_own_env_config_from_a_profile_a_set_and_a_saved_run(
     cfg = profile_config("quick", "house")  # Appendix C: 50M frames at the paper profile, as in Hard
     assert isinstance(cfg.env, HouseConfig) and cfg.frames == profiles["quick"]["frames_hard"]
     assert cfg.env.max_steps == 420 and cfg.env.dataset == "house" and cfg.env.height == 84
-    assert cfg.run_name() == "dual_attention-house-noaux-s0-quick"
+    assert run_name(cfg) == "dual_attention-house-noaux-s0-quick"
     back = TrainConfig.from_dict(cfg.to_dict())
     assert isinstance(back.env, HouseConfig) and back.to_dict() == cfg.to_dict()
     # --set env.difficulty switches the class; fields set away from their defaults survive, the rest are the House's
@@ -91,14 +92,14 @@ def test_a_model_option_is_set_from_the_command_line_and_recorded():
     cfg = apply_overrides(TrainConfig(), {"model_options.state_temperature": 0.25}).validate()
     assert cfg.model_options == {"state_temperature": 0.25}
     assert TrainConfig.from_dict(cfg.to_dict()).model_options == {"state_temperature": 0.25}  # saved with the run
-    assert cfg.run_name() == "dual_attention-easy-noaux-xs0.25-s0-paper"  # beside the default run, not over it
-    assert TrainConfig().run_name() == "dual_attention-easy-noaux-s0-paper"
+    assert run_name(cfg) == "dual_attention-easy-noaux-xs0.25-s0-paper"  # beside the default run, not over it
+    assert run_name(TrainConfig()) == "dual_attention-easy-noaux-s0-paper"
 
 
 def test_a_bf16_run_is_named_apart_from_its_fp32_run():
     from emml.config import TrainConfig, apply_overrides
 
-    assert apply_overrides(TrainConfig(), {"precision": "bf16"}).run_name() == "dual_attention-easy-noaux-bf16-s0-paper"
+    assert run_name(apply_overrides(TrainConfig(), {"precision": "bf16"})) == "dual_attention-easy-noaux-bf16-s0-paper"
 
 
 def test_the_callers_fields_win_over_the_profile_and_smoke_writes_under_scratch(tmp_path):

@@ -8,6 +8,7 @@ import pytest
 
 from emml.registry import REPRODUCE_DIR, list_tables, load_table
 from emml.report.tables import paper_numbers
+from emml.runs import run_name
 
 SEEDS = [0, 1, 2]
 
@@ -81,7 +82,7 @@ def test_run_spec_takes_seeds_and_size_from_the_profile():
     spec = load_table("table2").runs([7])[-1]  # Dual-Attention, Hard, Aux
     cfg = spec.to_config("paper")
     assert (cfg.seed, cfg.aux, cfg.env.difficulty, cfg.frames, cfg.profile) == (7, True, "hard", 50_000_000, "paper")
-    assert cfg.run_name() == "dual_attention-hard-aux-s7-paper"
+    assert run_name(cfg) == "dual_attention-hard-aux-s7-paper"
 
 
 def _write(tmp_path: Path, text: str) -> Path:
@@ -147,9 +148,13 @@ def test_invalid_toml_syntax_names_file(tmp_path):
 
 
 def test_rows_colliding_on_run_name_are_rejected(tmp_path):
-    extra = '\n[[rows]]\nlabel = "DA lr"\nmodel = "dual_attention"\noverrides = { "ppo.lr" = 0.1 }\n'
+    """Rows that differ only in how their runs run (threads) are one run; another learning rate is another run
+    (its name says it: emml/runs.py)."""
+    extra = '\n[[rows]]\nlabel = "DA {}"\nmodel = "dual_attention"\noverrides = {{ {} }}\n'
     with pytest.raises(ValueError, match="same run name"):
-        load_table("tableX", _write(tmp_path, GOOD + extra))
+        load_table("tableX", _write(tmp_path, GOOD + extra.format("threads", '"threads" = 1')))
+    table = load_table("tableX", _write(tmp_path, GOOD + extra.format("lr", '"ppo.lr" = 0.1')))
+    assert any(spec.run_name("smoke").endswith("+ppo.lr=0.1") for spec in table.runs([0]))
 
 
 def test_placeholder_declares_no_runs(tmp_path):

@@ -163,17 +163,30 @@ def test_a_broken_table4_names_the_key(tmp_path, old, new, key, message):
 
 
 def _small_train(cfg, **kwargs):
-    """The trainer on a smaller smoke run: 64 frames, 12-step episodes, one episode per evaluated instruction."""
+    """The trainer on a smaller smoke run: 64 frames, one episode per evaluated instruction (12-step episodes:
+    `_short_episodes`)."""
     from emml.config import apply_overrides
     from emml.rl.trainer import train
 
-    small = apply_overrides(cfg, {"frames": 64, "env.max_steps": 12, "diagnose_episodes": 0, "eval_episodes": 1})
+    small = apply_overrides(cfg, {"frames": 64, "diagnose_episodes": 0, "eval_episodes": 1})
     return train(small, **kwargs)
 
 
-def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, no_leftovers):
+def _short_episodes(monkeypatch, tmp_path) -> None:
+    """The smoke profile with 12-step episodes: an episode's length is part of a run's identity (its name), so
+    the training runs and the report that looks them up must both see it."""
+    import emml.profiles
+
+    text = emml.profiles.PROFILES_FILE.read_text()
+    path = tmp_path / "profiles.toml"
+    path.write_text(text.replace('[smoke]\n', '[smoke]\n"env.max_steps" = 12\n', 1))
+    monkeypatch.setenv(emml.profiles.PROFILES_ENV, str(path))  # the launcher's run processes too
+
+
+def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no_leftovers):
     """`emml run table4 --profile smoke` end to end: two training runs, each scored on the 28 test instructions
     after the surgery; the report fills all 15 rows for Easy and Hard; a second launch redoes nothing."""
+    _short_episodes(monkeypatch, tmp_path)
     from emml import transfer
     from emml.launch import run_table
     from emml.report.tables import EXTRA_MARK, report_table

@@ -67,6 +67,9 @@ class DoomEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 35 / 5}
     objects_info = False
     """Ask the engine for every actor's position (``state.objects``): off for speed; tests turn it on."""
+    shaped_tasks: tuple[str, ...] = ("sgn",)
+    """The tasks whose reward is shaped by the decrease in `_target_distance` (when `shaping` is on): SGN only in
+    Doom (§5.1; docs/fidelity.md 'Shaping')."""
 
     def __init__(self, config: DoomConfig | None = None, render_mode: str | None = None, **kwargs):
         cfg = config if config is not None else config_from_dict(DoomConfig, kwargs)
@@ -176,7 +179,7 @@ class DoomEnv(gym.Env):
     # --- episode --------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """A new episode. ``options={"sentence": text}`` plays that instruction or question (one of this env's
-        sentences) instead of drawing one; the scene is drawn as usual."""
+        sentences) instead of drawing one; the scene is drawn as usual (`_draw_scene`)."""
         super().reset(seed=seed)
         rng = self.np_random
         unknown = sorted(set(options or {}) - {"sentence"})
@@ -184,43 +187,34 @@ class DoomEnv(gym.Env):
             raise ValueError(f"reset options {unknown} are unknown; allowed: 'sentence'")
         if options and options.get("sentence") is not None:
             sentence = self._chosen(options["sentence"])
-            kind = sentence.kind
         else:
             kinds = tuple(self.sentences)
             kind = kinds[int(rng.integers(len(kinds)))]  # 50/50 when both tasks are on
             pool = self.sentences[kind]
             sentence = pool[int(rng.integers(len(pool)))]  # uniform in the split
-        self.episode = sample_episode(sentence, self.dataset, rng)
-        if self.cfg.difficulty == "easy":
-            ax, ay, angle = EASY_START
-            self.positions = list(EASY_SLOTS)
-        else:
-            pts = sample_positions(rng, 6)
-            (ax, ay), self.positions = pts[0], pts[1:]
-            angle = int(rng.choice([0, 90, 180, 270]))
+        doom_map, (ax, ay, angle) = self._draw_scene(sentence, rng)
         game = self._game()
         if seed is not None:
             game.set_seed(int(seed) & 0xFFFFFFFF)  # engine-side randomness (animations) follows the seed too
-        wanted = map_name(angle)
-        if wanted != self._map:
-            game.set_doom_map(wanted)
-            self._map = wanted
+        if doom_map != self._map:
+            game.set_doom_map(doom_map)
+            self._map = doom_map
         self._call(game.new_episode)
         c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
         for name, (x, y) in zip(self.episode.scene, self.positions):
-            actor = ACTORS[name]
-            ahead = 2 * actor.radius + PLAYER_RADIUS  # where summon puts it, ahead of the player
+            radius, spawn_class = self._actor(name)
+            ahead = 2 * radius + PLAYER_RADIUS  # where summon puts it, ahead of the player
             game.send_game_command(f"warp {round(x - ahead * c)} {round(y - ahead * s)}")
-            game.send_game_command(f"summon {actor.spawn_class}")
+            game.send_game_command(f"summon {spawn_class}")
         game.send_game_command(f"warp {ax} {ay}")
         self._call(game.advance_action, 1)  # the commands run in this one tic
         self.t = 0
         self.ended = False
         self.tokens = np.array(self.vocab.encode(sentence.text, self.cfg.max_words), dtype=np.int64)
-        self.task_id = TASKS.index(kind)
+        self.task_id = TASKS.index(sentence.kind)
         self.answer_id = self.vocab.index(self.episode.answer) if self.episode.answer else -1
         self._read_state()
-        self._dist = self._distances()[self.episode.target]
+        self._dist = self._target_distance()
         return self._obs(), self._info(False)
 
     def _chosen(self, text: str):
@@ -256,21 +250,52 @@ class DoomEnv(gym.Env):
             buttons = {FORWARD: [1, 0], LEFT: [0, -self._turn], RIGHT: [0, self._turn], ANSWER: [0, 0]}[move]
             self._call(game.make_action, buttons, cfg.frame_skip)  # SGN: 'answer' is a no-op step
             self._read_state()
-            dists = self._distances()
-            if self.task_id == 0:
-                d = dists[self.episode.target]
+            if TASKS[self.task_id] in self.shaped_tasks:
+                d = self._target_distance()
                 if cfg.shaping:
                     reward += cfg.shaping_coef * (self._dist - d)
                 self._dist = d
-                nearest = int(np.argmin(dists))
-                if dists[nearest] <= cfg.reach_distance:  # SGN ends at any object
-                    terminated = True
-                    success = nearest == self.episode.target
-                    reward += cfg.success_reward if success else cfg.wrong_reward
+            if self.task_id == 0 and (reached := self._reached()) is not None:  # SGN ends at any object
+                terminated = True
+                success = reached
+                reward += cfg.success_reward if success else cfg.wrong_reward
         self.t += 1
         truncated = not terminated and self.t >= cfg.max_steps
         self.ended = terminated or truncated
         return self._obs(), float(reward), terminated, truncated, self._info(success)
+
+    # --- what an env kind overrides (the House: emml/envs/house.py) -------------------------------------------
+    def _draw_scene(self, sentence, rng: np.random.Generator) -> tuple[str, tuple[int, int, int]]:
+        """Draw the episode of ``sentence`` (sets `episode` and `positions`, the actors' points in scene order):
+        returns the map to play and the agent's start (x, y, angle°). Easy: the fixed start and slots; Hard:
+        random points and one of four directions (§4 'Environments')."""
+        self.episode = sample_episode(sentence, self.dataset, rng)
+        if self.cfg.difficulty == "easy":
+            start = EASY_START
+            self.positions = list(EASY_SLOTS)
+        else:
+            pts = sample_positions(rng, 6)
+            (ax, ay), self.positions = pts[0], pts[1:]
+            start = (ax, ay, int(rng.choice([0, 90, 180, 270])))
+        return map_name(start[2]), start
+
+    def _actor(self, name: str) -> tuple[float, str]:
+        """(collision radius, spawn class) of the scene's actor ``name``: what `summon` places at its point."""
+        actor = ACTORS[name]
+        return actor.radius, actor.spawn_class
+
+    def _target_distance(self) -> float:
+        """The distance whose decrease shapes the reward: straight-line, agent to the target's centre (§5.1)."""
+        return self._distances()[self.episode.target]
+
+    def _reached(self) -> bool | None:
+        """SGN's reach test: None while no object is within `reach_distance` (centre distance); else whether the
+        nearest one is the target."""
+        dists = self._distances()
+        nearest = int(np.argmin(dists))
+        if dists[nearest] <= self.cfg.reach_distance:
+            return nearest == self.episode.target
+        return None
 
     # --- observation ------------------------------------------------------------------------------------------
     def _read_state(self):

@@ -12,13 +12,10 @@ doorways: emml/envs/navigation.py). SGN ends at any object, EQA at any answer; 4
 
 from __future__ import annotations
 
-import math
-
-import gymnasium as gym
 import numpy as np
 
 from emml.config import HouseConfig, config_from_dict
-from emml.envs.doom import ANSWER, FORWARD, LEFT, MOVES, RIGHT, TASKS, DoomEnv
+from emml.envs.doom import ANSWER, FORWARD, LEFT, MOVES, RIGHT, DoomEnv
 from emml.envs.furniture import CLASS_TO_ACTOR, FURNITURE, spawn_class
 from emml.envs.house_wad import HOUSE, MAP, wad_path
 from emml.envs.navigation import PLAYER_RADIUS, distance_at, shaping_fields, shaping_grid
@@ -33,6 +30,8 @@ class HouseEnv(DoomEnv):
 
     house = HOUSE
     """The fixed house (rooms, doorways, furniture slots, spawn)."""
+    shaped_tasks = ("sgn", "eqa")
+    """Appendix C: shaping by the decrease in path distance to the referent in SGN and EQA episodes alike."""
 
     def __init__(self, config: HouseConfig | None = None, render_mode: str | None = None, **kwargs):
         cfg = config if config is not None else config_from_dict(HouseConfig, kwargs)
@@ -54,88 +53,29 @@ class HouseEnv(DoomEnv):
     def _scenario(self):
         return wad_path(self.house), MAP
 
-    # --- episode --------------------------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """A new episode. ``options={"sentence": text}`` plays that instruction or question (one of this env's
-        sentences) instead of drawing one; the colours are drawn as usual."""
-        gym.Env.reset(self, seed=seed)
-        rng = self.np_random
-        unknown = sorted(set(options or {}) - {"sentence"})
-        if unknown:
-            raise ValueError(f"reset options {unknown} are unknown; allowed: 'sentence'")
-        if options and options.get("sentence") is not None:
-            sentence = self._chosen(options["sentence"])
-        else:
-            kinds = tuple(self.sentences)
-            kind = kinds[int(rng.integers(len(kinds)))]  # 50/50 when both tasks are on
-            pool = self.sentences[kind]
-            sentence = pool[int(rng.integers(len(pool)))]  # uniform in the split
+    # --- what the House overrides of DoomEnv: the scene, the distance, the reach test ------------------------
+    def _draw_scene(self, sentence, rng: np.random.Generator) -> tuple[str, tuple[int, int, int]]:
+        """Colours drawn so that the sentence has one referent or one answer (Appendix C, `sample_colours`); the
+        furniture stays at its slots and the agent at the fixed spawn."""
         self.episode = sample_colours(sentence, self.dataset, self.slot_objects, rng)
         self.targets = tuple(referents(sentence, self.episode.scene, self.dataset))
-        game = self._game()
-        if seed is not None:
-            game.set_seed(int(seed) & 0xFFFFFFFF)
-        if self._map != MAP:
-            game.set_doom_map(MAP)
-            self._map = MAP
-        self._call(game.new_episode)
-        ax, ay, angle = self.house.spawn
-        c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-        for name, slot in zip(self.episode.scene, self.house.slots):
-            actor = self.dataset.actors[name]
-            ahead = 2 * FURNITURE[actor.object].radius + PLAYER_RADIUS  # where summon puts it, ahead of the player
-            game.send_game_command(f"warp {round(slot.x - ahead * c)} {round(slot.y - ahead * s)}")
-            game.send_game_command(f"summon {spawn_class(actor.object, actor.color)}")
-        game.send_game_command(f"warp {ax} {ay}")
-        self._call(game.advance_action, 1)  # the commands run in this one tic
-        self.t = 0
-        self.ended = False
-        self.tokens = np.array(self.vocab.encode(sentence.text, self.cfg.max_words), dtype=np.int64)
-        self.task_id = TASKS.index(sentence.kind)
-        self.answer_id = self.vocab.index(self.episode.answer) if self.episode.answer else -1
-        self._read_state()
-        self._dist = self.target_distance()
-        return self._obs(), self._info(False)
+        return MAP, self.house.spawn
 
-    def step(self, action):
-        if self._engine is None and self.episode is not None:
-            raise RuntimeError("step() after close(): this env is closed; make a new one")
-        if self.episode is None:
-            raise RuntimeError("call reset() before step()")
-        if self.ended:
-            raise RuntimeError("step() after the episode ended (terminated or truncated): call reset() first")
-        arr = np.asarray(action)
-        if not self.action_space.contains(arr):
-            raise ValueError(
-                f"action {action!r}: expected two integers [move, word], move in 0..{len(MOVES) - 1} "
-                f"({', '.join(MOVES)}) and word in 0..{len(self.vocab) - 1} (a vocabulary index, read on 'answer')"
-            )
-        move, word = int(arr[0]), int(arr[1])
-        cfg, game = self.cfg, self._engine.game
-        reward, terminated, success = cfg.step_reward, False, False
-        if move == ANSWER and self.task_id == 1:  # EQA: any answer ends the episode
-            terminated = True
-            success = word == self.answer_id
-            reward += cfg.success_reward if success else cfg.wrong_reward
-        else:
-            buttons = {FORWARD: [1, 0], LEFT: [0, -self._turn], RIGHT: [0, self._turn], ANSWER: [0, 0]}[move]
-            self._call(game.make_action, buttons, cfg.frame_skip)  # SGN: 'answer' is a no-op step
-            self._read_state()
-            d = self.target_distance()
-            if cfg.shaping:  # Appendix C: shaping in SGN and EQA episodes alike
-                reward += cfg.shaping_coef * (self._dist - d)
-            self._dist = d
-            if self.task_id == 0:
-                gaps = self.gaps()
-                nearest = int(np.argmin(gaps))
-                if gaps[nearest] <= cfg.reach_distance:  # SGN ends at any object
-                    terminated = True
-                    success = nearest in self.targets
-                    reward += cfg.success_reward if success else cfg.wrong_reward
-        self.t += 1
-        truncated = not terminated and self.t >= cfg.max_steps
-        self.ended = terminated or truncated
-        return self._obs(), float(reward), terminated, truncated, self._info(success)
+    def _actor(self, name: str) -> tuple[float, str]:
+        actor = self.dataset.actors[name]
+        return FURNITURE[actor.object].radius, spawn_class(actor.object, actor.color)
+
+    def _target_distance(self) -> float:
+        return self.target_distance()
+
+    def _reached(self) -> bool | None:
+        """SGN's reach test on the collision boxes (`gaps`, HouseConfig.reach_distance): None while no piece is
+        in reach; else whether the nearest is a referent (either sofa of a sentence naming both)."""
+        gaps = self.gaps()
+        nearest = int(np.argmin(gaps))
+        if gaps[nearest] <= self.cfg.reach_distance:
+            return nearest in self.targets
+        return None
 
     # --- geometry -------------------------------------------------------------------------------------------
     def gaps(self) -> np.ndarray:

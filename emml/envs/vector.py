@@ -17,11 +17,12 @@ from dataclasses import asdict
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 from gymnasium.vector.async_vector_env import AsyncState
 from gymnasium.vector.utils import iterate
 
-from emml.config import DoomConfig
+from emml.config import DoomConfig, env_config_class
 from emml.envs.engine import (
     EngineError,
     RestartBudget,
@@ -77,18 +78,17 @@ class RestartingEnv(gym.Wrapper):
 
 
 def make_env(config: DoomConfig | dict) -> gym.Env:
-    """The env a config describes: a HouseEnv for difficulty 'house' (HouseConfig), else a DoomEnv."""
-    from emml.config import env_config_class
-
+    """The env a config describes: the config class of its difficulty's env kind (emml/env_kinds.py), and the env
+    class that config's gym id is registered with (a HouseEnv for 'house', HouseConfig; else a DoomEnv)."""
     values = asdict(config) if not isinstance(config, dict) else config
     cls = env_config_class(values.get("difficulty", "easy"))
-    if cls is not DoomConfig:
-        from emml.envs.house import HouseEnv
+    return env_class(cls.GYM_ID)(cls(**values))
 
-        return HouseEnv(cls(**values))
-    from emml.envs.doom import DoomEnv
 
-    return DoomEnv(DoomConfig(**values))
+def env_class(gym_id: str) -> type[gym.Env]:
+    """The class ``gym_id`` is registered with (`import emml` registers the ids of emml/env_kinds.py), imported
+    only now: a worker imports the one env it plays."""
+    return load_env_creator(gym.spec(gym_id).entry_point)
 
 
 def _make_env(config: dict, max_restarts: int, window: int):

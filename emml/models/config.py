@@ -9,16 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-ARCHITECTURES: tuple[str, ...] = (
-    "text_only",
-    "image_only",
-    "concat",
-    "ga",
-    "film",
-    "pacman",
-    "dual_attention",
-)
-"""Fusion architectures a `ModelConfig.name` may name (ablations are switches)."""
+from emml.models.registry import ARCHITECTURES, PLUGIN_HINT, architecture
 
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
@@ -31,7 +22,8 @@ class ModelConfig:
     """Hyperparameters of one model; every model shares encoders and policy."""
 
     name: str = "dual_attention"
-    """Fusion architecture, one of `ARCHITECTURES` (ablations use the switches below)."""
+    """Fusion architecture, one of `ARCHITECTURES`: a fusion class of the model registry, emml/models/registry.py
+    (ablations use the switches below)."""
     embed_dim: int = 32
     """Word-embedding size (paper appendix: 32)."""
     gru_text: int = 32
@@ -73,7 +65,9 @@ class ModelConfig:
     def validate(self) -> ModelConfig:
         """Raise `ValueError` naming the offending field; return self when valid."""
         if self.name not in ARCHITECTURES:
-            raise ValueError(f"ModelConfig.name={self.name!r} is unknown; known names: " + ", ".join(ARCHITECTURES))
+            raise ValueError(
+                f"ModelConfig.name={self.name!r} is unknown; known names: {', '.join(ARCHITECTURES)}; {PLUGIN_HINT}"
+            )
         for field in ("embed_dim", "gru_text", "hidden", "time_dim", "pacman_frames"):
             value = getattr(self, field)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -100,11 +94,11 @@ class ModelConfig:
             value = getattr(self, field)
             if not isinstance(value, bool):
                 raise ValueError(f"ModelConfig.{field}={value!r} must be True or False")
-        if self.name != "dual_attention":
-            for field in ("spatial_attention", "ga1", "ga2"):
-                if not getattr(self, field):
-                    raise ValueError(
-                        f"ModelConfig.{field}=False is only allowed for "
-                        f"name='dual_attention' (got name={self.name!r}); allowed: True"
-                    )
+        for field in ("spatial_attention", "ga1", "ga2"):  # the ablations (§4) a fusion declares it reads
+            if not getattr(self, field) and field not in architecture(self.name).ablations:
+                readers = [a for a in ARCHITECTURES if field in architecture(a).ablations]
+                raise ValueError(
+                    f"ModelConfig.{field}=False is only allowed for "
+                    f"name={' or '.join(map(repr, readers))} (got name={self.name!r}); allowed: True"
+                )
         return self

@@ -10,6 +10,9 @@ representation x_S and answer logits (x_Ans = softmax(answer logits)):
 * `TextOnly`, `ImageOnly`, `Concat`, `GatedAttention`, `FiLM` -- appendix
   "Baseline details"; their answer head is x_Ans = softmax(ReLU(Linear(x_S))).
 * `Pacman` -- QA attention of Das et al. 2018 over the last K frames.
+
+Each is a `Fusion`: what it needs (x_BoW, x_sent, a window of K frames, ablation switches) is declared as class
+attributes, which the model registry (emml/models/registry.py) and `EmmlModel` read.
 """
 
 from __future__ import annotations
@@ -32,6 +35,38 @@ class FusionOutput:
     """(N, h, w) spatial attention map x_spat (Dual-Attention only), else None."""
 
 
+class Fusion(nn.Module):
+    """A fusion unit: (x_I, x_BoW, x_sent) -> `FusionOutput`. Subclass it for a model of your own (README, "Compare
+    your own model") and register it (`emml.models.register_model`). What it needs is declared by the class
+    attributes below; `EmmlModel` reads them, never the class's identity."""
+
+    uses_bow: bool = False
+    """Reads x_BoW (N, V), the bag of words (the text encoder computes it either way)."""
+    uses_sent: bool = False
+    """Reads x_sent (N, V): the text encoder builds its sentence GRU only then; otherwise the fusion gets None."""
+    frame_window: str | None = None
+    """The `ModelConfig` field holding K when the unit reads the last K frames (PACMAN: 'pacman_frames'): it is then
+    called with x_I of (N, K, V, h, w), oldest first, and `EmmlModel` carries the window across steps; None: the
+    current frame's x_I (N, V, h, w)."""
+    ablations: tuple[str, ...] = ()
+    """The `ModelConfig` ablation switches (spatial_attention, ga1, ga2) this unit reads; under any other unit they
+    must stay True (`ModelConfig.validate`)."""
+    state_dim: int
+    """D, the size of x_S (N, D) it hands the policy module (set by ``__init__``)."""
+
+    @classmethod
+    def from_config(cls, cfg, vocab_size: int, height: int, width: int) -> Fusion:
+        """The unit for a V-word vocabulary and a conv3 grid of (height, width) = (h, w), under `ModelConfig` cfg;
+        by default ``cls(vocab_size, height, width)`` (no switch read)."""
+        return cls(vocab_size, height, width)
+
+    @classmethod
+    def state_formula(cls, cfg) -> str:
+        """x_S as the code computes it under `cfg`, for `emml models` (it fills '{x_S}' in a registry entry's
+        description); '' when the description says it."""
+        return ""
+
+
 def gated_attention(y_image: Tensor, y_text: Tensor) -> Tensor:
     """f_GA(y_I, y_T) = M_{y_T} ⊙ y_I: scale channel i of (N, d, h, w) by y_T[:, i]."""
     return y_image * y_text[:, :, None, None]
@@ -42,7 +77,7 @@ def spatial_attention(y_image: Tensor, y_spat: Tensor) -> Tensor:
     return y_image * y_spat[:, None, :, :]
 
 
-class DualAttention(nn.Module):
+class DualAttention(Fusion):
     """The Dual-Attention unit f_DA (Section 3.1, Eq. 1-5); parameter-free.
 
     Full unit::
@@ -67,6 +102,8 @@ class DualAttention(nn.Module):
     * w/o task indicator is a policy-module switch, not part of this unit.
     """
 
+    ablations = ("spatial_attention", "ga1", "ga2")
+
     def __init__(
         self,
         vocab_size: int,
@@ -85,6 +122,28 @@ class DualAttention(nn.Module):
         self.uses_bow = ga1
         self.uses_sent = ga2
         self.state_dim = height * width if spatial else vocab_size * height * width
+
+    @classmethod
+    def from_config(cls, cfg, vocab_size: int, height: int, width: int) -> DualAttention:
+        return cls(
+            vocab_size,
+            height,
+            width,
+            ga1=cfg.ga1,
+            ga2=cfg.ga2,
+            spatial=cfg.spatial_attention,
+            state_scale=cfg.state_scale,
+            state_temperature=cfg.state_temperature,
+        )
+
+    @classmethod
+    def state_formula(cls, cfg) -> str:
+        """The paper's vec(x_spat) (the text after Eq. 5), times h·w under `state_scale` (the default), a sharper
+        gradient-stopped copy of the map under `state_temperature`; vec(x_GA1) without spatial attention."""
+        if not cfg.spatial_attention:
+            return "x_S = vec(x_GA1)"
+        read = "vec(x_spat)" if cfg.state_temperature is None else f"softmax(scores / {cfg.state_temperature:g})"
+        return f"x_S = h·w·{read}" if cfg.state_scale else f"x_S = {read}"
 
     def forward(
         self, x_image: Tensor, x_bow: Tensor | None, x_sent: Tensor | None, x_extra: Tensor | None = None
@@ -132,11 +191,8 @@ class AnswerHead(nn.Module):
         return torch.relu(self.linear(state))
 
 
-class _Baseline(nn.Module):
+class _Baseline(Fusion):
     """Shared plumbing: subclasses define `state()`, the head is `AnswerHead`."""
-
-    uses_bow = False
-    uses_sent = False
 
     def __init__(self, vocab_size: int, state_dim: int) -> None:
         super().__init__()
@@ -218,7 +274,7 @@ class FiLM(_Baseline):
         return (gamma * x_image + beta).flatten(1)
 
 
-class Pacman(nn.Module):
+class Pacman(Fusion):
     """PACMAN QA attention (Das et al. 2018), adapted as in the appendix.
 
     Input: x_I of the last K frames (N, K, V, h, w), oldest first, and x_sent.
@@ -231,8 +287,8 @@ class Pacman(nn.Module):
     * answer logits = Linear([sum_k a_k proj_k, x_sent] -> V) (softmax classifier).
     """
 
-    uses_bow = False
     uses_sent = True
+    frame_window = "pacman_frames"
 
     def __init__(self, vocab_size: int, height: int, width: int) -> None:
         super().__init__()
@@ -252,32 +308,3 @@ class Pacman(nn.Module):
         attended = torch.einsum("nk,nkv->nv", weights, proj)
         answer_logits = self.classifier(torch.cat([attended, x_sent], dim=1))
         return FusionOutput(state=state, answer_logits=answer_logits)
-
-
-BASELINES: dict[str, type[nn.Module]] = {
-    "text_only": TextOnly,
-    "image_only": ImageOnly,
-    "concat": Concat,
-    "ga": GatedAttention,
-    "film": FiLM,
-    "pacman": Pacman,
-}
-
-
-def build_fusion(cfg, vocab_size: int, height: int, width: int) -> nn.Module:
-    """Fusion unit named by `cfg.name` for a conv3 grid of (height, width) = (h, w)."""
-    if cfg.name == "dual_attention":
-        return DualAttention(
-            vocab_size,
-            height,
-            width,
-            ga1=cfg.ga1,
-            ga2=cfg.ga2,
-            spatial=cfg.spatial_attention,
-            state_scale=cfg.state_scale,
-            state_temperature=cfg.state_temperature,
-        )
-    if cfg.name in BASELINES:
-        return BASELINES[cfg.name](vocab_size, height, width)
-    known = ", ".join(["dual_attention", *BASELINES])
-    raise ValueError(f"unknown fusion name={cfg.name!r}; known names: {known}")

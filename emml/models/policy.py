@@ -17,8 +17,9 @@ from torch import Tensor, nn
 
 from emml.models.config import LABEL_CONTROLS, ModelConfig
 from emml.models.encoders import ImageEncoder, TextEncoder, conv_output_size
-from emml.models.fusion import FusionOutput, Pacman, build_fusion
+from emml.models.fusion import FusionOutput
 from emml.models.gru import gru_cell, gru_sequence
+from emml.models.registry import build_fusion
 
 NUM_ACTIONS = 4
 """Navigation actions (the harness's action set size)."""
@@ -154,9 +155,12 @@ class EmmlModel(nn.Module):
     ``forward`` takes a (T, B) block: conv and text encoders and the fusion run
     batched over T*B; only the policy GRU loops over T. ``episode_start[t, b]``
     True resets that env's recurrent state (GRU h and PACMAN frame window)
-    before step t. Returned state tensors are not detached.
+    before step t. Returned state tensors are not detached. What the fusion
+    needs is read from its declared attributes (`Fusion`: x_sent, a frame
+    window), never from its class.
 
-    PACMAN: the window holds the last ``pacman_frames`` frames, oldest first.
+    A fusion with a frame window (PACMAN's `frame_window` = 'pacman_frames'):
+    the window holds the last K frames, oldest first.
     State "frames" carries the previous K-1 raw uint8 frames; their conv
     features are recomputed each call (so gradients reach them in PPO replay).
     At an episode start the window is padded by repeating the episode's first
@@ -185,7 +189,9 @@ class EmmlModel(nn.Module):
             time_dim=cfg.time_dim,
             task_indicator=cfg.task_indicator,
         )
-        self.window = cfg.pacman_frames if isinstance(self.fusion, Pacman) else 0
+        window = self.fusion.frame_window
+        self.window = getattr(cfg, window) if window else 0
+        """K, the frames the fusion reads (its `frame_window` field of the config); 0: the current frame only."""
         self.text_cache: TextCache | None = TextCache()
         """Acting-time cache of the instruction's encoding (None: encode at every step)."""
         self.detector: nn.Module | None = None
@@ -193,7 +199,7 @@ class EmmlModel(nn.Module):
         channels (N, k, h, w) in [0, 1], appended after the V conv3 channels; None under the paper's training."""
         self.type_gate: nn.Module | None = None
         """Control 'type_gate': the module that builds Eq. 4's gate from the dataset's word types
-        (emml/models/type_gate.py; `emml.evaluate.load_model` attaches it, as it needs the run's words)."""
+        (emml/models/type_gate.py; `emml.runs.load_model` attaches it, as it needs the run's words)."""
 
     def vmappable(self) -> EmmlModel:
         """Switch this model to the ops `torch.func.vmap` can batch over stacked copies (emml/rl/packed.py): the
@@ -219,7 +225,7 @@ class EmmlModel(nn.Module):
         if self.type_gate is None:
             raise RuntimeError(
                 "control='type_gate' needs the run's words: load the checkpoint with "
-                "emml.evaluate.load_model(path, control='type_gate') (emml eval CKPT --control type_gate)"
+                "emml.runs.load_model(path, control='type_gate') (emml eval CKPT --control type_gate)"
             )
         return self.type_gate(tokens, x_sent)
 
@@ -230,7 +236,7 @@ class EmmlModel(nn.Module):
         return self.gate(tokens, x_sent)
 
     def initial_state(self, batch_size: int, device=None) -> dict[str, Tensor]:
-        """{"h": (B, hidden) zeros} (+ PACMAN {"frames": (B, K-1, 3, H, W) uint8 zeros})."""
+        """{"h": (B, hidden) zeros} (+ with a frame window, PACMAN's: {"frames": (B, K-1, 3, H, W) uint8 zeros})."""
         state = {"h": self.policy.initial_state(batch_size, device)}
         if self.window:
             state["frames"] = torch.zeros(
@@ -259,7 +265,9 @@ class EmmlModel(nn.Module):
         source = torch.maximum(source, last_start[:, :, None])  # (T, B, K) step index
         return source + (k - 1)
 
-    def _fuse_pacman(self, obs, state, episode_start, x_sent):
+    def _fuse_window(self, obs, state, episode_start, x_sent):
+        """The fusion over the last K frames' x_I (N, K, V, h, w) (PACMAN); the aux logits of the T new frames and
+        the K-1 raw frames carried to the next call."""
         t_len, batch = episode_start.shape
         carried = state["frames"].transpose(0, 1)  # (K-1, B, 3, H, W)
         images = torch.cat([carried, obs["image"]], dim=0)  # (T+K-1, B, 3, H, W)
@@ -291,7 +299,7 @@ class EmmlModel(nn.Module):
         x_sent = self.gate(tokens, x_sent)  # diagnostic 'type_gate': Eq. 4's gate from the word types
         new_state: dict[str, Tensor] = {}
         if self.window:
-            fused, aux, new_state["frames"] = self._fuse_pacman(obs, state, episode_start, x_sent)
+            fused, aux, new_state["frames"] = self._fuse_window(obs, state, episode_start, x_sent)
         else:
             aux = self.image_encoder(image.flatten(0, 1))  # (N, V, h, w)
             x_image = torch.sigmoid(aux) if self.cfg.x_image == "sigmoid" else torch.relu(aux)  # x_I from conv3

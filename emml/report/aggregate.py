@@ -83,14 +83,23 @@ def probability_of_improvement(
     """P(X > Y): the probability that a run of X scores higher than a run of Y in the same cell (ties count half),
     averaged over the cells both have runs in (rliable.metrics.probability_of_improvement), with its 95% interval
     from resampling each row's runs within each cell. None: no cell in common."""
-    from rliable import metrics
-
     pairs = [(x, y) for x, y in zip(x_cells, y_cells) if len(x) and len(y)]
     if not pairs:
         return None
     x, y = _matrix([p[0] for p in pairs]), _matrix([p[1] for p in pairs])
-    func = lambda a, b: np.array([metrics.probability_of_improvement(a, b)])  # noqa: E731 - rliable's idiom
+    func = lambda a, b: np.array([improvement(a, b)])  # noqa: E731 - rliable's idiom
     return _estimate({"pair": (x, y)}, func, x.size + y.size, len(pairs), x.shape[0] > 1 or y.shape[0] > 1, reps, seed)
+
+
+def improvement(x: np.ndarray, y: np.ndarray) -> float:
+    """rliable.metrics.probability_of_improvement of (runs × cells) scores ``x`` over ``y``, computed at once for
+    every cell: per cell the Mann-Whitney U of x over y (pairs where x is higher, ties half) over the pairs, then the
+    mean over cells (tests/report/test_aggregate.py: equal to rliable's). rliable's calls scipy once per cell and
+    resample: 86 of the 98 s a Table 2 report took."""
+    higher = (x[:, None, :] > y[None, :, :]).sum(axis=(0, 1))
+    ties = (x[:, None, :] == y[None, :, :]).sum(axis=(0, 1))
+    per_cell = (higher + 0.5 * ties) / (x.shape[0] * y.shape[0])
+    return np.mean(list(per_cell))
 
 
 def reference_row(table) -> str | None:

@@ -91,10 +91,9 @@ def plot_table(
     from emml.profiles import profile_config, profile_seeds
     from emml.registry import load_table
     from emml.report import deviations
-    from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, reports_dir, results_path
-    from emml.results import read_results
-    from emml.rl.trainer import METRICS
-    from emml.tracking import project_path, read_mirror
+    from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, reports_dir, table_results
+    from emml.runs import METRICS, path_of
+    from emml.tracking import read_mirror
 
     table = load_table(name)
     run_root = run_root if run_root is not None else profile_config(profile).run_root
@@ -102,8 +101,7 @@ def plot_table(
     notes: list[str] = []
     if table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
-    path = results_path(name, profile, results_root)
-    results = read_results(path)
+    results = table_results(table, profile, results_root)  # its own rows, and those it borrows (Table 3's DA)
     run_ids = dict(zip(results["run_name"], results["run_id"]))
     panels = [(d, a) for d in table.difficulties for a in table.aux]
     fig, axes = plt.subplots(
@@ -127,7 +125,7 @@ def plot_table(
                     if rname not in cache:
                         cache[rname] = {k: _history(run_ids[rname], k) for k, _ in TRAIN_KEYS}
                         if not any(cache[rname].values()):  # another store's run: its run dir may be here
-                            mirror = read_mirror(project_path(run_root) / spec.table / rname / METRICS)
+                            mirror = read_mirror(path_of(run_root, spec.table, rname) / METRICS)
                             cache[rname] = {k: [(st, v) for st, kk, v in mirror if kk == k] for k, _ in TRAIN_KEYS}
                         if not any(cache[rname].values()):
                             notes.append(

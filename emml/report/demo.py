@@ -8,6 +8,7 @@ from pathlib import Path
 from emml.config import TrainConfig
 from emml.diagnose import SCALARS
 from emml.report.curves import plot_run
+from emml.runs import run_name
 from emml.tracking import metric_history, tracking_uri
 
 
@@ -36,7 +37,7 @@ def _diagnostics_table(run_id: str) -> list[str]:
 
 def write_demo_report(cfg: TrainConfig, result, out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    name = cfg.run_name()
+    name = run_name(cfg)
     tasks = {"both": "SGN and EQA", "sgn": "SGN only", "eqa": "EQA only"}[cfg.env.tasks]
     png = plot_run(
         result.run_id,

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml import fidelity
+from emml.env_kinds import env_label
 
 SAVED, NO_CONFIG, REFERENCE, DECLARED = "saved", "no saved config", "reference", "declared"
 """Where a run's config came from: its results.json; the registry because its results.json has no config yet
@@ -36,11 +37,10 @@ def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None,
     """A run of the registry with its config: from runs/<table>/<run>/results.json when there, else the config its
     RunSpec gives under ``profile`` (saying why). ``row``: its results CSV row, whose `eval_episodes` is the size
     of the evaluation its score came from (a re-scored run's differs from its config's)."""
-    from emml.report.saved_config import saved_config
-    from emml.tracking import project_path
+    from emml.runs import path_of, saved_config
 
     name = spec.run_name(profile)
-    run_dir = project_path(run_root) / spec.table / name
+    run_dir = path_of(run_root, spec.table, name)
     saved = saved_config(run_dir)
     if saved is not None:
         source = SAVED
@@ -56,7 +56,7 @@ def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None,
 
 
 _ATTR_TEXT = {
-    "difficulty": lambda v: {"easy": "Easy", "hard": "Hard", "house": "House"}.get(v, v),
+    "difficulty": env_label,
     "aux": lambda v: "Aux" if v else "No-Aux",
     "row": str,
 }

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+from emml.runs import CHECKPOINT, config_of, path_of, variant_dir
 from emml.tracking import project_path, project_root
 
 READING_ORDER = ("quick", "paper")
@@ -17,14 +18,30 @@ def profiles_with_results(results_root: str | Path = "results") -> dict[str, lis
     paper, then the others; never a profile whose numbers are not results (smoke: `emml.profiles.is_scratch`), even
     if a CSV of it lies here."""
     from emml.profiles import is_scratch, load_profiles
+    from emml.registry import list_tables, load_table
 
     known = load_profiles()
     out: dict[str, list[str]] = {}
     for csv in sorted(project_path(results_root).glob("table*/*.csv")):
         if csv.stem in known and not is_scratch(csv.stem):
             out.setdefault(csv.stem, []).append(csv.parent.name)
+    for profile, tables in out.items():  # a table whose only runs so far are another's (Table 3's DA Multi-Task)
+        for name in list_tables():
+            table = load_table(name)
+            borrowed = {row.from_table for row in table.rows if row.from_table}
+            if name not in tables and borrowed & set(tables) and _has_runs(table, profile, results_root):
+                tables.append(name)
+        tables.sort()
     rank = {p: i for i, p in enumerate(READING_ORDER)}
     return dict(sorted(out.items(), key=lambda kv: (rank.get(kv[0], len(rank)), kv[0])))
+
+
+def _has_runs(table, profile: str, results_root: str | Path) -> bool:
+    """Whether any run the table declares under ``profile`` has a results row (its own or a borrowed table's)."""
+    from emml.report.tables import _run_names, table_results
+
+    df = table_results(table, profile, results_root)
+    return not df.empty and bool(df["run_name"].isin(_run_names(table, profile)).any())
 
 
 def best_checkpoint(
@@ -46,7 +63,7 @@ def best_checkpoint(
     train_cols = [c for c in ("sgn_train", "eqa_train") if c in rows]
     rows["score"] = rows[train_cols].mean(axis=1)
     for _, row in rows.sort_values("score", ascending=False).iterrows():
-        path = project_path(run_root) / table / row["run_name"] / "checkpoint.pt"
+        path = path_of(run_root, table, row["run_name"]) / CHECKPOINT
         if path.exists():
             return path, row["run_name"]
     return None
@@ -54,8 +71,8 @@ def best_checkpoint(
 
 def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tuple[int, ...] = (0, 1)) -> list[Path]:
     """The channel figure (beside ``compare``, the No-Aux run, when given) and SGN/EQA attention figures."""
-    from emml.evaluate import load_model
     from emml.report.visualize import attention_figure, channels_figure, record_episode
+    from emml.runs import load_model
 
     model, cfg = load_model(checkpoint)
     name = checkpoint.parent.name
@@ -127,7 +144,7 @@ def write_reports(
             best = best_checkpoint(table, profile, results_root=results_root, run_root=run_root)
             if best is not None:
                 ckpt, name = best
-                no_aux = project_path(run_root) / table / name.replace("-aux-", "-noaux-") / "checkpoint.pt"
+                no_aux = variant_dir(config_of(ckpt.parent), run_root, aux=False) / CHECKPOINT
                 figs = figures(ckpt, out, no_aux if no_aux.exists() else None)
                 plt.close("all")
                 lines.append(

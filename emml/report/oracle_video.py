@@ -26,7 +26,7 @@ def oracle_demo(out: Path, episodes: int = 3, seed: int = 0) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     frames: list[Image.Image] = []
     rows = []
-    for difficulty in ("easy", "hard"):
+    for difficulty in DoomConfig.DIFFICULTIES:
         for task in ("sgn", "eqa"):
             env = DoomEnv(DoomConfig(difficulty=difficulty, tasks=task), render_mode="rgb_array")
             agent = Oracle(env)

@@ -5,28 +5,10 @@ results.json of a run finished before the trainer wrote it (`emml backfill-confi
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
-RESULTS = "results.json"
-CHECKPOINT = "checkpoint.pt"
-ROW_ONLY = ("tasks", "shaping", "precision")
-"""Columns `record_result` (emml/rl/trainer.py) adds to a results CSV row that are not keys of results.json."""
-
-
-def saved_config(run_dir: Path) -> dict | None:
-    """The run's config from its results.json, None when the file or its "config" is absent."""
-    path = Path(run_dir) / RESULTS
-    if not path.exists():
-        return None
-    return json.loads(path.read_text()).get("config")
-
-
-def _write(path: Path, payload: dict) -> None:
-    """Atomically, as the trainer writes results.json (2-space JSON)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2))
-    os.replace(tmp, path)
+from emml.runs import CHECKPOINT, RESULTS, ROW_ONLY
+from emml.runs import write_json as _write
 
 
 def _is_metric(column: str) -> bool:
@@ -55,8 +37,8 @@ def backfill_config(run_dir: Path) -> str:
     Only a finished checkpoint is read (a run still training writes its own results.json at the end). A finished
     run whose results.json is missing gets it rebuilt from its row of the results CSV when the row's run_id is the
     checkpoint's (the row is the payload, flattened)."""
+    from emml.checkpoint import load_checkpoint
     from emml.results import read_results
-    from emml.rl.checkpoint import load_checkpoint
     from emml.tracking import project_path
 
     run_dir = Path(run_dir)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from emml.env_kinds import ENV_KINDS, env_label
 from emml.registry import REPRODUCE_DIR, Table, load_table
 from emml.results import read_results
 from emml.tracking import project_path, project_root
@@ -24,7 +25,8 @@ from emml.tracking import project_path, project_root
 MISSING = "—"
 EXTRA_MARK = "†"
 """Marks a row of ours that the paper's table does not have (Table 4's other test instructions)."""
-DIFFICULTY_LABELS = {"easy": "Easy", "hard": "Hard", "house": "House"}
+DIFFICULTY_LABELS = {k.name: k.label for k in ENV_KINDS.values()}
+"""How a difficulty column is headed (emml/env_kinds.py)."""
 AUX_LABELS = {False: "No Aux", True: "Aux"}
 METRIC_LABELS = {
     "sgn_test": "SGN test",
@@ -73,8 +75,12 @@ class Cell:
 
 
 def paper_numbers(name: str, directory: Path = REPRODUCE_DIR / "paper") -> pd.DataFrame:
-    """reproduce/paper/<name>.csv as strings (values exactly as printed), aux as bool."""
-    df = pd.read_csv(directory / f"{name}.csv", dtype=str, keep_default_na=False)
+    """reproduce/paper/<name>.csv as strings (values exactly as printed), aux as bool; no rows for a table the paper
+    does not have (a researcher's own table: its cells show ours only)."""
+    path = directory / f"{name}.csv"
+    if not path.exists():
+        return pd.DataFrame({c: pd.Series(dtype=str) for c in ("row", "difficulty", "aux", "metric", "value")})
+    df = pd.read_csv(path, dtype=str, keep_default_na=False)
     df["aux"] = df["aux"].map({"true": True, "false": False})
     return df
 
@@ -149,7 +155,7 @@ def layout(table: Table, cells: list[Cell], tex: bool = False) -> tuple[pd.DataF
 
 def _label(level: str, value) -> str:
     if level == "difficulty":
-        return DIFFICULTY_LABELS.get(value, str(value))
+        return env_label(value)
     if level == "aux":
         return AUX_LABELS[bool(value)]
     return METRIC_LABELS.get(value, value)

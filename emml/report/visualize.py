@@ -21,8 +21,7 @@ import torch  # noqa: E402
 
 from emml.config import DoomConfig  # noqa: E402
 from emml.envs.doom import MOVES  # noqa: E402
-from emml.envs.vector import make_env  # noqa: E402
-from emml.evaluate import obs_to_torch  # noqa: E402
+from emml.evaluate import obs_to_torch, playing  # noqa: E402
 from emml.report.savefig import save  # noqa: E402
 
 CHANNEL_WORDS = ("red", "green", "torch", "pillar", "smallest", "tall", "armor")
@@ -62,11 +61,8 @@ class Episode:
 @torch.no_grad()
 def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0, device="cpu") -> Episode:
     """Play one greedy episode of ``task`` (train split) and record the model's outputs at every step."""
-    was_training = model.training
-    model.eval()
     cfg = dataclasses.replace(env_cfg, tasks=task, split="train", aux_labels=True, instructions=None)
-    env = make_env(cfg)
-    try:
+    with playing(model, cfg) as (env,):
         obs, _ = env.reset(seed=seed)
         x_sent = model.sentence_gate(torch.as_tensor(obs["tokens"])[None].to(device))  # what Eq. 4 reads
         control = getattr(model.cfg, "control", "none")
@@ -97,9 +93,6 @@ def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0,
             obs, _, terminated, truncated, info = env.step(np.array([move, word]))
             done = terminated or truncated
         ep.success = bool(info.get("success"))
-    finally:
-        env.close()
-        model.train(was_training)
     return ep
 
 

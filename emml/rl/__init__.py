@@ -5,7 +5,7 @@ answer head with a supervised cross-entropy loss, plus an optional spatial
 auxiliary loss (binary cross-entropy on the conv3 feature maps).
 """
 
-from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.rl.ppo import (
     PPOConfig,
     answer_loss,

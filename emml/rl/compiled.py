@@ -16,10 +16,8 @@ import shutil
 
 import torch
 
+from emml.config import COMPILE
 from emml.models.policy import EmmlModel
-
-COMPILE = ("off", "on", "auto")
-"""Values of TrainConfig.compile."""
 
 
 def cpp_compiler() -> str | None:
@@ -33,7 +31,8 @@ def cpp_compiler() -> str | None:
 
 
 def check_compile(value: str, device: str) -> None:
-    """Refuse, before any compute, a `compile` value that is unknown or cannot run on ``device``."""
+    """Refuse, before any compute, a `compile` value that is unknown or cannot run on ``device`` (where training
+    starts: emml/rl/hardware.py)."""
     if value not in COMPILE:
         raise ValueError(f"compile={value!r}: allowed values are {', '.join(COMPILE)}")
     if value == "on" and not device.startswith("cuda") and cpp_compiler() is None:

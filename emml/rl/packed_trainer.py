@@ -12,21 +12,14 @@ it alone, and the pack resumes from ordinary checkpoints when they are all at th
 from __future__ import annotations
 
 import dataclasses
-import time
 from contextlib import ExitStack
 
-import numpy as np
-import torch
-
 from emml.config import TrainConfig
-from emml.envs.labels import channel_mask
 from emml.rl.packed import StackedModels, load_optimizer_state, optimizer_state, packed_ppo_update
 from emml.rl.ppo import make_optimizer
-from emml.rl.precision import conv_precision
-from emml.rl.rollout import RolloutBuffer
-from emml.rl.sampler import Sampler
-from emml.rl.trainer import RunResult, Trainer, _dtype, update_metrics
+from emml.rl.trainer import Trainer, train_loop
 from emml.runlock import hold_run
+from emml.runs import RunResult
 from emml.tracking import Tracker
 
 SEED_ONLY = "seed"
@@ -83,6 +76,7 @@ class PackedTrainer:
                 f"packed runs must resume from the same update, found updates {sorted(updates)}: train them apart "
                 "(emml train --seed N) to the same update, or start them afresh"
             )
+        learner = None
         try:  # from the first MLflow run started (open), a failure ends every started run, never leaves it RUNNING
             opened = [t.open(build=False) for t in self.trainers]
             stacked = StackedModels([o[0] for o in opened]).to(self.device)
@@ -91,8 +85,14 @@ class PackedTrainer:
                 if o[1] is not None:
                     load_optimizer_state(optimizer, r, o[1])
             update, frames = opened[0][2], opened[0][3]
-            finals = self._loop(stacked, optimizer, update, frames)
+            learner = PackedLearner(stacked, optimizer, self.cfg)
+            for t in self.trainers:
+                t._consistent = (update, frames)
+            finals = [(m, m.pop("_frames")) for m in train_loop(self.trainers, learner, update, frames)]
         except BaseException as e:  # KILLED on Ctrl-C or a termination signal, else FAILED (Tracker.abort)
+            if learner is not None and isinstance(e, (KeyboardInterrupt, SystemExit)):
+                for r, t in enumerate(self.trainers):  # each run keeps its last whole update, as a plain run does
+                    t.checkpoint_on_stop(learner.run_model(r), learner.optimizer_state(r))
             for t in self.trainers:
                 t.tracker.abort(e)
             raise
@@ -102,54 +102,25 @@ class PackedTrainer:
             results.append(RunResult(t.dir, t.tracker.run_id, frames, metrics, resumed=o[4]))
         return results
 
-    def _checkpoints(self, stacked, optimizer, update: int, frames: int, finished: bool = False) -> None:
-        for r, t in enumerate(self.trainers):
-            t._checkpoint(stacked.unstack(r), optimizer_state(optimizer, r), update, frames, finished)
 
-    def _loop(self, stacked: StackedModels, optimizer, update: int, frames: int) -> list[tuple[dict, int]]:
-        cfg, device, n = self.cfg, self.device, len(self.trainers)
-        B, T = cfg.num_envs, cfg.num_steps
-        mask = torch.as_tensor(channel_mask(self.trainers[0].vocab, tuple(cfg.env.aux_words)), device=device)
-        with Sampler(cfg, device, runs=n) as sampler:
-            shapes = {k: (s.shape, _dtype(s)) for k, s in sampler.single_observation_space.spaces.items()}
-            buffer = RolloutBuffer(T, B * n, shapes, device=device)
-            # actor b of run r (actor b * n + r) gets the env seed its plain run gives its actor b
-            seeds = [t.cfg.seed * 1000 + update * B + b for b in range(B) for t in self.trainers]
-            sampler.reset(stacked, seed=seeds)
-            next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
-            while update < cfg.num_updates:
-                t_start = time.perf_counter()
-                with conv_precision(stacked, cfg.precision):
-                    sampler.collect(stacked, buffer)
-                    buffer.compute_returns(sampler.last_value(stacked), cfg.ppo.gamma, cfg.ppo.gae_lambda)
-                    stats = packed_ppo_update(stacked, optimizer, buffer, cfg.ppo, mask, use_aux=cfg.aux)
-                update += 1
-                frames += B * T
-                fps = B * T * n / (time.perf_counter() - t_start)
-                for r, t in enumerate(self.trainers):
-                    recent = sampler.recent_by_run[r]
-                    metrics = update_metrics(stats[r], fps / n, recent, update, sampler.dropped_episodes)
-                    metrics["charts/packed_fps"] = fps
-                    t.tracker.log_metrics(metrics, step=frames)
-                if not self.quiet and update % cfg.log_every == 0:
-                    line = " ".join(
-                        f"s{t.cfg.seed} sgn {np.mean(sampler.recent_by_run[r][0] or [np.nan]):.2f}"
-                        for r, t in enumerate(self.trainers)
-                    )
-                    print(f"update {update:>5} frames {frames:>9,} x {n} runs, {fps:6.0f} frames/s in all | {line}")
-                if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
-                    for r, t in enumerate(self.trainers):
-                        t._eval(stacked.unstack(r), frames)
-                    next_eval += cfg.eval_every
-                if update % cfg.checkpoint_every == 0 or update == cfg.num_updates:
-                    self._checkpoints(stacked, optimizer, update, frames)
-        finals = []
-        for r, t in enumerate(self.trainers):
-            final = t._eval(stacked.unstack(r), frames, final=True)
-            t._write_results(final, frames)
-            finals.append((final, frames))
-        self._checkpoints(stacked, optimizer, update, frames, finished=True)
-        return finals
+class PackedLearner:
+    """The learner of N packed runs: the stacked model acts for every run's actors, `packed_ppo_update` steps each
+    run's parameters by its own PPO update (emml/rl/packed.py); run r's model and optimizer state come back as a
+    plain run's, for its evaluations and checkpoints."""
+
+    def __init__(self, stacked: StackedModels, optimizer, cfg: TrainConfig):
+        self.model, self.optimizer, self.cfg = stacked, optimizer, cfg
+        self.runs = stacked.runs
+
+    def update(self, buffer, mask) -> list[dict]:
+        """Every run's PPO update on its actors' rollout; their losses, one dict per run."""
+        return packed_ppo_update(self.model, self.optimizer, buffer, self.cfg.ppo, mask, use_aux=self.cfg.aux)
+
+    def run_model(self, r: int):
+        return self.model.unstack(r)
+
+    def optimizer_state(self, r: int) -> dict:
+        return optimizer_state(self.optimizer, r)
 
 
 def train_packed(cfgs: list[TrainConfig], quiet: bool = False) -> list[RunResult]:

@@ -13,75 +13,13 @@ epochs/minibatches/optimiser loop over a :class:`~emml.rl.rollout.RolloutBuffer`
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, fields
 
 import torch
 import torch.nn.functional as F
 
+from emml.config import PPOConfig  # defined beside TrainConfig (configs are leaves); still importable from here
 from emml.rl.rollout import RolloutBuffer
-
-
-@dataclass
-class PPOConfig:
-    """Hyper-parameters of the PPO update (paper appendix A unless noted)."""
-
-    clip_coef: float = 0.2
-    """Surrogate clipping epsilon (PPO Eq. 7). Paper: 0.2."""
-    gamma: float = 0.99
-    """Discount factor. Paper: 0.99."""
-    gae_lambda: float = 0.95
-    """GAE lambda (Schulman et al. 2016). Paper silent -- our choice (PPO paper's Atari value)."""
-    epochs: int = 4
-    """Optimisation epochs per rollout. Paper: 4."""
-    minibatches: int = 1
-    """Minibatches per epoch, split along the env axis so recurrent sequences stay whole. Paper: 1 ("single batch")."""
-    lr: float = 2.5e-4
-    """Adam learning rate. Paper: 2.5e-4 (constant; no annealing mentioned)."""
-    ent_coef: float = 0.01
-    """Entropy-bonus coefficient on the move distribution. Paper silent -- our choice (PPO paper's Atari value)."""
-    vf_coef: float = 0.5
-    """Value-loss coefficient (value loss is 0.5 * MSE). Paper silent -- our choice (CleanRL default)."""
-    max_grad_norm: float = 0.5
-    """Global gradient-norm clip. Paper silent -- our choice (CleanRL default)."""
-    norm_adv: bool = True
-    """Normalise advantages per minibatch to zero mean / unit std. Paper silent -- our choice (CleanRL default)."""
-    clip_vloss: bool = False
-    """Use PPO2-style clipped value loss. Paper silent -- our choice (off; Andrychowicz et al. 2021: no benefit)."""
-    answer_coef: float = 1.0
-    """Weight of the supervised answer cross-entropy. Paper silent on the weight -- our choice."""
-    aux_coef: float = 1.0
-    """Weight of the spatial auxiliary binary cross-entropy. Paper silent on the weight -- our choice."""
-    adam_eps: float = 1e-5
-    """Adam epsilon. Paper silent -- our choice (CleanRL/baselines PPO value)."""
-
-    def validate(self) -> PPOConfig:
-        """Raise ValueError naming the first out-of-range field; return self."""
-        positive = ("clip_coef", "lr", "max_grad_norm", "adam_eps")
-        non_negative = ("ent_coef", "vf_coef", "answer_coef", "aux_coef")
-        unit = ("gamma", "gae_lambda")
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name in ("norm_adv", "clip_vloss"):
-                if not isinstance(v, bool):
-                    raise ValueError(f"PPOConfig.{f.name} must be a bool, got {v!r}")
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"PPOConfig.{f.name} must be a finite number, got {v!r}")
-            if f.name in ("epochs", "minibatches"):
-                if not isinstance(v, int) or v < 1:
-                    raise ValueError(f"PPOConfig.{f.name} must be an integer >= 1, got {v!r}")
-            elif f.name in positive and not v > 0:
-                raise ValueError(f"PPOConfig.{f.name} must be > 0, got {v!r}")
-            elif f.name in non_negative and not v >= 0:
-                raise ValueError(f"PPOConfig.{f.name} must be >= 0, got {v!r}")
-            elif f.name in unit and not 0.0 <= v <= 1.0:
-                raise ValueError(f"PPOConfig.{f.name} must be in [0, 1], got {v!r}")
-        if not self.clip_coef < 1.0:
-            raise ValueError(f"PPOConfig.clip_coef must be in (0, 1), got {self.clip_coef!r}")
-        return self
-
 
 # ---------------------------------------------------------------------------
 # Pure loss terms. All accept any leading shape ((T, B) or flattened (N,)).

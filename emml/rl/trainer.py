@@ -11,68 +11,47 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import random
-import subprocess
 import time
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
 from emml import alloc
+from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.config import TrainConfig
 from emml.diagnose import SCALARS, diagnose, summary_line
-from emml.diskspace import no_space_names
 from emml.envs.labels import channel_mask
 from emml.evaluate import evaluate
 from emml.models import build_model
-from emml.results import upsert_result
-from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
+from emml.rl.hardware import check_hardware
 from emml.rl.ppo import make_optimizer, model_forward, ppo_update
 from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.runlock import hold_run
+from emml.runs import (
+    CHECKPOINT,
+    EVAL_SEED,
+    METRICS,
+    RESULTS,
+    RunResult,
+    check_resumable,
+    git_sha,
+    record_result,
+    results_payload,
+    run_dir,
+    run_name,
+    run_tags,
+    save_results,
+)
 from emml.tasks.language import load_dataset, resolve_vocabulary
-from emml.tracking import Tracker, project_path, project_root
+from emml.tracking import Tracker
 
 log = logging.getLogger(__name__)
-CHECKPOINT = "checkpoint.pt"
-METRICS = "metrics.csv"
-"""Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.tracking.Tracker.mirror_to)."""
-RESULTS = "results.json"
-EVAL_SEED = 10_000
-"""Episode seeds of every greedy evaluation of a run: EVAL_SEED, EVAL_SEED + 1, … (emml.evaluate), recorded as
-``eval_seed`` beside the score."""
-
-
-def git_sha() -> str:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=project_root(), capture_output=True, text=True, timeout=5
-        )
-        return out.stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-def run_dir(cfg: TrainConfig) -> Path:
-    return project_path(cfg.run_root) / cfg.table / cfg.run_name()
-
-
-@dataclass
-class RunResult:
-    run_dir: Path
-    run_id: str
-    frames: int
-    metrics: dict
-    resumed: bool = False
-    skipped: bool = False
 
 
 def _seed_everything(seed: int) -> None:
@@ -81,61 +60,14 @@ def _seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-class ConfigMismatch(ValueError):
-    """A rerun whose config differs from the checkpoint's run (the message names the fields)."""
-
-
-def _check_same_config(saved: dict, current: dict, path: Path) -> None:
-    """A rerun resumes only the same experiment: differing fields fail by name before anything is touched."""
-    ignore = {
-        "frames",  # asking for more frames continues a run (finished or not) to the new target
-        "eval_every",
-        "eval_episodes",  # how a run is measured, not what it is: the evaluations' size
-        "final_eval_episodes",
-        "diagnose_episodes",
-        "checkpoint_every",
-        "log_every",
-        "threads",
-        "asynchronous",
-        "env_groups",  # how the actors are stepped, not what they do
-        "envs_per_worker",
-        "acting_threads",
-        "max_engine_restarts",
-        "engine_restart_window",
-        "device",
-        "compile",
-        "run_root",
-        "results_root",
-    }
-    # a field added since the checkpoint was written reads as its default: the run it describes is unchanged
-    defaults = TrainConfig().to_dict()
-    diffs = []
-    for key in sorted(set(saved) | set(current)):
-        if key in ignore:
-            continue
-        a, b = saved.get(key, defaults.get(key)), current.get(key)
-        if isinstance(a, dict) and isinstance(b, dict):
-            diffs += [f"{key}.{k}" for k in sorted(set(a) | set(b)) if _norm(a.get(k)) != _norm(b.get(k))]
-        elif _norm(a) != _norm(b):
-            diffs.append(key)
-    if diffs:
-        raise ConfigMismatch(
-            f"{path} holds a run with a different config ({', '.join(diffs)}); use another seed/table/run_root, "
-            "or delete that run directory"
-        )
-
-
-def _norm(v):
-    return list(v) if isinstance(v, tuple) else v
-
-
 class Trainer:
     def __init__(
         self, cfg: TrainConfig, tracker: Tracker | None = None, quiet: bool = False, parent_run_id: str | None = None
     ):
-        self.cfg = cfg.validate()
+        self.cfg = check_hardware(cfg.validate())  # the values, then what this machine can run: before any compute
         self.parent_run_id = parent_run_id
         self.dir = run_dir(cfg)
+        self.name = run_name(cfg)
         self.tracker = tracker or Tracker()
         self.quiet = quiet
         dataset = load_dataset(cfg.env.dataset)
@@ -164,7 +96,7 @@ class Trainer:
             metrics = self._loop(model, optimizer, update, frames)
         except BaseException as e:  # KILLED on Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers), else FAILED
             if isinstance(e, (KeyboardInterrupt, SystemExit)):
-                self._checkpoint_on_stop(model, optimizer)
+                self.checkpoint_on_stop(model, optimizer)
             self.tracker.abort(e)
             raise
         self.tracker.finish("FINISHED")
@@ -176,7 +108,7 @@ class Trainer:
         if not path.exists():
             return None
         saved = load_checkpoint(path)
-        _check_same_config(saved["config"], self.cfg.to_dict(), path)
+        check_resumable(saved["config"], self.cfg, path)
         return saved
 
     def finished(self, saved: dict | None = None) -> bool:
@@ -220,20 +152,7 @@ class Trainer:
             update, frames = saved["update"], saved["frames"]
         if build and wants_compile(cfg.compile, self.device):
             compile_model(model)
-        tags = {
-            "table": cfg.table,
-            "model": cfg.model,
-            "difficulty": env_cfg.difficulty,
-            "aux": cfg.aux,
-            "seed": cfg.seed,
-            "profile": cfg.profile,
-            "git_sha": self.git_sha,
-            "allocator": alloc.loaded(),
-            "tasks": env_cfg.tasks,
-            "shaping": env_cfg.shaping,
-            "precision": cfg.precision,
-            "checkpoint": str(self.dir / CHECKPOINT),
-        }
+        tags = run_tags(cfg, self.git_sha, alloc.loaded())
         self.tracker.mirror_to(self.dir / METRICS)
         if saved is not None and not (self.dir / METRICS).exists() and self.tracker.has_run(saved["run_id"]):
             self.tracker.export_to_mirror(saved["run_id"])  # a run dir from before the mirror existed
@@ -241,7 +160,7 @@ class Trainer:
             self.tracker.resume_after(frames)  # before start: a replay into a new store reads the mirror
         run_id = self.tracker.start(
             cfg.table,
-            cfg.run_name(),
+            self.name,
             tags,
             cfg.to_dict(),
             run_id=saved["run_id"] if saved else None,
@@ -249,7 +168,7 @@ class Trainer:
         )
         if saved is not None:
             if not self.quiet:
-                tqdm.write(f"resuming {cfg.run_name()} from frame {frames:,} (update {update}), MLflow run {run_id}")
+                tqdm.write(f"resuming {self.name} from frame {frames:,} (update {update}), MLflow run {run_id}")
         else:  # at once, so that a run killed before its first update resumes this MLflow run, not a second one
             try:
                 self._checkpoint(model, optimizer or make_optimizer(model.parameters(), cfg.ppo), update, frames, False)
@@ -260,69 +179,7 @@ class Trainer:
 
     # --- the loop ---------------------------------------------------------------------------------------------
     def _loop(self, model, optimizer, update: int, frames: int) -> dict:
-        cfg, device = self.cfg, self.device
-        B, T = cfg.num_envs, cfg.num_steps
-        mask = torch.as_tensor(channel_mask(self.vocab, tuple(cfg.env.aux_words)), device=device)
-        with Sampler(cfg, device) as sampler:
-            shapes = {k: (s.shape, _dtype(s)) for k, s in sampler.single_observation_space.spaces.items()}
-            buffer = RolloutBuffer(T, B, shapes, device=device)
-            sampler.reset(model, seed=cfg.seed * 1000 + update * B)
-            recent = sampler.recent
-            next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
-            bar = tqdm(
-                total=cfg.num_updates * cfg.frames_per_update,
-                initial=frames,
-                unit="frame",
-                disable=self.quiet,
-                dynamic_ncols=True,
-                smoothing=0.1,
-            )
-            since_line = dict.fromkeys(TIME_SPLIT, 0.0)  # the log line's split: since the previous line
-            log_mark = (time.perf_counter(), frames)
-            while update < cfg.num_updates:
-                t_start = time.perf_counter()
-                with conv_precision(model, cfg.precision):
-                    sampler.collect(model, buffer)
-                    t_learn = time.perf_counter()
-                    last_value = sampler.last_value(model)
-                    buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
-                    self._consistent = None  # the update changes the model and optimizer step by step
-                    stats = ppo_update(
-                        model_forward(model), optimizer, model.parameters(), buffer, cfg.ppo, mask, use_aux=cfg.aux
-                    )
-                update += 1
-                frames += B * T
-                self._consistent = (update, frames)
-                now = time.perf_counter()
-                seconds = sampler.timing | {"learn": now - t_learn}
-                for part, value in seconds.items():
-                    since_line[part] += value
-                metrics = update_metrics(
-                    stats, B * T / (now - t_start), recent, update, sampler.dropped_episodes, seconds
-                )
-                self.tracker.log_metrics(metrics, step=frames)
-                bar.update(B * T)
-                bar.set_postfix(
-                    sgn=f"{metrics.get('train/success_sgn', 0):.2f}", eqa=f"{metrics.get('train/success_eqa', 0):.2f}"
-                )
-                if update % cfg.log_every == 0 and not self.quiet:
-                    now, since = time.perf_counter(), log_mark
-                    log_mark = (now, frames)
-                    fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
-                    bar.write(_log_line(update, frames, fps, metrics, since_line))
-                    since_line = dict.fromkeys(TIME_SPLIT, 0.0)
-                if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
-                    self._eval(model, frames)
-                    next_eval += cfg.eval_every
-                if update % cfg.checkpoint_every == 0 or update == cfg.num_updates:
-                    self._checkpoint(model, optimizer, update, frames, finished=False)
-            bar.close()
-        final = self._eval(model, frames, final=True)
-        self._checkpoint(model, optimizer, update, frames, finished=False)
-        self._write_results(final, frames)
-        self._checkpoint(model, optimizer, update, frames, finished=True)
-        final["_frames"] = frames
-        return final
+        return train_loop([self], PlainLearner(model, optimizer, self.cfg), update, frames)[0]
 
     # --- pieces -----------------------------------------------------------------------------------------------
     def _eval(self, model, frames: int, final: bool = False) -> dict:
@@ -343,7 +200,7 @@ class Trainer:
         self.tracker.log_metrics(metrics, step=frames)
         return acc
 
-    def _checkpoint_on_stop(self, model, optimizer) -> None:
+    def checkpoint_on_stop(self, model, optimizer) -> None:
         """A stopped run (Ctrl-C, SIGTERM) keeps the updates it finished since its last checkpoint: unless it stopped
         inside an update (model and optimizer half-stepped), its state is that of its last whole update."""
         at = getattr(self, "_consistent", None)
@@ -369,55 +226,129 @@ class Trainer:
         self._saved_update = update
 
     def _write_results(self, metrics: dict, frames: int) -> None:
-        cfg = self.cfg
-        payload = {
-            **run_identity(cfg),
-            "frames": frames,
-            "git_sha": self.git_sha,
-            "run_id": self.tracker.run_id,
-            "eval_episodes": cfg.final_eval_episodes,  # the score's: the final evaluation's
-            "eval_seed": EVAL_SEED,
-            "metrics": metrics,
-            "config": cfg.to_dict(),  # what the run trained with: reports state its deviations from the paper
-        }
-        save_results(self.dir, payload, cfg)
+        save_results(self.dir, results_payload(self.cfg, metrics, frames, self.git_sha, self.tracker.run_id), self.cfg)
 
 
-def run_identity(cfg: TrainConfig) -> dict:
-    """What names a run in its results.json and results row (its provenance follows: frames, git sha, run id)."""
-    return {
-        "run_name": cfg.run_name(),
-        "table": cfg.table,
-        "model": cfg.model,
-        "difficulty": cfg.env.difficulty,
-        "aux": cfg.aux,
-        "seed": cfg.seed,
-        "profile": cfg.profile,
-    }
+class PlainLearner:
+    """The learner of one run: its model acts, `ppo_update` steps its optimizer (emml/rl/ppo.py). A packed run's
+    learner (emml/rl/packed_trainer.py, `PackedLearner`) has the same interface over N runs."""
+
+    runs = 1
+
+    def __init__(self, model, optimizer, cfg: TrainConfig):
+        self.model, self.optimizer, self.cfg = model, optimizer, cfg
+
+    def update(self, buffer: RolloutBuffer, mask: torch.Tensor) -> list[dict]:
+        """One PPO update on the rollout (Appendix A); its losses, one dict per run."""
+        model, cfg = self.model, self.cfg
+        forward, params = model_forward(model), model.parameters()
+        return [ppo_update(forward, self.optimizer, params, buffer, cfg.ppo, mask, use_aux=cfg.aux)]
+
+    def run_model(self, r: int):
+        """Run r's model, to evaluate and save."""
+        return self.model
+
+    def optimizer_state(self, r: int):
+        """Run r's optimizer (or its state_dict), to save."""
+        return self.optimizer
 
 
-def save_results(directory: Path, payload: dict, cfg: TrainConfig, record: bool = True) -> None:
-    """Write a run's results.json atomically, then (``record``) upsert its row in the results CSV (`record_result`)."""
-    tmp = directory / (RESULTS + ".tmp")
-    with no_space_names(directory / RESULTS, tmp):
-        tmp.write_text(json.dumps(payload, indent=2))
-        os.replace(tmp, directory / RESULTS)
-    if record:
-        record_result(payload, cfg)
+def env_seeds(seeds: list[int], update: int, num_envs: int) -> list[int]:
+    """The env seed of every actor when a run starts or resumes at ``update``: actor b of the run of seed s gets
+    s·1000 + update·num_envs + b. Several runs' actors are interleaved (packed runs, emml/rl/packed.py): actor
+    b·N + r is actor b of run r."""
+    return [s * 1000 + update * num_envs + b for b in range(num_envs) for s in seeds]
 
 
-def results_csv(cfg: TrainConfig) -> Path:
-    return project_path(cfg.results_root) / cfg.table / f"{cfg.profile}.csv"
-
-
-def record_result(payload: dict, cfg: TrainConfig) -> Path:
-    """Upsert the run's row (keyed by run name) in results/<table>/<profile>.csv (emml.results)."""
-    from emml.profiles import refuse_committed
-
-    refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results
-    row = {k: v for k, v in payload.items() if k not in ("metrics", "config")}
-    row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, precision=cfg.precision, **payload["metrics"])
-    return upsert_result(results_csv(cfg), row)
+def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> list[dict]:
+    """The one training loop, of a run (`PlainLearner`) or of N packed runs (one learner, one sampler over every
+    run's actors): collect `num_steps` steps per actor, one update, then each run's metrics, evaluations and
+    checkpoints at its cadences; at the end each run's final evaluation, results and finished checkpoint. Returns
+    each run's final metrics (with ``_frames``). A run's ``_consistent`` says whether its model and optimizer are
+    those of a whole update (`Trainer.checkpoint_on_stop`)."""
+    cfg, device, n = trainers[0].cfg, trainers[0].device, len(trainers)
+    B, T = cfg.num_envs, cfg.num_steps
+    quiet = trainers[0].quiet
+    mask = torch.as_tensor(channel_mask(trainers[0].vocab, tuple(cfg.env.aux_words)), device=device)
+    model = learner.model
+    with Sampler(cfg, device, runs=n) as sampler:
+        shapes = {k: (s.shape, _dtype(s)) for k, s in sampler.single_observation_space.spaces.items()}
+        buffer = RolloutBuffer(T, B * n, shapes, device=device)
+        sampler.reset(model, seed=env_seeds([t.cfg.seed for t in trainers], update, B))
+        next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
+        bar = tqdm(
+            total=cfg.num_updates * cfg.frames_per_update,
+            initial=frames,
+            unit="frame",
+            disable=quiet,
+            dynamic_ncols=True,
+            smoothing=0.1,
+        )
+        since_line = dict.fromkeys(TIME_SPLIT, 0.0)  # the log line's split: since the previous line
+        log_mark = (time.perf_counter(), frames)
+        while update < cfg.num_updates:
+            t_start = time.perf_counter()
+            with conv_precision(model, cfg.precision):
+                sampler.collect(model, buffer)
+                t_learn = time.perf_counter()
+                last_value = sampler.last_value(model)
+                buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
+                for t in trainers:
+                    t._consistent = None  # the update changes the model and optimizer step by step
+                stats = learner.update(buffer, mask)
+            update += 1
+            frames += B * T
+            for t in trainers:
+                t._consistent = (update, frames)
+            now = time.perf_counter()
+            seconds = sampler.timing | {"learn": now - t_learn}
+            for part, value in seconds.items():
+                since_line[part] += value
+            fps = B * T * n / (now - t_start)
+            logged = []
+            for r, t in enumerate(trainers):
+                metrics = update_metrics(
+                    stats[r], fps / n, sampler.recent_by_run[r], update, sampler.dropped_episodes, seconds
+                )
+                if n > 1:
+                    metrics["charts/packed_fps"] = fps
+                t.tracker.log_metrics(metrics, step=frames)
+                logged.append(metrics)
+            first = logged[0]
+            bar.update(B * T)
+            bar.set_postfix(
+                sgn=f"{first.get('train/success_sgn', 0):.2f}", eqa=f"{first.get('train/success_eqa', 0):.2f}"
+            )
+            if update % cfg.log_every == 0 and not quiet:
+                now, since = time.perf_counter(), log_mark
+                log_mark = (now, frames)
+                line_fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
+                if n == 1:
+                    bar.write(_log_line(update, frames, line_fps, first, since_line))
+                else:
+                    seeds = " ".join(
+                        f"s{t.cfg.seed} sgn {np.mean(sampler.recent_by_run[r][0] or [np.nan]):.2f}"
+                        for r, t in enumerate(trainers)
+                    )
+                    bar.write(f"update {update:>5} frames {frames:>9,} x {n} runs, {fps:6.0f} frames/s all | {seeds}")
+                since_line = dict.fromkeys(TIME_SPLIT, 0.0)
+            if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
+                for r, t in enumerate(trainers):
+                    t._eval(learner.run_model(r), frames)
+                next_eval += cfg.eval_every
+            if update % cfg.checkpoint_every == 0 or update == cfg.num_updates:
+                for r, t in enumerate(trainers):
+                    t._checkpoint(learner.run_model(r), learner.optimizer_state(r), update, frames, finished=False)
+        bar.close()
+    finals = []
+    for r, t in enumerate(trainers):
+        run_model, state = learner.run_model(r), learner.optimizer_state(r)
+        final = t._eval(run_model, frames, final=True)
+        t._checkpoint(run_model, state, update, frames, finished=False)
+        t._write_results(final, frames)
+        t._checkpoint(run_model, state, update, frames, finished=True)
+        finals.append({**final, "_frames": frames})
+    return finals
 
 
 def update_metrics(

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import tomllib
 
+from emml.config import VOCABULARY_SOURCES, check_choice  # the config's allowed values (also imported from here)
+
 SPLITS = ("train", "test")
 KINDS = ("sgn", "eqa")
 
@@ -74,12 +76,6 @@ class Dataset:
         return tuple(w for a in sorted(attrs) for w in self.word_groups[group[a]])
 
 
-def check_choice(field: str, value, allowed) -> None:
-    """Raise a ValueError naming the field and its allowed values."""
-    if value not in allowed:
-        raise ValueError(f"{field}={value!r} is not allowed; choose one of {', '.join(map(repr, allowed))}")
-
-
 def normalize(text: str) -> str:
     return " ".join(text.lower().replace("?", " ").replace(".", " ").split())
 
@@ -111,13 +107,8 @@ def load_dataset(name: str = "doom") -> Dataset:
                     sentences.append(Sentence(text, kind, split, row["template"], row.get("answer")))
     actors_raw = dict(raw["actors"])
     margin = actors_raw.pop("superlative_margin")
-    if actors_raw.pop("sprites", "iwad") == "furniture":  # House (Table 8): sprites the project draws itself
-        from emml.envs.furniture import sprite_areas
-    else:
-        from emml.envs.objects import sprite_areas  # areas are measured from the engine's sprites
-
-    areas = sprite_areas()
-    actors = {n: ActorWords(a["object"], a["color"], a.get("size"), areas[n]) for n, a in actors_raw.items()}
+    # areas are data of the dataset (tests/envs/test_sprite_areas.py measures them again from the sprites)
+    actors = {n: ActorWords(a["object"], a["color"], a.get("size"), a["area"]) for n, a in actors_raw.items()}
     return Dataset(name, tuple(sentences), actors, groups, margin)
 
 
@@ -135,7 +126,7 @@ class Vocabulary:
         """'all': every word of every instruction, question and answer (the default: test words included, as the
         single-task ablation supervises them through aux labels); 'train_instructions': the training
         instructions' words only (the transfer experiment, Table 4, appends new words later)."""
-        check_choice("vocabulary", source, ("all", "train_instructions"))
+        check_choice("vocabulary", source, VOCABULARY_SOURCES)
         if source == "all":
             texts = [s.text for s in dataset.sentences] + list(dataset.answer_words())
         else:
@@ -165,10 +156,6 @@ class Vocabulary:
         if len(ids) > max_words:
             raise ValueError(f"max_words={max_words} is too small for {text!r} ({len(ids)} words)")
         return ids + [0] * (max_words - len(ids))
-
-
-VOCABULARY_SOURCES = ("all", "train_instructions")
-"""Names a run's `DoomConfig.vocabulary` may give instead of a word list (`Vocabulary.from_dataset`)."""
 
 
 def resolve_vocabulary(spec, dataset: Dataset) -> Vocabulary:

@@ -2,10 +2,12 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from rliable import metrics
 
 from emml.registry import load_table
-from emml.report.aggregate import iqm, probability_of_improvement, reference_row
+from emml.report.aggregate import improvement, iqm, probability_of_improvement, reference_row
 
 CELLS = [[0.92, 0.89, 0.93], [0.1, 0.4, 0.2], [0.5, 0.6, 0.7]]
 
@@ -43,3 +45,20 @@ def test_the_reference_row_is_the_papers_dual_attention():
     assert reference_row(load_table("table2")) == "Dual-Attention"
     assert reference_row(load_table("table3")) == "DA Multi-Task"
     assert reference_row(load_table("table4")) is None  # every row reads the same transfer runs
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.integers(1, 4).flatmap(
+        lambda cells: st.tuples(
+            st.lists(st.lists(st.sampled_from([0.0, 0.25, 0.5, 0.75, 1.0]) | st.floats(0, 1), min_size=cells,
+                              max_size=cells), min_size=1, max_size=4),
+            st.lists(st.lists(st.sampled_from([0.0, 0.25, 0.5, 0.75, 1.0]) | st.floats(0, 1), min_size=cells,
+                              max_size=cells), min_size=1, max_size=4),
+        )
+    )
+)  # fmt: skip
+def test_the_vectorised_improvement_is_rliables_to_the_bit(xy):
+    """Ties included (scores on a grid of episodes repeat): the same number as rliable's scipy-based statistic."""
+    x, y = np.array(xy[0]), np.array(xy[1])
+    assert improvement(x, y) == metrics.probability_of_improvement(x, y)

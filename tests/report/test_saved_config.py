@@ -7,19 +7,20 @@ import pandas as pd
 import torch
 
 from emml.profiles import profile_config
-from emml.report.saved_config import backfill_config, run_dirs, saved_config
+from emml.report.saved_config import backfill_config, run_dirs
+from emml.runs import run_name, saved_config
 
 
 def fixture_run(root, finished=True, results=True, **fields):
     """FIXTURE: a run dir with a checkpoint (config, frames, finished, run_id) and, if ``results``, a results.json
     written before the trainer saved the config."""
     cfg = profile_config("quick", "easy", {"results_root": str(root / "results"), "table": "t"}, **fields)
-    folder = root / "runs" / "t" / cfg.run_name()
+    folder = root / "runs" / "t" / run_name(cfg)
     folder.mkdir(parents=True)
     payload = {"model": {}, "config": cfg.to_dict(), "frames": 64, "finished": finished, "run_id": "abc"}
     torch.save(payload, folder / "checkpoint.pt")
     if results:
-        (folder / "results.json").write_text(json.dumps({"run_name": cfg.run_name(), "metrics": {"sgn_test": 0.5}}))
+        (folder / "results.json").write_text(json.dumps({"run_name": run_name(cfg), "metrics": {"sgn_test": 0.5}}))
     return folder, cfg
 
 
@@ -42,7 +43,7 @@ def test_a_lost_results_json_is_rebuilt_from_its_results_row_only_when_the_run_i
     folder, cfg = fixture_run(tmp_path, results=False, seed=2)
     csv = tmp_path / "results" / "t" / "quick.csv"
     csv.parent.mkdir(parents=True)
-    row = {"run_name": cfg.run_name(), "table": "t", "model": cfg.model, "difficulty": "easy", "aux": False}
+    row = {"run_name": run_name(cfg), "table": "t", "model": cfg.model, "difficulty": "easy", "aux": False}
     row |= {"seed": 2, "profile": "quick", "frames": 64, "git_sha": "12e0077", "run_id": "other"}
     row |= {"eval_episodes": 100, "tasks": "both", "shaping": True, "sgn_train": 0.25, "sgn_test": 0.5}
     pd.DataFrame([row]).to_csv(csv, index=False)

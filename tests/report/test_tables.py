@@ -10,6 +10,7 @@ import pytest
 from emml.profiles import profile_seeds
 from emml.registry import load_table
 from emml.report.tables import MISSING, report_table, reports_dir
+from emml.runs import run_name
 
 PROFILE = "quick"  # three seeds
 
@@ -19,7 +20,7 @@ def fake_results(table: str, root, drop: tuple[str, ...] = (), value=None) -> pd
     rows = []
     for i, spec in enumerate(load_table(table).runs(profile_seeds(PROFILE))):
         cfg = spec.to_config(PROFILE)
-        name = cfg.run_name()
+        name = run_name(cfg)
         if name in drop:
             continue
         row = {

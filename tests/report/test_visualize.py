@@ -7,10 +7,11 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from emml.cli import app
-from emml.evaluate import load_model, obs_to_torch
+from emml.evaluate import obs_to_torch
 from emml.profiles import profile_config
 from emml.report.visualize import CHANNEL_WORDS, attention_figure, channels_figure, episode_gif, record_episode
-from emml.rl.trainer import CHECKPOINT, train
+from emml.rl.trainer import train
+from emml.runs import CHECKPOINT, load_model
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +125,7 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
     import shutil
 
     from emml.report.index import write_reports
-    from emml.rl.trainer import record_result
+    from emml.runs import record_result
 
     # the two smoke runs recorded as table2 rows of the demo profile (the index never lists smoke), their run dirs
     # where table2 keeps them

@@ -14,7 +14,9 @@ from emml.models import build_model
 from emml.profiles import profile_config
 from emml.results import read_results
 from emml.rl import precision
-from emml.rl.trainer import METRICS, Trainer, results_csv
+from emml.rl.hardware import check_hardware
+from emml.rl.trainer import Trainer
+from emml.runs import METRICS, results_csv, run_name
 from emml.tracking import read_mirror
 from tests.conftest import SMOKE
 
@@ -32,7 +34,7 @@ def native_bf16(monkeypatch):
 def test_bf16_is_refused_on_a_cpu_without_native_bf16(no_native_bf16, tmp_path):
     cfg = profile_config("smoke", "easy", {"precision": "bf16"})
     with pytest.raises(ValueError, match=r"precision='bf16'.*no native bf16.*avx512_bf16, amx_bf16.*precision='fp32'"):
-        cfg.validate()
+        check_hardware(cfg.validate())  # the value is valid; the machine is asked where training starts
     result = CliRunner().invoke(
         app, ["train", "--profile", "smoke", "--set", 'precision="bf16"', "--set", f'run_root="{tmp_path}"']
     )
@@ -121,8 +123,8 @@ def test_a_bf16_run_trains_with_finite_losses(native_bf16, tracking, no_leftover
     assert result.frames >= 64
     losses = [v for _, key, v in read_mirror(result.run_dir / METRICS) if key.startswith("losses/")]
     assert losses and all(math.isfinite(v) for v in losses)
-    row = read_results(results_csv(cfg)).set_index("run_name").loc[cfg.run_name()]
-    assert row["precision"] == "bf16" and cfg.run_name().endswith("-bf16-s0-smoke")
+    row = read_results(results_csv(cfg)).set_index("run_name").loc[run_name(cfg)]
+    assert row["precision"] == "bf16" and run_name(cfg).endswith("-bf16-s0-smoke")
 
 
 def test_bf16_scales_pixels_straight_to_the_fp32_quotient_rounded_to_bf16():

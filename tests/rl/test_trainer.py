@@ -11,21 +11,22 @@ from pathlib import Path
 
 import pytest
 
+from emml.checkpoint import load_checkpoint, save_checkpoint
 from emml.config import TrainConfig
-from emml.evaluate import evaluate_checkpoint
 from emml.models import MODELS
 from emml.profiles import profile_config
 from emml.results import read_results
-from emml.rl.checkpoint import load_checkpoint, save_checkpoint
-from emml.rl.trainer import (
+from emml.rl.trainer import train
+from emml.runs import (
     CHECKPOINT,
     METRICS,
     RESULTS,
     ConfigMismatch,
-    _check_same_config,
+    check_resumable,
+    evaluate_checkpoint,
     results_csv,
     run_dir,
-    train,
+    run_name,
 )
 from emml.tracking import metric_history, read_mirror
 
@@ -50,7 +51,7 @@ def test_every_model_trains_a_few_hundred_frames(model, tracking, no_leftovers):
     import pandas as pd
 
     rows = pd.read_csv(os.path.join(tracking["results_root"], "test", "smoke.csv"))
-    assert rows["run_name"].tolist() == [cfg.run_name()] and "config" not in rows
+    assert rows["run_name"].tolist() == [run_name(cfg)] and "config" not in rows
     assert rows.loc[0, "frames"] == 128 and rows.loc[0, "seed"] == 0 and rows.loc[0, "model"] == model
     losses = metric_history(result.run_id, "losses/answer")
     assert len(losses) == 2  # one point per update (2 updates of 2 x 32 frames)
@@ -247,12 +248,12 @@ def test_a_house_run_trains_evaluates_diagnoses_and_reloads(tracking, no_leftove
     diagnostics (its spawn is fixed, so the actor's sensitivity is defined as in Easy), and a checkpoint that reloads
     with its HouseConfig."""
     from emml.config import HouseConfig
-    from emml.evaluate import load_model
+    from emml.runs import load_model
 
     cfg = smoke(tracking, frames=128, eval_episodes=2, seed=2, **{"env.difficulty": "house", "eval_every": 128})
     cfg.diagnose_episodes = 1
     result = train(cfg, quiet=True)
-    assert cfg.run_name() == "dual_attention-house-noaux-s2-smoke"
+    assert run_name(cfg) == "dual_attention-house-noaux-s2-smoke"
     assert set(result.metrics) == {"sgn_train", "sgn_test", "eqa_train", "eqa_test"}
     assert [s for s, _ in metric_history(result.run_id, "diag/actor_sensitivity")] == [128]
     _, saved = load_model(result.run_dir / CHECKPOINT)
@@ -266,18 +267,35 @@ def test_unknown_override_is_named():
         profile_config("huge")
 
 
-def test_resume_refuses_a_different_config(tracking, no_leftovers):
-    train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
-    with pytest.raises(ValueError, match="ppo.lr"):
-        train(smoke(tracking, frames=64, eval_episodes=1, **{"ppo.lr": 1e-3}), quiet=True)
+def test_an_lr_sweep_trains_one_run_per_value_and_resume_refuses_another_identity(tracking, no_leftovers):
+    """ppo.lr identifies a run (issue 35): each value gets its own run dir; a checkpoint whose identity differs
+    under the same name (here its words) is refused by field, before anything is touched."""
+    import torch
+
+    runs = [train(smoke(tracking, frames=64, eval_episodes=1, **{"ppo.lr": lr}), quiet=True) for lr in (1e-3, 2e-3)]
+    assert len({r.run_dir for r in runs}) == 2 and all(r.run_dir.name.endswith(f"+ppo.lr={lr:g}") for r, lr in
+                                                       zip(runs, (1e-3, 2e-3)))  # fmt: skip
+    cfg = smoke(tracking, frames=64, eval_episodes=1, **{"ppo.lr": 1e-3})
+    saved = torch.load(runs[0].run_dir / CHECKPOINT, weights_only=False)["config"]
+    with pytest.raises(ConfigMismatch, match="env.vocabulary"):
+        check_resumable({**saved, "env": {**saved["env"], "vocabulary": ["only", "words"]}}, cfg, Path("c.pt"))
 
 
 def test_a_field_added_after_a_checkpoint_reads_as_its_default(tracking):
     current = smoke(tracking).to_dict()
     older = {k: v for k, v in current.items() if k != "precision"}  # written before the field existed
-    _check_same_config(older, current, Path("checkpoint.pt"))
+    check_resumable(older, smoke(tracking), Path("checkpoint.pt"))
     with pytest.raises(ConfigMismatch, match="precision"):
-        _check_same_config(older, smoke(tracking, precision="bf16").to_dict(), Path("checkpoint.pt"))
+        check_resumable(older, smoke(tracking, precision="bf16"), Path("checkpoint.pt"))
+
+
+def test_how_a_run_runs_is_not_its_identity(tracking):
+    """Device, threads, workers, roots, cadences and the frame target may change between a run and its resume."""
+    saved = smoke(tracking).to_dict()
+    runtime = {"threads": 1, "env_groups": 1, "frames": 4096, "eval_every": 64, "checkpoint_every": 2}
+    other = smoke(tracking, **runtime)
+    check_resumable(saved, other, Path("checkpoint.pt"))
+    assert run_name(other) == run_name(smoke(tracking))
 
 
 def test_the_score_plays_final_eval_episodes_and_the_curve_eval_episodes(tracking, monkeypatch, no_leftovers):
@@ -445,12 +463,12 @@ def test_workers_hosting_several_envs_train_exactly_alike(tracking, no_leftovers
 
 
 def test_smoke_numbers_are_not_recorded_under_the_committed_results(tmp_path):
-    from emml.rl.trainer import record_result
+    from emml.runs import record_result
     from emml.tracking import project_path
 
     cfg = profile_config("smoke", "easy", {"results_root": "results", "table": "test"})
     with pytest.raises(ValueError, match="the 'smoke' profile's numbers are not results"):
-        record_result({"run_name": cfg.run_name(), "metrics": {"sgn_test": 0.5}}, cfg)
+        record_result({"run_name": run_name(cfg), "metrics": {"sgn_test": 0.5}}, cfg)
     assert not (project_path("results") / "test").exists()
     assert profile_config("smoke").results_root == "scratch/results"  # where smoke numbers go by default
 

@@ -44,7 +44,7 @@ def test_split_rules():
 def test_actors_vocabulary_and_answers():
     assert len(DS.actors) == 24
     assert DS.actors["YellowOfficeChair"].words() == ("office_chair", "yellow")
-    assert all(a.area > 500 for a in DS.actors.values())  # measured from the drawn sprites
+    assert all(a.area > 500 for a in DS.actors.values())  # the drawn sprites' (tests/envs/test_sprite_areas.py)
     vocab = Vocabulary.from_dataset(DS)
     assert len(vocab) == len(set(vocab.words)) == 18
     assert set(DS.answer_words()) == set(DS.word_groups["colors"]) | set(DS.word_groups["objects"])

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from emml.rl import checkpoint
-from emml.rl.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml import checkpoint
+from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -33,7 +33,7 @@ def test_hard_crash_before_replace_keeps_original(tmp_path):
     script = textwrap.dedent(
         f"""
         import os, torch
-        from emml.rl.checkpoint import save_checkpoint
+        from emml.checkpoint import save_checkpoint
         os.replace = lambda *a, **k: os._exit(9)  # die like SIGKILL right before the rename
         save_checkpoint({str(path)!r}, {{"step": 2, "big": torch.zeros(1000)}})
         """

@@ -1,0 +1,31 @@
+"""What this machine can run of a run's config, checked where training starts: by the trainer before any compute,
+and by `emml train`, `emml run` and `emml bench train` before any run starts.
+
+`TrainConfig.validate` checks the values (it is a leaf and imports no torch); these are the checks that ask the
+machine: a C++ compiler for `compile='on'` on a CPU (emml/rl/compiled.py), native bf16 arithmetic for
+`precision='bf16'` (emml/rl/precision.py), a CUDA device for `device='cuda'`. Each failure is a ValueError naming
+the field, its value and what to use instead (the CLI prints it and exits 2).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from emml.config import TrainConfig
+from emml.rl.compiled import check_compile
+from emml.rl.precision import check_precision
+
+
+def check_device(device: str) -> None:
+    """Refuse, before any compute, a CUDA device torch cannot see."""
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"device={device!r} but torch sees no CUDA device; use device='cpu'")
+
+
+def check_hardware(cfg: TrainConfig) -> TrainConfig:
+    """Refuse, before any compute, what this machine cannot run of ``cfg`` (validated): its compile, device and
+    precision settings; returns ``cfg``."""
+    check_compile(cfg.compile, cfg.device)
+    check_device(cfg.device)
+    check_precision(cfg.precision, cfg.device)
+    return cfg

@@ -1,0 +1,331 @@
+"""A run's one owner: its directory and files, its identity, its results and provenance, its model.
+
+A run lives in ``<run_root>/<table>/<run name>/``:
+
+- ``checkpoint.pt``: model, optimizer, RNG states, counters, vocabulary, config, MLflow run id (`save_checkpoint`);
+- ``metrics.csv``: every metric point, step,key,value (emml.tracking.Tracker.mirror_to);
+- ``results.json``: the final score with its provenance and config (`save_results`), its row in
+  ``<results_root>/<table>/<profile>.csv`` (`record_result`);
+- ``run.lock``: held while a process trains or re-scores it (emml/runlock.py).
+
+Identity. What a run *is* is `TrainConfig.identity()`: every field but those of how it runs (`TrainConfig.RUNTIME`:
+device, threads, workers, roots, cadences, the frame target). Its name is `TrainConfig.spelled_name()` (the fields a
+reader looks for: model, difficulty, aux, tasks, shaping, precision, seed, profile), followed, when another
+identifying field differs from its profile's value, by those fields (`swept`): a sweep over any identifying
+field (``--set ppo.lr=...``) gets one run dir per value, and a rerun resumes only a run of the same identity
+(`check_resumable`). The results row, the MLflow tags and results.json name a run by `run_identity`.
+
+Importing this module imports no torch (reports read runs through it): checkpoints and models are loaded in the
+functions that need them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+from emml.config import TrainConfig, apply_overrides
+from emml.diskspace import no_space_names
+from emml.tracking import project_path, project_root
+
+CHECKPOINT = "checkpoint.pt"
+"""The run's state (`save_checkpoint`): written every `checkpoint_every` updates, at a stop, and at the end."""
+METRICS = "metrics.csv"
+"""Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.tracking.Tracker.mirror_to)."""
+RESULTS = "results.json"
+"""The final score, its provenance and the config the run trained with (`save_results`)."""
+EVAL_SEED = 10_000
+"""Episode seeds of every greedy evaluation of a run: EVAL_SEED, EVAL_SEED + 1, … (emml.evaluate), recorded as
+``eval_seed`` beside the score."""
+RUN_FILES = (CHECKPOINT, METRICS, RESULTS)
+"""Files any of which makes a folder a run dir."""
+NAMED = ("table", "model", "aux", "seed", "profile", "precision", "env.difficulty", "env.tasks", "env.shaping",
+         "model_options.state_temperature")  # fmt: skip
+"""Identifying fields the run dir's path spells out (its table folder, `TrainConfig.spelled_name`): never repeated by
+`swept`."""
+RESOLVED = ("env.vocabulary", "env.aux_words", "env.aux_labels")
+"""Identifying fields that the trainer resolves at start (a vocabulary source becomes its word list, the aux words
+are the dataset's, aux_labels follows aux): compared on resume, never part of the name (it would change when
+resolved)."""
+SWEPT_DIGEST_OVER = 48
+"""Characters above which the swept fields are named by a digest instead of spelled out."""
+
+
+def git_sha() -> str:
+    """The short sha of the checkout's HEAD ('unknown' outside git): a run's provenance."""
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=project_root(), capture_output=True, text=True, timeout=5
+        )
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+# --- identity ------------------------------------------------------------------------------------------------------
+def _flat(d: dict, prefix: str = "") -> dict:
+    """{'env': {'height': 60}} -> {'env.height': 60} (tuples as lists: a config read back from JSON has lists)."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict) and k in ("env", "ppo", "model_options"):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def _baseline(cfg: TrainConfig) -> dict:
+    """The flat identity of the run its profile would give (same model, difficulty, aux, seed): what `swept`
+    compares with. A profile that is not in reproduce/profiles.toml compares with TrainConfig's defaults."""
+    from emml.profiles import load_profiles, profile_config
+
+    if cfg.profile in load_profiles():
+        base = profile_config(cfg.profile, cfg.env.difficulty, model=cfg.model, aux=cfg.aux, seed=cfg.seed)
+    else:
+        base = TrainConfig(model=cfg.model, aux=cfg.aux, seed=cfg.seed, profile=cfg.profile)
+    return _flat(base.identity())
+
+
+def swept(cfg: TrainConfig) -> dict:
+    """Identifying fields (dotted) that differ from the profile's value and that the readable name does not spell:
+    {field: value}, sorted. Empty for every run a table or profile declares as-is."""
+    base, own = _baseline(cfg), _flat(cfg.identity())
+    skip = set(NAMED) | set(RESOLVED)
+    return {k: own[k] for k in sorted(own) if k not in skip and own[k] != base.get(k)}
+
+
+def run_name(cfg: TrainConfig) -> str:
+    """The run's name: `TrainConfig.spelled_name()`, then ``+field=value`` per `swept` field (a digest when long)."""
+    name, extra = cfg.spelled_name(), swept(cfg)
+    if not extra:
+        return name
+    spelled = "+".join(f"{k}={_short(v)}" for k, v in extra.items())
+    if len(spelled) > SWEPT_DIGEST_OVER or not all(c.isalnum() or c in "+=._-" for c in spelled):
+        spelled = "x" + hashlib.sha256(json.dumps(extra, sort_keys=True).encode()).hexdigest()[:8]
+    return f"{name}+{spelled}"
+
+
+def _short(v) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def run_dir(cfg: TrainConfig) -> Path:
+    """``<run_root>/<table>/<run name>`` (the run root relative to the project unless absolute)."""
+    return project_path(cfg.run_root) / cfg.table / run_name(cfg)
+
+
+def path_of(run_root: str | Path, table: str, name: str) -> Path:
+    """The run dir of run ``name`` of ``table`` under ``run_root`` (a results row names its run so)."""
+    return project_path(run_root) / table / name
+
+
+def config_of(directory: Path) -> TrainConfig | None:
+    """The config the run in ``directory`` trained with: its results.json's, else its checkpoint's; None when it has
+    neither."""
+    saved = saved_config(directory)
+    if saved is None and (Path(directory) / CHECKPOINT).exists():
+        saved = read_checkpoint(Path(directory) / CHECKPOINT)["config"]
+    return TrainConfig.from_dict(saved) if saved is not None else None
+
+
+def variant_dir(cfg: TrainConfig, run_root: str | Path, **fields) -> Path:
+    """The run dir, under ``run_root``, of the run that differs from ``cfg``'s in the TrainConfig ``fields`` (e.g.
+    the No-Aux run beside an Aux run: ``aux=False``)."""
+    other = apply_overrides(TrainConfig.from_dict(cfg.to_dict()), {**fields, "run_root": str(run_root)})
+    return run_dir(other)
+
+
+def run_identity(cfg: TrainConfig) -> dict:
+    """What names a run in its results.json, results row and MLflow tags (its provenance follows: frames, git sha,
+    run id)."""
+    return {
+        "run_name": run_name(cfg),
+        "table": cfg.table,
+        "model": cfg.model,
+        "difficulty": cfg.env.difficulty,
+        "aux": cfg.aux,
+        "seed": cfg.seed,
+        "profile": cfg.profile,
+    }
+
+
+def run_tags(cfg: TrainConfig, git_sha: str, allocator: str) -> dict:
+    """The run's MLflow tags: its identity (less its name, the MLflow run name), the setting a reader filters
+    on, its provenance and its checkpoint's path."""
+    identity = run_identity(cfg)
+    identity.pop("run_name")
+    return {
+        **identity,
+        "git_sha": git_sha,
+        "allocator": allocator,
+        "tasks": cfg.env.tasks,
+        "shaping": cfg.env.shaping,
+        "precision": cfg.precision,
+        "checkpoint": str(run_dir(cfg) / CHECKPOINT),
+    }
+
+
+class ConfigMismatch(ValueError):
+    """A rerun whose identity differs from the checkpoint's run (the message names the fields)."""
+
+
+def check_resumable(saved: dict, cfg: TrainConfig, path: Path) -> None:
+    """A rerun resumes only the same experiment: identifying fields that differ fail by name before anything is
+    touched. ``saved``: the checkpoint's config (`TrainConfig.to_dict`); a field added since it was written reads as
+    its default (the run it describes is unchanged); how the run runs (`TrainConfig.RUNTIME`) may differ."""
+    defaults = _flat(TrainConfig().identity())
+    old = {**defaults, **{k: v for k, v in _flat(saved).items() if k.split(".")[0] not in TrainConfig.RUNTIME}}
+    new = _flat(cfg.identity())
+    diffs = [k for k in sorted(set(old) | set(new)) if old.get(k, defaults.get(k)) != new.get(k, defaults.get(k))]
+    if diffs:
+        raise ConfigMismatch(
+            f"{path} holds a run with a different config ({', '.join(diffs)}); use another seed/table/run_root, "
+            "or delete that run directory"
+        )
+
+
+# --- checkpoint and model ------------------------------------------------------------------------------------------
+def read_checkpoint(path: Path) -> dict:
+    """A checkpoint's payload (`save_checkpoint`), on the CPU."""
+    from emml.checkpoint import load_checkpoint  # torch: loaded when a checkpoint is read, not for reports
+
+    return load_checkpoint(path)
+
+
+def load_model(path, device: str = "cpu", control: str | None = None):
+    """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary; ``control`` (one of
+    `emml.models.config.CONTROLS`) replaces the run's diagnostic control, for evaluation (same weights)."""
+    from emml.models import build_model  # torch: loaded when a model is, not for reports
+
+    ckpt = read_checkpoint(path)
+    cfg = TrainConfig.from_dict(ckpt["config"])
+    if control is not None:
+        cfg.model_options = {**cfg.model_options, "control": control}
+    env = cfg.env
+    model = build_model(cfg.model, len(ckpt["vocabulary"]), env.height, env.width, env.max_steps, **cfg.model_options)
+    model.load_state_dict(ckpt["model"])
+    if model.cfg.control == "type_gate":  # the word-type gate needs the run's words and the dataset's types
+        from emml.models.type_gate import TypeGate
+        from emml.tasks.language import load_dataset
+
+        model.type_gate = TypeGate(tuple(ckpt["vocabulary"]), load_dataset(env.dataset))
+    return model.to(device), cfg
+
+
+def evaluate_checkpoint(
+    path, episodes: int, seed: int = EVAL_SEED, device: str = "cpu", control: str | None = None
+) -> dict[str, float]:
+    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily over ``episodes``
+    per (task, split) from episode seed ``seed`` (emml.evaluate); ``control`` as in `load_model`."""
+    import torch
+
+    from emml.evaluate import evaluate
+
+    model, cfg = load_model(path, device, control)
+    torch.manual_seed(seed)
+    return evaluate(model, cfg.env, episodes, seed=seed, device=device)
+
+
+# --- results -------------------------------------------------------------------------------------------------------
+class RunDirError(ValueError):
+    """A run dir whose results.json or metrics.csv cannot be read (the message names the file)."""
+
+
+def read_results(path: Path) -> dict:
+    """A run's results.json (``path``: the file or its run dir); RunDirError naming the file unless it is a JSON
+    object with 'run_id' and 'table'."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / RESULTS
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise RunDirError(f"{path}: not JSON ({e.msg}, line {e.lineno} column {e.colno})") from None
+    if not isinstance(data, dict):
+        raise RunDirError(f"{path}: not a JSON object")
+    missing = [k for k in ("run_id", "table") if not data.get(k)]
+    if missing:
+        raise RunDirError(f"{path}: no {' and no '.join(map(repr, missing))}")
+    return data
+
+
+def saved_config(directory: Path) -> dict | None:
+    """The config a run trained with, from its results.json ("config"); None when the file or its "config" is
+    absent (a run finished before the trainer wrote it: `emml backfill-config`)."""
+    path = Path(directory) / RESULTS
+    if not path.exists():
+        return None
+    return json.loads(path.read_text()).get("config")
+
+
+def write_json(path: Path, payload: dict) -> None:
+    """Atomically (a temporary file, then a rename), as 2-space JSON; a full disk names both files."""
+    tmp = path.with_name(path.name + ".tmp")
+    with no_space_names(path, tmp):
+        tmp.write_text(json.dumps(payload, indent=2))
+        os.replace(tmp, path)
+
+
+def results_payload(cfg: TrainConfig, metrics: dict, frames: int, git_sha: str, run_id: str) -> dict:
+    """What results.json holds: the run's identity, its provenance, how its score was measured, the score and the
+    config it trained with (reports state its deviations from the paper)."""
+    return {
+        **run_identity(cfg),
+        "frames": frames,
+        "git_sha": git_sha,
+        "run_id": run_id,
+        "eval_episodes": cfg.final_eval_episodes,  # the score's: the final evaluation's
+        "eval_seed": EVAL_SEED,
+        "metrics": metrics,
+        "config": cfg.to_dict(),
+    }
+
+
+def save_results(directory: Path, payload: dict, cfg: TrainConfig, record: bool = True) -> None:
+    """Write a run's results.json atomically, then (``record``) upsert its row in the results CSV (`record_result`)."""
+    write_json(Path(directory) / RESULTS, payload)
+    if record:
+        record_result(payload, cfg)
+
+
+def results_csv(cfg: TrainConfig) -> Path:
+    """``<results_root>/<table>/<profile>.csv``: the run's results table."""
+    return project_path(cfg.results_root) / cfg.table / f"{cfg.profile}.csv"
+
+
+ROW_ONLY = ("tasks", "shaping", "precision")
+"""Columns `record_result` adds to a results row that are not keys of results.json."""
+
+
+def record_result(payload: dict, cfg: TrainConfig) -> Path:
+    """Upsert the run's row (keyed by run name) in its results CSV (emml.results): results.json's keys but the
+    metrics and config, then `ROW_ONLY`, then the metrics."""
+    from emml.profiles import refuse_committed
+    from emml.results import upsert_result
+
+    refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results
+    row = {k: v for k, v in payload.items() if k not in ("metrics", "config")}
+    row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, precision=cfg.precision, **payload["metrics"])
+    return upsert_result(results_csv(cfg), row)
+
+
+@dataclass
+class RunResult:
+    """What training a run returns."""
+
+    run_dir: Path
+    """Its directory."""
+    run_id: str
+    """Its MLflow run id."""
+    frames: int
+    """Frames trained."""
+    metrics: dict
+    """Its final score (greedy accuracy per task and split)."""
+    resumed: bool = False
+    """Resumed from a checkpoint."""
+    skipped: bool = False
+    """Already finished: nothing trained, its row recorded again."""

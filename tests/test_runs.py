@@ -1,0 +1,50 @@
+"""A run's one owner (emml/runs.py): names, identity, paths, and reports that read runs without torch."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from emml.config import TrainConfig
+from emml.profiles import profile_config
+from emml.runs import CHECKPOINT, config_of, path_of, run_dir, run_name, swept, variant_dir
+from emml.tracking import project_root
+
+
+def test_every_committed_run_dir_keeps_its_name():
+    """Run dirs written before the identity was declared (the committed reference runs) resolve to themselves."""
+    dirs = sorted(p.parent for p in (project_root() / "runs").glob("*/*/results.json")) + sorted(
+        p.parent for p in (project_root() / "runs").glob("*/*/*/results.json")
+    )
+    assert dirs, "no committed run dir to check"
+    for d in dirs:
+        cfg = TrainConfig.from_dict(json.loads((d / "results.json").read_text())["config"])
+        assert run_name(cfg) == d.name, (d, swept(cfg))
+
+
+def test_a_field_a_profile_does_not_set_names_its_value_and_a_long_list_a_digest():
+    base = profile_config("quick")
+    assert run_name(base) == "dual_attention-easy-noaux-s0-quick" and swept(base) == {}
+    lr = profile_config("quick", "easy", {"ppo.lr": 3e-4})
+    assert run_name(lr) == "dual_attention-easy-noaux-s0-quick+ppo.lr=0.0003"
+    many = profile_config("quick", "easy", {"ppo.lr": 3e-4, "ppo.clip_coef": 0.1, "env.frame_skip": 4, "ppo.epochs": 3})
+    assert run_name(many).startswith("dual_attention-easy-noaux-s0-quick+x") and len(run_name(many)) < 60
+    assert run_name(many) != run_name(profile_config("quick", "easy", {"ppo.lr": 3e-4, "ppo.clip_coef": 0.3}))
+
+
+def test_the_no_aux_run_beside_an_aux_run_is_found_from_its_config(tmp_path):
+    aux = profile_config("quick", aux=True, table="table2")
+    there = variant_dir(aux, tmp_path, aux=False)
+    assert there == tmp_path / "table2" / "dual_attention-easy-noaux-s0-quick"
+    rooted = profile_config("quick", "easy", {"run_root": str(tmp_path)}, aux=True, table="table2")
+    assert path_of(tmp_path, "table2", run_name(aux)) == run_dir(rooted)
+    assert config_of(tmp_path / "none") is None and CHECKPOINT == "checkpoint.pt"
+
+
+def test_the_report_tables_and_the_run_owner_import_no_torch():
+    code = "import sys, emml.runs, emml.report.tables, emml.report.index; print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(project_root()))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
