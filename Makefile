@@ -24,10 +24,8 @@ $(VENV)/.installed: pyproject.toml
 demo: setup
 	$(EMML) demo
 
-# the suite in parallel (pytest-xdist, one worker per core, at most 4: each runs trainings with their own engines;
-# 637 tests in 16 min 41 s on 2 idle cores). A test counts only the engines its own worker started (tests/conftest.py)
 test: setup
-	$(PY) -m pytest -q -n auto --maxprocesses=4
+	$(PY) -m pytest -q
 
 # the learning checks too long for CI (tests marked slow: the end-to-end SGN test on learned detectors, ~8 min)
 test-slow: setup
