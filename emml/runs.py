@@ -157,7 +157,7 @@ def run_tags(cfg: TrainConfig, git_sha: str, allocator: str) -> dict:
     """The run's MLflow tags: its identity (less its name, the MLflow run name), the setting a reader filters
     on, its provenance and its checkpoint's path."""
     identity = run_identity(cfg)
-    identity.pop("run_name")
+    name = identity.pop("run_name")
     return {
         **identity,
         "git_sha": git_sha,
@@ -165,7 +165,7 @@ def run_tags(cfg: TrainConfig, git_sha: str, allocator: str) -> dict:
         "tasks": cfg.env.tasks,
         "shaping": cfg.env.shaping,
         "precision": cfg.precision,
-        "checkpoint": str(run_dir(cfg) / CHECKPOINT),
+        "checkpoint": str(path_of(cfg.run_root, cfg.table, name) / CHECKPOINT),
     }
 
 
@@ -180,7 +180,8 @@ def check_resumable(saved: dict, cfg: TrainConfig, path: Path) -> None:
     defaults = _flat(TrainConfig().identity())
     old = {**defaults, **{k: v for k, v in _flat(saved).items() if k.split(".")[0] not in TrainConfig.RUNTIME}}
     new = _flat(cfg.identity())
-    diffs = [k for k in sorted(set(old) | set(new)) if old.get(k, defaults.get(k)) != new.get(k, defaults.get(k))]
+    diffs = [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]  # an option set on one side only:
+    # absent (None) on the other
     if diffs:
         raise ConfigMismatch(
             f"{path} holds a run with a different config ({', '.join(diffs)}); use another seed/table/run_root, "

@@ -99,7 +99,7 @@ def improvement(x: np.ndarray, y: np.ndarray) -> float:
     higher = (x[:, None, :] > y[None, :, :]).sum(axis=(0, 1))
     ties = (x[:, None, :] == y[None, :, :]).sum(axis=(0, 1))
     per_cell = (higher + 0.5 * ties) / (x.shape[0] * y.shape[0])
-    return np.mean(list(per_cell))
+    return np.mean(list(per_cell))  # the mean of a list of numpy floats, as rliable takes it: the same float
 
 
 def reference_row(table) -> str | None:

@@ -110,7 +110,6 @@ class PackedLearner:
 
     def __init__(self, stacked: StackedModels, optimizer, cfg: TrainConfig):
         self.model, self.optimizer, self.cfg = stacked, optimizer, cfg
-        self.runs = stacked.runs
 
     def update(self, buffer, mask) -> list[dict]:
         """Every run's PPO update on its actors' rollout; their losses, one dict per run."""

@@ -41,9 +41,9 @@ from emml.runs import (
     RunResult,
     check_resumable,
     git_sha,
+    path_of,
     record_result,
     results_payload,
-    run_dir,
     run_name,
     run_tags,
     save_results,
@@ -66,8 +66,8 @@ class Trainer:
     ):
         self.cfg = check_hardware(cfg.validate())  # the values, then what this machine can run: before any compute
         self.parent_run_id = parent_run_id
-        self.dir = run_dir(cfg)
         self.name = run_name(cfg)
+        self.dir = path_of(cfg.run_root, cfg.table, self.name)
         self.tracker = tracker or Tracker()
         self.quiet = quiet
         dataset = load_dataset(cfg.env.dataset)
@@ -232,8 +232,6 @@ class Trainer:
 class PlainLearner:
     """The learner of one run: its model acts, `ppo_update` steps its optimizer (emml/rl/ppo.py). A packed run's
     learner (emml/rl/packed_trainer.py, `PackedLearner`) has the same interface over N runs."""
-
-    runs = 1
 
     def __init__(self, model, optimizer, cfg: TrainConfig):
         self.model, self.optimizer, self.cfg = model, optimizer, cfg
