@@ -239,11 +239,11 @@ def bench_train_cmd(
     from emml.bench import PARTS, bench_train
     from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
-    from emml.rl.hardware import check_hardware
+    from emml.rl.hardware import check_runnable
 
     try:
         cfg = profile_config(profile, "easy", _parse_sets(sets), model=model, aux=aux, device=device).validate()
-        check_hardware(cfg)  # bench runs the model without a Trainer: what this machine can run, before compute
+        check_runnable(cfg)  # bench runs the model without a Trainer: the registry and the machine, before compute
     except ValueError as e:
         _fail(str(e))
     if part not in PARTS:
@@ -288,11 +288,11 @@ def _child_bench_args(profile: str, updates: int, sets: list[str], variants: lis
     """`bench train` options for child processes, after validating the config of every variant here: bad input
     fails before any child starts."""
     from emml.profiles import profile_config
-    from emml.rl.hardware import check_hardware
+    from emml.rl.hardware import check_runnable
 
     for extra in variants:
         try:
-            check_hardware(profile_config(profile, "easy", {**_parse_sets(sets), **extra}).validate())
+            check_runnable(profile_config(profile, "easy", {**_parse_sets(sets), **extra}).validate())
         except ValueError as e:
             _fail(str(e))
     return ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]
@@ -413,7 +413,7 @@ def train(
     seeds of it in one process, each written as its own run."""
     from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
-    from emml.rl.hardware import check_hardware
+    from emml.rl.hardware import check_runnable
 
     overrides = _parse_sets(sets)
     if frames:
@@ -427,7 +427,7 @@ def train(
             profile_config(profile, difficulty, overrides, model=model, aux=aux, seed=s, table=table, device=device)
             for s in seeds
         ]
-        cfg = check_hardware(cfgs[0].validate())  # the values, then what this machine can run (emml/rl/hardware.py)
+        cfg = check_runnable(cfgs[0].validate())  # the values, then the model registry and the machine (rl/hardware.py)
         if pack_seeds:
             from emml.rl.packed_trainer import check_packable
 
@@ -489,7 +489,7 @@ def train(
 
 _CONTROLS = (
     "detectors (x_I := aux labels), target_mask (x_S := the referent's cells), type_gate (Eq. 4's gate from the "
-    "dataset's word types), none (emml/models/config.py)"
+    "dataset's word types), none (emml/config.py, ModelConfig.control)"
 )
 
 

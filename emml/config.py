@@ -3,9 +3,9 @@ the reason, collected in docs/fidelity.md). `validate()` fails before any comput
 allowed values.
 
 Configs are leaves: this module imports no other layer of `emml` but the leaves `emml.geometry` and
-`emml.env_kinds` (and, until the model registry is a lower layer, `emml.models` for the model names, in
-`validate()`). What the machine can run (a C++ compiler for `compile`, native bf16 for `precision`, a CUDA device)
-is checked where training starts, not here: `emml.rl.hardware.check_hardware`."""
+`emml.env_kinds`. What needs more than the values is checked where training starts, not here
+(`emml.rl.hardware.check_runnable`): the model registry (plugins loaded) names the model and the ablations its
+fusion declares; the machine runs `compile` (a C++ compiler), `precision` (native bf16) and `device` (CUDA)."""
 
 from __future__ import annotations
 
@@ -265,6 +265,92 @@ class PPOConfig:
         return self
 
 
+CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
+"""Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
+LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
+"""The controls that read the env's privileged aux labels (acting needs them; training needs aux=True)."""
+
+
+@dataclass
+class ModelConfig:
+    """Hyperparameters of one model; every model shares encoders and policy."""
+
+    name: str = "dual_attention"
+    """Fusion architecture, one of `emml.models.ARCHITECTURES`: a fusion class of the model registry,
+    emml/models/registry.py (ablations use the switches below)."""
+    embed_dim: int = 32
+    """Word-embedding size (paper appendix: 32)."""
+    gru_text: int = 32
+    """Hidden size of the sentence GRU (paper appendix: 32)."""
+    hidden: int = 128
+    """Hidden size of the policy's linear layer and GRU (paper appendix: 128)."""
+    time_dim: int = 32
+    """Size of the learned time-step embedding (paper is silent; our choice)."""
+    pacman_frames: int = 5
+    """Frames in the PACMAN attention window, current frame included (paper: 5)."""
+    spatial_attention: bool = True
+    """Dual-Attention: use the Spatial-Attention unit (Eq. 2-3); False = 'w/o SA' ablation."""
+    ga1: bool = True
+    """Dual-Attention: use the BoW Gated-Attention (Eq. 1); False = 'w/o GA1' ablation."""
+    ga2: bool = True
+    """Dual-Attention: use the sentence Gated-Attention (Eq. 4); False = 'w/o GA2' ablation."""
+    task_indicator: bool = True
+    """Feed the SGN/EQA task one-hot to the policy; False = 'w/o task indicator' ablation."""
+    state_scale: bool = True
+    """Dual-Attention: hand the policy x_S = h·w · vec(x_spat) (mean 1 per cell) instead of vec(x_spat) (entries
+    ~1/(h·w)). Paper silent on input scaling; measured in docs/fidelity.md."""
+    state_temperature: float | None = None
+    """Dual-Attention, opt-in: hand the policy x_S = h·w · softmax(scores / state_temperature) with the gradient
+    stopped, a sharper copy of x_spat (Eq. 2); x_spat itself, Eq. 3-5 and every loss's gradient into the detectors
+    stay as they are. None (the default): x_S = h·w · vec(x_spat). The paper is silent on how the policy reads the
+    map: at temperature 1 a detector that ranks the target first but scores it 0.6 against 0.2 gives it 1.5x a
+    background cell, too faint for the actor; measured in docs/fidelity.md."""
+    x_image: str = "sigmoid"
+    """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
+    (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
+    either way. The paper contradicts itself; measured in docs/fidelity.md."""
+    control: str = "none"
+    """Diagnostic controls, not the paper's model (they read privileged labels, so they need aux labels):
+    'none'; 'detectors': x_I := the aux labels (perfect detectors, unlabelled channels 0); 'target_mask':
+    x_S := the cells showing the episode's referent (perfect x_S, values 0/1); 'type_gate' (Dual-Attention with GA2,
+    evaluation only: `emml eval CKPT --control type_gate`): Eq. 4's x_sent := a gate from the dataset's word types
+    that opens the channels of the attribute a question asks for (emml/models/type_gate.py), no labels read."""
+
+    def validate(self) -> ModelConfig:
+        """The fields' values: raise `ValueError` naming the offending field; return self when valid. Whether `name`
+        is registered and declares the ablations switched off is the model registry's check
+        (`emml.models.registry.check_architecture`), made where a model is built or a run starts."""
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"ModelConfig.name={self.name!r} must be the name of a fusion architecture")
+        for name in ("embed_dim", "gru_text", "hidden", "time_dim", "pacman_frames"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"ModelConfig.{name}={value!r} must be a positive integer (>= 1)")
+        t = self.state_temperature
+        if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float)) or not t > 0):
+            raise ValueError(f"ModelConfig.state_temperature={t!r} must be None (off) or a number > 0")
+        if t is not None and not (self.name == "dual_attention" and self.spatial_attention):
+            raise ValueError(
+                f"ModelConfig.state_temperature={t!r} sharpens the spatial attention map: only for "
+                f"name='dual_attention' with spatial_attention=True (got name={self.name!r}, "
+                f"spatial_attention={self.spatial_attention}); allowed there: None or a number > 0"
+            )
+        if self.x_image not in ("sigmoid", "relu"):
+            raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
+        if self.control not in CONTROLS:
+            raise ValueError(f"ModelConfig.control={self.control!r} is unknown; allowed: " + ", ".join(CONTROLS))
+        if self.control == "type_gate" and not (self.name == "dual_attention" and self.ga2):
+            raise ValueError(
+                f"ModelConfig.control='type_gate' replaces the GA2 gate (Eq. 4): only for name='dual_attention' "
+                f"with ga2=True (got name={self.name!r}, ga2={self.ga2})"
+            )
+        for name in ("spatial_attention", "ga1", "ga2", "task_indicator", "state_scale"):
+            value = getattr(self, name)
+            if not isinstance(value, bool):
+                raise ValueError(f"ModelConfig.{name}={value!r} must be True or False")
+        return self
+
+
 @dataclass
 class TrainConfig:
     """One training run: environment, model, PPO and the run's own settings (issue: one trainer for all tables).
@@ -381,12 +467,14 @@ class TrainConfig:
         self.env.aux_labels = self.aux
 
     def validate(self) -> TrainConfig:
-        """The fields' values, before any compute (what this machine can run: `emml.rl.hardware.check_hardware`)."""
-        # upward, and ignored by the layers contract (pyproject.toml) until the model registry, which imports torch,
-        # has a name list below the configs; local so that importing the configs imports no torch
-        from emml.models import model_config
-
-        model_config(self.model, **self.model_options)  # names the model and any unknown option
+        """The fields' values, before any compute. The model's registry entry and this machine are checked where
+        training starts (`emml.rl.hardware.check_runnable`)."""
+        if not isinstance(self.model, str) or not PLAIN_NAME.fullmatch(self.model):
+            raise ValueError(f"model={self.model!r} must be a model registry name (`emml models`)")
+        unknown = sorted(set(self.model_options) - {f.name for f in fields(ModelConfig)})
+        if unknown:
+            known = ", ".join(f.name for f in fields(ModelConfig))
+            raise ValueError(f"model_options: unknown ModelConfig field(s) {unknown}; allowed: {known}")
         check_choice("env.difficulty", self.env.difficulty, ENV_DIFFICULTIES)
         self.env.validate()
         self.ppo.validate()
@@ -504,8 +592,6 @@ def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") ->
             if section not in ("env", "ppo", "model_options"):
                 raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo', 'model_options'")
             if section == "model_options":
-                from emml.models.config import ModelConfig  # upward: as in TrainConfig.validate
-
                 known = [f.name for f in fields(ModelConfig)]
                 if name not in known:
                     raise ValueError(f"{source} {key!r}: unknown model option; known: {', '.join(known)}")

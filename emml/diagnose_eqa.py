@@ -48,10 +48,9 @@ def actor_words(dataset: Dataset, name: str) -> str:
 
 def _gate_model(model) -> str | None:
     """None when the model has a GA2 gate (Eq. 4); else why there is none."""
-    fusion = model.fusion
-    if type(fusion).__name__ != "DualAttention":
+    if "ga2" not in getattr(model.fusion, "ablations", ()):  # a fusion declares its gates (emml/models/fusion.py)
         return f"no GA2 gate in model {model.cfg.name!r} (Dual-Attention only)"
-    if not fusion.ga2:
+    if not model.cfg.ga2:
         return "no GA2 gate in this model (the 'w/o GA2' ablation)"
     return None
 

@@ -28,7 +28,6 @@ NOT_TAGS = ("run_name", "run_id", "metrics", "config")
 """results.json keys that are not tags: the run name, the id (tag ``IMPORTED_RUN_ID``), the score and config."""
 
 
-
 @dataclass
 class ImportResult:
     """What became of one run dir."""

@@ -229,10 +229,10 @@ def run_table(
     report.skipped = [rname for rname, (_, state) in states.items() if state == "finished"]
     if todo:  # each run's config, the store, the run and results folders, the results CSV: before the parent run
         from emml.preflight import check_train
-        from emml.rl.hardware import check_hardware
+        from emml.rl.hardware import check_runnable
 
         roots = _roots(run_root, results_root)
-        check_train(*(check_hardware(spec.to_config(profile, **roots, device=device).validate()) for spec in todo))
+        check_train(*(check_runnable(spec.to_config(profile, **roots, device=device).validate()) for spec in todo))
     log(f"{name} [{profile}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
     if not todo:
         return report

@@ -291,8 +291,12 @@ def _model_name(path: Path, key: str, value) -> str:
 
 def _config(path: Path, key: str, model: str, overrides: dict) -> TrainConfig:
     """The validated TrainConfig that ``overrides`` give ``model``; a bad override fails naming ``key``."""
+    from emml.models import check_model  # the registry's own check of the model's options (it imports torch)
+
     try:
-        return apply_overrides(TrainConfig(model=model), overrides, source="override").validate()
+        cfg = apply_overrides(TrainConfig(model=model), overrides, source="override").validate()
+        check_model(cfg.model, cfg.model_options)
+        return cfg
     except ValueError as e:
         raise _err(path, key, str(e)) from e
 

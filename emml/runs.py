@@ -199,7 +199,7 @@ def read_checkpoint(path: Path) -> dict:
 
 def load_model(path, device: str = "cpu", control: str | None = None):
     """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary; ``control`` (one of
-    `emml.models.config.CONTROLS`) replaces the run's diagnostic control, for evaluation (same weights)."""
+    `emml.config.CONTROLS`) replaces the run's diagnostic control, for evaluation (same weights)."""
     from emml.models import build_model  # torch: loaded when a model is, not for reports
 
     ckpt = read_checkpoint(path)

@@ -106,11 +106,21 @@ def test_every_list_of_models_derives_from_the_registry(sandbox):
     from torch import nn
 
     from emml.config import TrainConfig
-    from emml.models import ARCHITECTURES, MODELS, Fusion, FusionOutput, ModelConfig, build_model, register_model
+    from emml.models import (
+        ARCHITECTURES,
+        MODELS,
+        Fusion,
+        FusionOutput,
+        ModelConfig,
+        build_model,
+        check_architecture,
+        check_model,
+        register_model,
+    )
 
     assert "probe" not in MODELS and "probe" not in models_json()
-    with pytest.raises(ValueError, match="name='probe' is unknown"):
-        ModelConfig(name="probe").validate()
+    with pytest.raises(ValueError, match="unknown fusion name='probe'"):
+        check_architecture(ModelConfig(name="probe").validate())
 
     @register_model("probe", "Probe: x_S = vec(x_I)")
     class Probe(Fusion):
@@ -123,15 +133,15 @@ def test_every_list_of_models_derives_from_the_registry(sandbox):
             return FusionOutput(state=x_image.flatten(1), answer_logits=self.answer(x_image.mean(dim=(2, 3))))
 
     assert list(MODELS)[-1] == "probe" and "probe" in ARCHITECTURES
-    assert ModelConfig(name="probe").validate().name == "probe"
-    TrainConfig(model="probe").validate()
+    assert check_architecture(ModelConfig(name="probe").validate()).name == "probe"
+    assert check_model(TrainConfig(model="probe").validate().model, {}).name == "probe"
     row = models_json()["probe"]
     assert row["description"] == "Probe: x_S = vec(x_I)" and row["source"] == __name__ and row["parameters"] > 0
     model = build_model("probe", 6, 60, 108, 20)
     assert isinstance(model.fusion, Probe) and model.window == 0
     assert not model.text_encoder.sentence  # it reads no x_sent: no sentence GRU
     with pytest.raises(ValueError, match="ga1=False is only allowed for name='dual_attention'"):
-        ModelConfig(name="probe", ga1=False).validate()  # ablations are declared by the fusion that reads them
+        check_architecture(ModelConfig(name="probe", ga1=False).validate())  # ablations are declared by the fusion that reads them
     with pytest.raises(ValueError, match="'probe' is already registered"):
         register_model("probe", "another", Fusion)
     with pytest.raises(TypeError, match="not a subclass of emml.models.Fusion"):

@@ -179,7 +179,7 @@ def _short_episodes(monkeypatch, tmp_path) -> None:
 
     text = emml.profiles.PROFILES_FILE.read_text()
     path = tmp_path / "profiles.toml"
-    path.write_text(text.replace('[smoke]\n', '[smoke]\n"env.max_steps" = 12\n', 1))
+    path.write_text(text.replace("[smoke]\n", '[smoke]\n"env.max_steps" = 12\n', 1))
     monkeypatch.setenv(emml.profiles.PROFILES_ENV, str(path))  # the launcher's run processes too
 
 

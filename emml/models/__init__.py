@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
-from emml.models.config import ModelConfig
+from emml.config import ModelConfig
 from emml.models.encoders import conv_output_size
 from emml.models.fusion import Fusion, FusionOutput
 from emml.models.policy import EmmlModel, ModelOutput
@@ -18,6 +18,7 @@ from emml.models.registry import (
     MODELS,
     PLUGIN_HINT,
     ModelSpec,
+    check_architecture,
     register_model,
     register_variant,
 )
@@ -39,7 +40,13 @@ def model_config(name: str, **overrides: Any) -> ModelConfig:
         raise ValueError(
             f"unknown ModelConfig field(s) {sorted(unknown)}; allowed: " + ", ".join(ModelConfig.__dataclass_fields__)
         )
-    return replace(ModelConfig(), **{**spec.options, **overrides}).validate()
+    return check_architecture(replace(ModelConfig(), **{**spec.options, **overrides}).validate())
+
+
+def check_model(name: str, options: dict) -> ModelConfig:
+    """The `ModelConfig` a run's `TrainConfig.model` and `model_options` give, through the registry (plugins loaded):
+    an unknown name or option, or a bad value, fails naming it."""
+    return model_config(name, **options)
 
 
 def state_formula(cfg: ModelConfig) -> str:
@@ -86,6 +93,8 @@ __all__ = [
     "ModelOutput",
     "ModelSpec",
     "build_model",
+    "check_model",
+    "check_architecture",
     "conv_output_size",
     "count_parameters",
     "describe",

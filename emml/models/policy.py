@@ -15,11 +15,11 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from emml.models.config import LABEL_CONTROLS, ModelConfig
+from emml.config import LABEL_CONTROLS, ModelConfig
 from emml.models.encoders import ImageEncoder, TextEncoder, conv_output_size
 from emml.models.fusion import FusionOutput
 from emml.models.gru import gru_cell, gru_sequence
-from emml.models.registry import build_fusion
+from emml.models.registry import build_fusion, check_architecture
 
 NUM_ACTIONS = 4
 """Navigation actions (the harness's action set size)."""
@@ -170,7 +170,7 @@ class EmmlModel(nn.Module):
 
     def __init__(self, cfg: ModelConfig, vocab_size: int, height: int, width: int, max_steps: int) -> None:
         super().__init__()
-        cfg.validate()
+        check_architecture(cfg.validate())
         if isinstance(vocab_size, bool) or not isinstance(vocab_size, int) or vocab_size < 1:
             raise ValueError(f"vocab_size={vocab_size!r} must be a positive integer")
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:

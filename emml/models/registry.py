@@ -186,6 +186,20 @@ def architecture(name: str) -> type[Fusion]:
     return _ENTRIES[name].fusion
 
 
+def check_architecture(cfg):
+    """The registry's check of a `ModelConfig` (validated for its values): its name is a registered fusion, and the
+    ablations it switches off (§4) are ones that fusion declares it reads; returns ``cfg``."""
+    architecture(cfg.name)
+    for field_name in ("spatial_attention", "ga1", "ga2"):
+        if not getattr(cfg, field_name) and field_name not in architecture(cfg.name).ablations:
+            readers = [a for a in ARCHITECTURES if field_name in architecture(a).ablations]
+            raise ValueError(
+                f"ModelConfig.{field_name}=False is only allowed for "
+                f"name={' or '.join(map(repr, readers))} (got name={cfg.name!r}); allowed: True"
+            )
+    return cfg
+
+
 def build_fusion(cfg, vocab_size: int, height: int, width: int) -> Fusion:
     """Fusion unit of architecture `cfg.name` for a conv3 grid of (height, width) = (h, w)."""
     fusion = architecture(cfg.name).from_config(cfg, vocab_size, height, width)

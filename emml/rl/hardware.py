@@ -1,10 +1,12 @@
-"""What this machine can run of a run's config, checked where training starts: by the trainer before any compute,
-and by `emml train`, `emml run` and `emml bench train` before any run starts.
+"""What this installation and this machine can run of a run's config, checked where training starts
+(`check_runnable`): by the trainer before any compute, and by `emml train`, `emml run` and `emml bench train` before
+any run starts.
 
-`TrainConfig.validate` checks the values (it is a leaf and imports no torch); these are the checks that ask the
-machine: a C++ compiler for `compile='on'` on a CPU (emml/rl/compiled.py), native bf16 arithmetic for
-`precision='bf16'` (emml/rl/precision.py), a CUDA device for `device='cuda'`. Each failure is a ValueError naming
-the field, its value and what to use instead (the CLI prints it and exits 2).
+`TrainConfig.validate` checks the values (it is a leaf and imports no torch); these are the checks that ask the model
+registry (the model's name and options, plugins loaded: `emml.models.check_model`) and the machine: a C++ compiler
+for `compile='on'` on a CPU (emml/rl/compiled.py), native bf16 arithmetic for `precision='bf16'`
+(emml/rl/precision.py), a CUDA device for `device='cuda'`. Each failure is a ValueError naming the field, its value
+and what to use instead (the CLI prints it and exits 2).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import torch
 
 from emml.config import TrainConfig
+from emml.models import check_model
 from emml.rl.compiled import check_compile
 from emml.rl.precision import check_precision
 
@@ -29,3 +32,10 @@ def check_hardware(cfg: TrainConfig) -> TrainConfig:
     check_device(cfg.device)
     check_precision(cfg.precision, cfg.device)
     return cfg
+
+
+def check_runnable(cfg: TrainConfig) -> TrainConfig:
+    """Refuse, before any compute, what ``cfg`` (validated) asks of the model registry or of this machine that they
+    cannot give: an unknown model or model option, or a compile, device or precision setting; returns ``cfg``."""
+    check_model(cfg.model, cfg.model_options)
+    return check_hardware(cfg)

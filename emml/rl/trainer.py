@@ -27,7 +27,7 @@ from emml.evaluate import evaluate
 from emml.models import build_model
 from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
-from emml.rl.hardware import check_hardware
+from emml.rl.hardware import check_runnable
 from emml.rl.ppo import make_optimizer, model_forward, ppo_update
 from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
@@ -64,7 +64,7 @@ class Trainer:
     def __init__(
         self, cfg: TrainConfig, tracker: Tracker | None = None, quiet: bool = False, parent_run_id: str | None = None
     ):
-        self.cfg = check_hardware(cfg.validate())  # the values, then what this machine can run: before any compute
+        self.cfg = check_runnable(cfg.validate())  # the values, then the model registry and the machine: before compute
         self.parent_run_id = parent_run_id
         self.name = run_name(cfg)
         self.dir = path_of(cfg.run_root, cfg.table, self.name)

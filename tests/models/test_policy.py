@@ -9,6 +9,7 @@ from emml.models import (
     EmmlModel,
     ModelConfig,
     build_model,
+    check_architecture,
     model_table,
 )
 
@@ -242,7 +243,7 @@ def test_unknown_model_name_lists_known_names():
 )
 def test_config_validate_names_field(kwargs, field):
     with pytest.raises(ValueError, match=field):
-        ModelConfig(**kwargs).validate()
+        check_architecture(ModelConfig(**kwargs).validate())  # values, then the registry's name and ablations
 
 
 def test_build_model_overrides_and_too_small_image():

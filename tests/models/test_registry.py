@@ -3,7 +3,7 @@ shown, and what each fusion needs read from its declared attributes."""
 
 import pytest
 
-from emml.models import ARCHITECTURES, MODELS, ModelConfig, build_model, model_config
+from emml.models import ARCHITECTURES, MODELS, ModelConfig, build_model, check_architecture, model_config
 from emml.models.fusion import DualAttention, Fusion, Pacman
 from emml.models.registry import architecture
 
@@ -48,6 +48,6 @@ def test_unknown_names_point_at_plugins():
     with pytest.raises(ValueError, match="--plugin"):
         model_config("mine")
     with pytest.raises(ValueError, match="EMML_PLUGINS"):
-        ModelConfig(name="mine").validate()
+        check_architecture(ModelConfig(name="mine"))
     with pytest.raises(ValueError, match="known names: text_only, image_only"):
         architecture("mine")

@@ -11,7 +11,7 @@ from emml.config import TrainConfig
 from emml.models import build_model
 from emml.rl import compiled as compiled_module
 from emml.rl.compiled import compile_model, wants_compile
-from emml.rl.hardware import check_hardware
+from emml.rl.hardware import check_runnable
 
 V, H, W, L, STEPS = 12, 60, 108, 6, 20
 
@@ -55,9 +55,9 @@ def test_compile_names_its_values_and_refuses_a_cpu_without_a_compiler(monkeypat
     monkeypatch.setattr(compiled_module, "cpp_compiler", lambda: None)
     cfg = TrainConfig(compile="on").validate()  # the value is valid: the machine is asked where training starts
     with pytest.raises(ValueError, match="no C\\+\\+ compiler"):
-        check_hardware(cfg)
+        check_runnable(cfg)
     assert not wants_compile("auto", "cpu")  # auto falls back to the plain model
-    check_hardware(TrainConfig(compile="auto").validate())
+    check_runnable(TrainConfig(compile="auto").validate())
 
 
 def test_auto_compiles_on_a_cpu_with_a_compiler_only(monkeypatch):

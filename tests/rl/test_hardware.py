@@ -10,9 +10,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from emml.config import TrainConfig
 from emml.launch import run_table
 from emml.profiles import profile_config
-from emml.rl.hardware import check_hardware
+from emml.rl.hardware import check_runnable
 from emml.rl.trainer import Trainer
 
 NO_CUDA = re.escape("device='cuda' but torch sees no CUDA device; use device='cpu'")
@@ -30,7 +31,7 @@ def never_train(cfg, quiet=False, parent_run_id=None):
 def test_cuda_without_a_device_is_refused_where_training_starts(no_cuda, tmp_path):
     cfg = profile_config("smoke", "easy", {"device": "cuda", "run_root": str(tmp_path / "runs")}).validate()
     with pytest.raises(ValueError, match=NO_CUDA):
-        check_hardware(cfg)
+        check_runnable(cfg)
     with pytest.raises(ValueError, match=NO_CUDA):
         Trainer(cfg)
     assert not (tmp_path / "runs").exists()  # refused before anything was written
@@ -52,8 +53,24 @@ def test_the_launcher_refuses_before_any_run(no_cuda, tracking):
 
 
 def test_the_config_imports_no_torch_and_no_layer_above_it():
-    """The layers contract (pyproject.toml, `make lint`) reads the source; this runs it: `import emml.config`."""
+    """The layers contract (pyproject.toml, `make lint`) reads the source; this runs it: `import emml.config`, and
+    validating a config with model options (the model registry is asked where training starts, not here)."""
     above = ("torch", "emml.rl", "emml.models", "emml.envs", "emml.tasks", "emml.runs")
-    code = f"import sys, emml.config; print([m for m in sys.modules if m.startswith({above})])"
+    code = (
+        "import sys; from emml.config import TrainConfig, ModelConfig, apply_overrides; "
+        "apply_overrides(TrainConfig(model='pacman'), {'model_options.pacman_frames': 3}).validate(); "
+        "ModelConfig(name='pacman').validate(); "
+        f"print([m for m in sys.modules if m.startswith({above})])"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_a_model_the_registry_does_not_know_is_refused_where_training_starts():
+    cfg = TrainConfig(model="mine").validate()  # a value the configs accept: a registry name is not theirs to check
+    with pytest.raises(ValueError, match="unknown model name='mine'.*--plugin"):
+        check_runnable(cfg)
+    with pytest.raises(ValueError, match="ga1=False is only allowed for name='dual_attention'"):
+        check_runnable(TrainConfig(model="ga", model_options={"ga1": False}).validate())
+    with pytest.raises(ValueError, match=r"model_options: unknown ModelConfig field\(s\) \['hiden'\]"):
+        TrainConfig(model_options={"hiden": 64}).validate()

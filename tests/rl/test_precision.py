@@ -14,7 +14,7 @@ from emml.models import build_model
 from emml.profiles import profile_config
 from emml.results import read_results
 from emml.rl import precision
-from emml.rl.hardware import check_hardware
+from emml.rl.hardware import check_runnable
 from emml.rl.trainer import Trainer
 from emml.runs import METRICS, results_csv, run_name
 from emml.tracking import read_mirror
@@ -34,7 +34,7 @@ def native_bf16(monkeypatch):
 def test_bf16_is_refused_on_a_cpu_without_native_bf16(no_native_bf16, tmp_path):
     cfg = profile_config("smoke", "easy", {"precision": "bf16"})
     with pytest.raises(ValueError, match=r"precision='bf16'.*no native bf16.*avx512_bf16, amx_bf16.*precision='fp32'"):
-        check_hardware(cfg.validate())  # the value is valid; the machine is asked where training starts
+        check_runnable(cfg.validate())  # the value is valid; the machine is asked where training starts
     result = CliRunner().invoke(
         app, ["train", "--profile", "smoke", "--set", 'precision="bf16"', "--set", f'run_root="{tmp_path}"']
     )
