@@ -84,11 +84,29 @@ def engine_home() -> Path:
     return home
 
 
+LAUNCHER = """#!/bin/sh
+cd "{home}" || exit 1
+instance=- prev=
+for a in "$@"; do [ "$prev" = +viz_instance_id ] && instance=$a; prev=$a; done
+read -r stat < /proc/$$/stat
+rest=${{stat##*) }}
+start=$(echo $rest | cut -d' ' -f20)
+record="{records}/$PPID-$$"
+mkdir -p "{records}" && echo "$start $instance" > "$record.tmp" && mv "$record.tmp" "$record"
+exec "{binary}" "$@"
+"""
+"""The engine's launcher. It records the engine (``<owner pid>-<engine pid>``: start time, /proc/PID/stat field 22,
+and instance id, as `_record` writes them) before it ``exec``s the engine, which keeps the pid and the start time:
+an owner killed with SIGKILL while ``game.init()`` runs, before `start_engine` could record what it forked, leaves
+an engine `sweep_orphans` still finds (one such engine was left on this machine, session 12)."""
+
+
 def engine_launcher(binary: str) -> Path:
     """A launcher that starts the engine ``binary`` in :func:`engine_home` (``exec``: the engine keeps the pid
-    and name the library and :func:`start_engine` expect). Written once per content, atomically."""
+    and name the library and :func:`start_engine` expect), recorded first (`LAUNCHER`). Written once per content,
+    atomically."""
     home = engine_home()
-    script = f'#!/bin/sh\ncd "{home}" || exit 1\nexec "{binary}" "$@"\n'
+    script = LAUNCHER.format(home=home, records=records_dir(), binary=binary)
     path = home / f"vizdoom-{hashlib.sha1(script.encode()).hexdigest()[:12]}.sh"
     if not path.exists():
         fd, tmp = tempfile.mkstemp(dir=home, suffix=".tmp")
@@ -113,6 +131,7 @@ def start_engine(game) -> Engine:
     try:
         game.init()
     except Exception as e:  # vizdoom raises its own exception types
+        _drop_dead_records()  # what the launcher recorded of an engine that did not start
         raise EngineError(f"ViZDoom failed to start: {e}") from e
     new = {p: c for p, c in _children_named("vizdoom").items() if p not in before}
     pid, instance = None, None
@@ -148,6 +167,17 @@ def _record(engine: Engine) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{os.getpid()}-{engine.pid}"
     path.write_text(f"{_start_time(engine.pid)} {engine.instance_id or '-'}\n")
+
+
+def _drop_dead_records() -> None:
+    """Remove this process's records of engines that are gone and were never taken live (a failed start)."""
+    with _LOCK:
+        live = set(_LIVE)
+    for path in records_dir().glob(f"{os.getpid()}-*"):
+        pid = int(path.name.split("-")[1]) if path.name.split("-")[1].isdigit() else None
+        if pid is not None and pid not in live and not _alive(pid):
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
 
 
 def _unrecord(pid: int) -> None:

@@ -125,3 +125,21 @@ def test_a_record_whose_pid_now_names_another_process_is_not_killed(tmp_path, mo
     finally:
         other.kill()
         other.wait()
+
+
+def test_the_launcher_records_the_engine_before_it_runs(monkeypatch, no_leftovers):
+    """An owner SIGKILLed inside ``game.init()`` never reaches `_record`: the launcher's own record is what
+    `sweep_orphans` then finds (session 12 left such an engine behind)."""
+    import emml.envs.engine as engine
+    from emml.envs.doom import DoomEnv
+
+    monkeypatch.setattr(engine, "_record", lambda e: None)  # as if the owner died before recording
+    env = DoomEnv(height=60, width=108)
+    try:
+        env.reset(seed=0)
+        pid, instance = env._engine.pid, env._engine.instance_id
+        record = engine.records_dir() / f"{os.getpid()}-{pid}"
+        assert record.read_text().split() == [engine._start_time(pid), instance]
+    finally:
+        env.close()
+    assert not record.exists()  # ended: unrecorded as before
