@@ -265,6 +265,8 @@ class PPOConfig:
         return self
 
 
+SENTENCE_READOUTS: tuple[str, ...] = ("last", "mean")
+"""Values of `ModelConfig.sentence_readout`: the GRU's last output (the paper's reading) or the mean of its outputs."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
@@ -305,6 +307,13 @@ class ModelConfig:
     stay as they are. None (the default): x_S = h·w · vec(x_spat). The paper is silent on how the policy reads the
     map: at temperature 1 a detector that ranks the target first but scores it 0.6 against 0.2 gives it 1.5x a
     background cell, too faint for the actor; measured in docs/fidelity.md."""
+    sentence_readout: str = "last"
+    """Which GRU output x_sent's Linear reads (§3: x_sent = f(T; θ_sent), "passing the words in T through a GRU
+    network followed by a linear layer"): 'last', the GRU's output after the last word (the paper's reading, the
+    default); or, opt-in, 'mean', the mean of its outputs over the words, which keeps the question word ('what' /
+    'which') in x_sent. Measured in docs/fidelity.md (issue 34): with 'last', a test question ending in a word no
+    training question ends in gets the GA2 gate of the instructions ending in it ('what color is the torch'
+    answered 'torch')."""
     x_image: str = "sigmoid"
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
@@ -334,6 +343,11 @@ class ModelConfig:
                 f"ModelConfig.state_temperature={t!r} sharpens the spatial attention map: only for "
                 f"name='dual_attention' with spatial_attention=True (got name={self.name!r}, "
                 f"spatial_attention={self.spatial_attention}); allowed there: None or a number > 0"
+            )
+        if self.sentence_readout not in SENTENCE_READOUTS:
+            raise ValueError(
+                f"ModelConfig.sentence_readout={self.sentence_readout!r} is unknown; allowed: "
+                + ", ".join(SENTENCE_READOUTS)
             )
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
@@ -546,8 +560,8 @@ class TrainConfig:
         return -(-self.frames // self.frames_per_update)
 
     def spelled_name(self) -> str:
-        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, model options,
-        precision, seed, profile."""
+        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the opt-in
+        model options (state temperature, sentence readout), precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
             parts.append(f"{self.env.tasks}only")
@@ -555,6 +569,8 @@ class TrainConfig:
             parts.append("noshaping")
         if (t := self.model_options.get("state_temperature")) is not None:  # opt-in: the policy reads a sharper map
             parts.append(f"xs{t:g}")
+        if (readout := self.model_options.get("sentence_readout", "last")) != "last":  # opt-in: x_sent's readout
+            parts.append(f"sent{readout}")
         if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it
             parts.append(self.precision)
         return "-".join([*parts, f"s{self.seed}", self.profile])

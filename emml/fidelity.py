@@ -171,6 +171,14 @@ PAPER: tuple[PaperValue, ...] = (
         _spatial_map,
     ),
     PaperValue(
+        "x_sent read from",
+        ("model.sentence_readout",),
+        lambda c: ("last",),
+        "§3: 'a GRU followed by a linear layer', its final state",
+        lambda v: {"last": "the GRU's last output", "mean": "the mean of the GRU's outputs"}.get(v[0], v[0]),
+        lambda c: c["model.name"] != "image_only",
+    ),
+    PaperValue(
         "diagnostic control",
         ("model.control",),
         lambda c: ("none",),

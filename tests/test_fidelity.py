@@ -40,6 +40,16 @@ def test_a_changed_field_is_a_deviation_unless_the_row_sets_it():
     assert fidelity.deviations(cfg, frozenset({"env.shaping"})) == ["learning rate 0.0001 (paper 0.00025, App. A)"]
 
 
+def test_the_mean_sentence_readout_is_named_where_a_run_uses_it():
+    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
+    assert not any("x_sent" in d for d in fidelity.deviations(fidelity.resolve(saved)))
+    saved["model_options"] = {"sentence_readout": "mean"}
+    assert (
+        "x_sent read from the mean of the GRU's outputs (paper the GRU's last output, §3: 'a GRU followed by a "
+        "linear layer', its final state)" in fidelity.deviations(fidelity.resolve(saved))
+    )
+
+
 def test_our_choices_follow_the_config():
     saved = profile_config("paper", model="dual_attention", aux=True).to_dict()
     choices = fidelity.choices(fidelity.resolve(saved))

@@ -141,7 +141,9 @@ def test_every_list_of_models_derives_from_the_registry(sandbox):
     assert isinstance(model.fusion, Probe) and model.window == 0
     assert not model.text_encoder.sentence  # it reads no x_sent: no sentence GRU
     with pytest.raises(ValueError, match="ga1=False is only allowed for name='dual_attention'"):
-        check_architecture(ModelConfig(name="probe", ga1=False).validate())  # ablations are declared by the fusion that reads them
+        check_architecture(
+            ModelConfig(name="probe", ga1=False).validate()
+        )  # ablations are declared by the fusion that reads them
     with pytest.raises(ValueError, match="'probe' is already registered"):
         register_model("probe", "another", Fusion)
     with pytest.raises(TypeError, match="not a subclass of emml.models.Fusion"):

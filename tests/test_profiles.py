@@ -94,6 +94,8 @@ def test_a_model_option_is_set_from_the_command_line_and_recorded():
     assert TrainConfig.from_dict(cfg.to_dict()).model_options == {"state_temperature": 0.25}  # saved with the run
     assert run_name(cfg) == "dual_attention-easy-noaux-xs0.25-s0-paper"  # beside the default run, not over it
     assert run_name(TrainConfig()) == "dual_attention-easy-noaux-s0-paper"
+    mean = apply_overrides(TrainConfig(), {"model_options.sentence_readout": "mean"}).validate()
+    assert run_name(mean) == "dual_attention-easy-noaux-sentmean-s0-paper"  # issue 34's opt-in readout, spelled
 
 
 def test_a_bf16_run_is_named_apart_from_its_fp32_run():

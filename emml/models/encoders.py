@@ -121,10 +121,15 @@ class TextEncoder(nn.Module):
     (for fusions that never read it, so no dead parameters exist).
     """
 
-    def __init__(self, vocab_size: int, embed_dim: int = 32, gru: int = 32, sentence: bool = True) -> None:
+    def __init__(
+        self, vocab_size: int, embed_dim: int = 32, gru: int = 32, sentence: bool = True, readout: str = "last"
+    ) -> None:
         super().__init__()
         self.vocab_size = vocab_size
         self.sentence = sentence
+        self.readout = readout
+        """Which GRU output the Linear reads: 'last' (after the last word) or 'mean' (over the words);
+        `ModelConfig.sentence_readout`."""
         self.unrolled = False
         """Run the GRU as its equations in linear ops (`gru_scan`) rather than the fused `nn.GRU` kernel: what
         `torch.func.vmap` can batch over stacked runs (emml/rl/packed.py). Same values within float tolerance."""
@@ -140,10 +145,14 @@ class TextEncoder(nn.Module):
         return (tokens.unsqueeze(-1) == words).any(dim=-2).to(torch.float32)
 
     def sentence_embedding(self, tokens: Tensor) -> Tensor:
-        """x_sent = ReLU(Linear(GRU(Embedding(tokens))[last non-pad step]))."""
+        """x_sent = ReLU(Linear(GRU(Embedding(tokens))[last non-pad step])), or with readout 'mean' the mean of the
+        GRU's outputs over the non-pad steps in place of the last one (0 for an all-pad row either way)."""
         n, length = tokens.shape
         embedded = self.embedding(tokens)
         out = gru_scan(self.gru, embedded) if self.unrolled else self.gru(embedded)[0]  # (N, L, gru)
+        if self.readout == "mean":
+            words = (tokens != 0).unsqueeze(-1).to(out.dtype)  # right-padded: pad steps read nothing
+            return torch.relu(self.linear((out * words).sum(1) / words.sum(1).clamp(min=1)))
         positions = torch.arange(1, length + 1, device=tokens.device)
         last = ((tokens != 0).long() * positions).amax(dim=1)  # 1-based; 0 = all pad
         index = (last - 1).clamp(min=0).view(n, 1, 1).expand(n, 1, out.shape[-1])

@@ -180,7 +180,9 @@ class EmmlModel(nn.Module):
         self.grid = conv_output_size(height, width)
         self.image_encoder = ImageEncoder(vocab_size)
         self.fusion = build_fusion(cfg, vocab_size, *self.grid)
-        self.text_encoder = TextEncoder(vocab_size, cfg.embed_dim, cfg.gru_text, sentence=self.fusion.uses_sent)
+        self.text_encoder = TextEncoder(
+            vocab_size, cfg.embed_dim, cfg.gru_text, sentence=self.fusion.uses_sent, readout=cfg.sentence_readout
+        )
         self.policy = PolicyModule(
             self.fusion.state_dim,
             vocab_size,

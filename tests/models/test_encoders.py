@@ -142,3 +142,20 @@ def test_a_large_batch_encodes_each_distinct_instruction_once_with_the_same_valu
         if want is not None:
             torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-6)
     assert torch.equal(bow, enc.bag_of_words(tokens))
+
+
+def test_the_mean_readout_reads_every_word_and_the_default_reads_the_last():
+    """`ModelConfig.sentence_readout` (issue 34): 'mean' gives the Linear the mean of the GRU's outputs over the
+    words (pad steps excluded); 'last', the default, its output after the last word."""
+    torch.manual_seed(0)
+    last = TextEncoder(vocab_size=6, embed_dim=8, gru=8)
+    mean = TextEncoder(vocab_size=6, embed_dim=8, gru=8, readout="mean")
+    mean.load_state_dict(last.state_dict())  # the same parameters: only the readout differs
+    padded = torch.tensor([[2, 4, 6, 0, 0], [3, 0, 0, 0, 0], [0, 0, 0, 0, 0]])
+    out = last.gru(last.embedding(padded))[0]
+    expected = torch.relu(last.linear(torch.stack([out[0, :3].mean(0), out[1, 0], torch.zeros(8)])))
+    torch.testing.assert_close(mean(padded)[1], expected)
+    torch.testing.assert_close(last(padded)[1][:2], torch.relu(last.linear(torch.stack([out[0, 2], out[1, 0]]))))
+    assert not torch.allclose(mean(padded)[1][0], last(padded)[1][0])  # a 3-word row: the two readouts differ
+    mean.unrolled = True  # the packed trainer's GRU (vmap): the same readout
+    torch.testing.assert_close(mean(padded)[1], expected, rtol=1e-5, atol=1e-6)
