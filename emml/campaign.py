@@ -2,7 +2,10 @@
 
 A campaign file lists `[[steps]]` in the order they are to be trained; a step names a table, a profile, which of
 the table's runs (`only`: RunSpec fields, each one value or a list whose order orders the runs) and, optionally,
-`frames` (a step may train a profile to fewer frames than the profile's, e.g. the paper profile's first 1.5M).
+`frames` (a step may train a profile to fewer frames than the profile's, e.g. the paper profile's first 1.5M). A
+step's table is one of the paper's (reproduce/table*.toml) or an experiment beyond them, `experiments/<name>`
+(reproduce/experiments/<name>.toml: a table of one's own, `emml run FILE`, whose rows are the settings an issue
+measures, e.g. issue 34's x_sent readout).
 `emml campaign NAME` trains every unfinished run in that order through the table launcher (emml/launch.py), which
 skips finished runs and resumes interrupted ones; `--status` shows each run as done / running / interrupted / to do
 with its frames and an estimate of the time left, measured from this machine's own runs of the same profile.
@@ -28,6 +31,9 @@ from emml.registry import REPRODUCE_DIR, RunSpec
 from emml.runs import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
+EXPERIMENTS_DIR = REPRODUCE_DIR / "experiments"
+"""Tables beyond the paper's that a campaign step may name as ``experiments/<name>``."""
+EXPERIMENT_PREFIX = "experiments/"
 STEP_KEYS = ("name", "table", "profile", "only", "frames", "note")
 TOP_KEYS = ("title", "steps")
 STATES = ("done", "running", "interrupted", "to do")
@@ -42,7 +48,7 @@ class Step:
     name: str
     """Short label (shown by --status)."""
     table: str
-    """Table name (reproduce/<table>.toml)."""
+    """Table name (reproduce/<table>.toml), or ``experiments/<name>`` (reproduce/experiments/<name>.toml)."""
     profile: str
     """Profile (reproduce/profiles.toml)."""
     only: dict = field(default_factory=dict)
@@ -54,6 +60,13 @@ class Step:
 
     def overrides(self) -> dict:
         return {"frames": self.frames} if self.frames is not None else {}
+
+    @property
+    def table_ref(self) -> str:
+        """What `emml.registry.load_table` loads: the table's name, or an experiment's file."""
+        if self.table.startswith(EXPERIMENT_PREFIX):
+            return str(EXPERIMENTS_DIR / f"{self.table.removeprefix(EXPERIMENT_PREFIX)}.toml")
+        return self.table
 
 
 @dataclass(frozen=True)
@@ -88,6 +101,11 @@ def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
     return sorted(p.stem for p in directory.glob("*.toml"))
 
 
+def list_experiments(directory: Path = EXPERIMENTS_DIR) -> list[str]:
+    """Names of the experiment tables (reproduce/experiments/*.toml), sorted."""
+    return sorted(p.stem for p in directory.glob("*.toml"))
+
+
 def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
     from emml.launch import ONLY_FIELDS, select_runs
@@ -106,7 +124,8 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     raw_steps = data.get("steps")
     if not isinstance(raw_steps, list) or not raw_steps:
         raise ValueError(f"{path}: 'steps' must be a non-empty array of tables ([[steps]])")
-    steps, tables, profiles = [], list_tables(), load_profiles()
+    steps, profiles = [], load_profiles()
+    tables = [*list_tables(), *(f"{EXPERIMENT_PREFIX}{e}" for e in list_experiments())]
     for i, raw in enumerate(raw_steps):
         where = f"steps[{i}]"
         _check_keys(path, where, raw, STEP_KEYS)
@@ -114,7 +133,8 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
             if not isinstance(raw.get(key), str) or not raw[key]:
                 raise ValueError(f"{path}: {where}.{key} is required (a non-empty string)")
         if raw["table"] not in tables:
-            raise ValueError(f"{path}: {where}.table={raw['table']!r} is unknown; allowed: {', '.join(tables)}")
+            allowed = ", ".join([*tables, *(f"{EXPERIMENT_PREFIX}{e}" for e in list_experiments())])
+            raise ValueError(f"{path}: {where}.table={raw['table']!r} is unknown; allowed: {allowed}")
         if raw["profile"] not in profiles:
             raise ValueError(f"{path}: {where}.profile={raw['profile']!r} is unknown; allowed: {', '.join(profiles)}")
         only = raw.get("only", {})
@@ -125,7 +145,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
             raise ValueError(f"{path}: {where}.frames={frames!r} must be a positive integer")
         step = Step(raw["name"], raw["table"], raw["profile"], only, frames, raw.get("note", ""))
         try:  # the selection names runs the table has (the values present are named otherwise)
-            select_runs(_declared(step.table, step.profile), step.only)
+            select_runs(_declared(step.table_ref, step.profile), step.only)
         except ValueError as e:
             raise ValueError(f"{path}: {where}.only: {e}") from None
         steps.append(step)
@@ -157,7 +177,7 @@ def step_runs(
     from emml.launch import run_states, select_runs, with_overrides
 
     if states is None:
-        states = run_states(step.table, step.profile, run_root, results_root)
+        states = run_states(step.table_ref, step.profile, run_root, results_root)
     return [
         (with_overrides(spec, step.overrides(), step.profile), state)
         for spec, state in select_runs(states, step.only).values()
@@ -176,7 +196,7 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
     for step in campaign.steps:
         key = (step.table, step.profile)
         if key not in read:  # run_states reads every run dir's checkpoint: once per table and profile
-            read[key] = run_states(step.table, step.profile, run_root, results_root)
+            read[key] = run_states(step.table_ref, step.profile, run_root, results_root)
         for spec, launch_state in step_runs(step, run_root, results_root, read[key]):
             cfg = spec.to_config(step.profile, **fields)
             directory = run_dir(cfg)
@@ -269,7 +289,7 @@ def run_campaign(
         log(f"[{campaign.name} {i}/{len(campaign.steps)}] {step.name}: {step.table} [{step.profile}]")
         reports.append(
             run_table(
-                step.table,
+                step.table_ref,
                 step.profile,
                 jobs=jobs,
                 run_root=run_root,

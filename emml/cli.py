@@ -659,6 +659,40 @@ def diagnose(
     _echo(result, as_json, "\n".join(lines))
 
 
+@app.command("probe-eqa")
+def probe_eqa_cmd(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt (Dual-Attention with its GA2 gate, on EQA)"),
+    episodes: int = typer.Option(40, help="First frames per question (seeds 30,000+)."),
+    readouts: str = typer.Option("last,mean", help="x_sent readouts to train, comma-separated: last | mean."),
+    seeds: int = typer.Option(3, help="Encoders trained per readout (seeds 0, 1, ...)."),
+    steps: int = typer.Option(600, help="Adam steps per encoder (minibatches of --batch frames)."),
+    batch: int = typer.Option(128, help="Frames per minibatch."),
+    lr: float = typer.Option(3e-3, help="Adam's learning rate."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Would another question encoder answer the EQA test questions (issue 34)? On the first frames of EQA
+    episodes, conv and Dual-Attention frozen, x_sent's encoder (GRU + Linear; the embedding copied from the
+    checkpoint, frozen) retrained on the training questions' answers per readout and seed; answer accuracy on the
+    train and test questions beside the checkpoint's own encoder (emml/probe_eqa.py)."""
+    from emml.envs.engine import install_signal_handlers
+    from emml.probe_eqa import check_options, probe_checkpoint, probe_table
+
+    chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
+    try:
+        check_options(episodes, chosen, seeds, steps, batch, lr)
+    except ValueError as e:
+        _fail(str(e))
+    _check_checkpoint(checkpoint)
+    install_signal_handlers()
+    if not as_json:
+        typer.echo(f"probing {checkpoint}: {episodes} first frames per EQA question…", err=True)
+    try:
+        result = probe_checkpoint(checkpoint, episodes, chosen, seeds, steps, batch, lr)
+    except ValueError as e:  # a model without a GA2 gate, a run not scored on EQA
+        _fail(str(e))
+    _echo(result, as_json, probe_table(result))
+
+
 def _models(*paths: Path) -> list[tuple[str, object, object]]:
     """(label, model, config) per checkpoint, each checked first; the label says aux or no aux and the run."""
     from emml.runs import load_model

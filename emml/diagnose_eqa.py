@@ -46,7 +46,7 @@ def actor_words(dataset: Dataset, name: str) -> str:
     return " ".join(w for w in (a.size, a.color, a.object) if w)
 
 
-def _gate_model(model) -> str | None:
+def gate_missing(model) -> str | None:
     """None when the model has a GA2 gate (Eq. 4); else why there is none."""
     if "ga2" not in getattr(model.fusion, "ablations", ()):  # a fusion declares its gates (emml/models/fusion.py)
         return f"no GA2 gate in model {model.cfg.name!r} (Dual-Attention only)"
@@ -154,7 +154,7 @@ def diagnose_eqa(
     episode i of the split's question j plays with reset seed ``seed + j * episodes + i``."""
     dataset = load_dataset(env_cfg.dataset)
     settings = [(split, chosen) for task, split, chosen in eval_settings(env_cfg) if task == "eqa"]
-    gate_note = _gate_model(model)
+    gate_note = gate_missing(model)
     result = {
         "episodes": episodes,
         "seed": seed,

@@ -96,6 +96,29 @@ def test_a_bad_campaign_fails_naming_the_file_and_the_key(campaigns, text, messa
 def test_the_reference_campaign_loads():
     plan = load_campaign("reference")
     assert plan.steps[0].table == "table2" and any(s.profile == "paper" and s.frames for s in plan.steps)
+    experiment = next(s for s in plan.steps if s.table == "experiments/eqa_readout")  # issue 34's experiment
+    assert Path(experiment.table_ref).is_file()
+
+
+def test_an_experiment_step_trains_its_own_rows_and_borrows_the_papers(tracking, campaigns):
+    """A step may name a table beyond the paper's, reproduce/experiments/<name>.toml: issue 34's x_sent readout.
+    Its 'last' row reads Table 2's Dual-Attention runs (trained there); its 'mean' row trains runs of its own."""
+    (campaigns / "exp.toml").write_text(
+        '[[steps]]\nname = "readout"\ntable = "experiments/eqa_readout"\nprofile = "smoke"\nonly = { seed = 0 }\n'
+    )
+    plan = load_campaign("exp", campaigns)
+    roots = (tracking["run_root"], tracking["results_root"])
+    rows = [(r.run_name, r.state) for r in status(plan, *roots)]
+    assert rows == [
+        ("dual_attention-easy-aux-s0-smoke", "to do"),
+        ("dual_attention-easy-aux-sentmean-s0-smoke", "to do"),
+    ]
+    run_campaign(plan, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
+    assert sorted(c[0] for c in calls(tracking)) == [name for name, _ in rows]
+    assert (Path(tracking["run_root"]) / "eqa_readout" / "dual_attention-easy-aux-sentmean-s0-smoke").is_dir()
+    (campaigns / "bad.toml").write_text('[[steps]]\nname = "a"\ntable = "experiments/nope"\nprofile = "smoke"\n')
+    with pytest.raises(ValueError, match="allowed: table2, table3, table4, table5, experiments/eqa_readout"):
+        load_campaign("bad", campaigns)
 
 
 def test_the_pinned_worktree_holds_the_commit_and_is_made_once(tmp_path):
