@@ -668,6 +668,9 @@ def probe_eqa_cmd(
     steps: int = typer.Option(600, help="Adam steps per encoder (minibatches of --batch frames)."),
     batch: int = typer.Option(128, help="Frames per minibatch."),
     lr: float = typer.Option(3e-3, help="Adam's learning rate."),
+    eq1_words: str = typer.Option(
+        "all", help="Words Eq. 1 sums the channels of: all (as the model) | content (function words left out)."
+    ),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Would another question encoder answer the EQA test questions (issue 34)? On the first frames of EQA
@@ -679,7 +682,7 @@ def probe_eqa_cmd(
 
     chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
     try:
-        check_options(episodes, chosen, seeds, steps, batch, lr)
+        check_options(episodes, chosen, seeds, steps, batch, lr, eq1_words)
     except ValueError as e:
         _fail(str(e))
     _check_checkpoint(checkpoint)
@@ -687,7 +690,7 @@ def probe_eqa_cmd(
     if not as_json:
         typer.echo(f"probing {checkpoint}: {episodes} first frames per EQA question…", err=True)
     try:
-        result = probe_checkpoint(checkpoint, episodes, chosen, seeds, steps, batch, lr)
+        result = probe_checkpoint(checkpoint, episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words)
     except ValueError as e:  # a model without a GA2 gate, a run not scored on EQA
         _fail(str(e))
     _echo(result, as_json, probe_table(result))

@@ -22,6 +22,12 @@ questions the right gate, and which readout of the GRU does (`emml.config.SENTEN
   questions' frames, overall and per question; and, the reference, the same for the checkpoint's own x_sent (the
   gate the fusion reads: `EmmlModel.sentence_gate`), which reproduces the failure.
 
+Eq. 1's words (``eq1_words``): 'all', as the model reads them (x_BoW of every word of the question), or 'content',
+x_BoW restricted to the dataset's content words (colours, objects, sizes, superlatives; the function words what,
+which, is, the, color, object, in, go, to have all-zero aux labels, yet their channels fire on the kinds of object
+that were referents of training questions: docs/fidelity.md, "Where EQA test fails"). It applies to the checkpoint's
+encoder and to every retrained one alike.
+
 The first frame only: the policy answers at its first step in most EQA episodes (mean episode length <= 1.12 on the
 quick checkpoints), so the accuracy here is close to, not equal to, the greedy EQA accuracy of `emml eval`.
 """
@@ -40,7 +46,7 @@ from emml.envs.vector import make_env
 from emml.evaluate import eval_settings
 from emml.models.encoders import TextEncoder
 from emml.runs import load_model
-from emml.tasks.language import load_dataset
+from emml.tasks.language import load_dataset, resolve_vocabulary
 
 SEED = 30_000
 """First reset seed of the probe's episodes (`emml eval` plays 10,000+, `emml diagnose` 20,000+)."""
@@ -55,12 +61,19 @@ LR = 3e-3
 SEEDS = 3
 """Encoder seeds per readout: 0, 1, ..."""
 SPLITS = ("train", "test")
+EQ1_WORDS = ("all", "content")
+"""Values of ``eq1_words``: Eq. 1 sums the channels of every word of the question, or of its content words only."""
+CONTENT_GROUPS = ("colors", "objects", "sizes", "superlatives")
+"""The dataset's word groups whose words are content words (the others are function words)."""
 IMAGE_BATCH = 256
 """Frames per conv forward when x_I is computed."""
 
 
-def check_options(episodes: int, readouts, seeds: int, steps: int, batch: int = BATCH, lr: float = LR) -> None:
+def check_options(
+    episodes: int, readouts, seeds: int, steps: int, batch: int = BATCH, lr: float = LR, eq1_words: str = "all"
+) -> None:
     """ValueError naming the first bad option and what it allows (before a checkpoint is loaded)."""
+    check_choice("eq1_words", eq1_words, EQ1_WORDS)
     for name, value in (("episodes", episodes), ("seeds", seeds), ("steps", steps), ("batch", batch)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name}={value!r} must be an integer >= 1")
@@ -146,9 +159,23 @@ def collect_frames(model, cfg, questions: dict[str, tuple[str, ...]], episodes: 
     return data
 
 
+def eq1_mask(cfg, eq1_words: str) -> torch.Tensor | None:
+    """(V,) 1 for the words Eq. 1 reads under ``eq1_words`` ('content': the dataset's `CONTENT_GROUPS`), None for
+    'all'."""
+    if eq1_words == "all":
+        return None
+    dataset = load_dataset(cfg.env.dataset)
+    content = {w for g in CONTENT_GROUPS for w in dataset.word_groups[g]}
+    words = resolve_vocabulary(cfg.env.vocabulary, dataset).words
+    return torch.tensor([w in content for w in words], dtype=torch.float32)
+
+
 def answer_logits(model, frames: dict, x_sent: torch.Tensor) -> torch.Tensor:
-    """Eq. 1-5 on the frames' x_I and x_BoW, under the gate ``x_sent``: the answer logits (N, V)."""
+    """Eq. 1-5 on the frames' x_I and x_BoW (its words masked by ``frames['eq1_mask']`` when there is one), under the
+    gate ``x_sent``: the answer logits (N, V)."""
     x_bow = model.text_encoder.bag_of_words(frames["tokens"])
+    if frames.get("eq1_mask") is not None:
+        x_bow = x_bow * frames["eq1_mask"]
     return model.fusion(frames["x_image"], x_bow, x_sent).answer_logits
 
 
@@ -185,7 +212,11 @@ def train_encoder(
     n = len(frames["answer"])
     for _ in range(steps):
         rows = torch.randint(n, (batch,), generator=draw)
-        mini = {"x_image": frames["x_image"][rows], "tokens": frames["tokens"][rows]}
+        mini = {
+            "x_image": frames["x_image"][rows],
+            "tokens": frames["tokens"][rows],
+            "eq1_mask": frames.get("eq1_mask"),
+        }
         logits = answer_logits(model, mini, encoder(mini["tokens"])[1])
         loss = nn.functional.cross_entropy(logits, frames["answer"][rows])
         optimizer.zero_grad()
@@ -223,12 +254,13 @@ def probe_eqa(
     batch: int = BATCH,
     lr: float = LR,
     seed: int = SEED,
+    eq1_words: str = "all",
 ) -> dict:
     """The probe of the module docstring on ``model`` and its run's TrainConfig ``cfg``: the checkpoint encoder's
     scores, then per readout one trained encoder per seed 0..``seeds``-1 and their mean. ValueError (before any
     engine starts) for a bad option or a model or run the probe cannot read (`probe_questions`)."""
     readouts = tuple(dict.fromkeys(readouts))
-    check_options(episodes, readouts, seeds, steps, batch, lr)
+    check_options(episodes, readouts, seeds, steps, batch, lr, eq1_words)
     questions = probe_questions(model, cfg)
     result = {
         "model": model.cfg.name,
@@ -239,6 +271,7 @@ def probe_eqa(
         "steps": steps,
         "batch": batch,
         "lr": lr,
+        "eq1_words": eq1_words,
         "questions": {s: list(q) for s, q in questions.items()},
         "frames": {},
         "checkpoint_encoder": None,
@@ -246,6 +279,9 @@ def probe_eqa(
     }
     with _eval_mode(model):
         data = collect_frames(model, cfg, questions, episodes, seed)
+        mask = eq1_mask(cfg, eq1_words)
+        for split in SPLITS:
+            data[split]["eq1_mask"] = mask
         result["frames"] = {s: len(data[s]["answer"]) for s in SPLITS}
         result["checkpoint_encoder"] = _scores(model, data, model.sentence_gate)
         for readout in readouts:
@@ -266,12 +302,13 @@ def probe_checkpoint(
     batch: int = BATCH,
     lr: float = LR,
     seed: int = SEED,
+    eq1_words: str = "all",
 ) -> dict:
     """`probe_eqa` on a checkpoint (`emml.runs.load_model`), the options checked before it is loaded; the result
     names the checkpoint."""
-    check_options(episodes, tuple(readouts), seeds, steps, batch, lr)
+    check_options(episodes, tuple(readouts), seeds, steps, batch, lr, eq1_words)
     model, cfg = load_model(path)
-    result = probe_eqa(model, cfg, episodes, readouts, seeds, steps, batch, lr, seed)
+    result = probe_eqa(model, cfg, episodes, readouts, seeds, steps, batch, lr, seed, eq1_words)
     return {"checkpoint": str(path), **result}
 
 
@@ -282,7 +319,8 @@ def probe_table(result: dict) -> str:
         f"EQA question-encoder probe (issue 34) of {result.get('checkpoint', result['model'])}",
         f"first frames: {result['episodes']} per question (seeds {result['seed']:,}+; {result['frames']['train']} "
         f"train, {result['frames']['test']} test); x_sent's GRU + Linear retrained on the training questions "
-        f"({result['steps']} Adam steps, batch {result['batch']}, lr {result['lr']:g}), embedding and x_I frozen",
+        f"({result['steps']} Adam steps, batch {result['batch']}, lr {result['lr']:g}), embedding and x_I frozen; "
+        f"Eq. 1 reads {'every word' if result['eq1_words'] == 'all' else 'the content words'} of the question",
         "",
         f"{'x_sent encoder':<24}  {'train':>5}  {'test':>5}  per seed (train/test)",
     ]

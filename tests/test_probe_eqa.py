@@ -185,3 +185,31 @@ def test_the_cli_prints_the_table_or_the_json(checkpoint, no_leftovers):
     data = json.loads(runner.invoke(app, [*args, "--json"]).stdout)
     assert list(data["readouts"]) == ["last", "mean"] and data["frames"] == {"train": 21, "test": 8}
     assert set(data["checkpoint_encoder"]["per_question"]["test"]) == set(data["questions"]["test"])
+
+
+def test_eq1_over_the_content_words_masks_the_function_words_only(frames):
+    """``eq1_words='content'``: Eq. 1 reads x_BoW without the function words; the answers change only through it."""
+    model, cfg, data = frames
+    mask = probe.eq1_mask(cfg, "content")
+    words = resolve_vocabulary(cfg.env.vocabulary, load_dataset(cfg.env.dataset)).words
+    assert {w for w, m in zip(words, mask) if m == 0} == {
+        "go",
+        "to",
+        "the",
+        "object",
+        "what",
+        "color",
+        "is",
+        "which",
+        "in",
+    }
+    assert probe.eq1_mask(cfg, "all") is None
+    train = data["train"]
+    gate = model.sentence_gate(train["tokens"])
+    masked = {**train, "eq1_mask": mask}
+    x_bow = model.text_encoder.bag_of_words(train["tokens"])
+    expected = model.fusion(train["x_image"], x_bow * mask, gate).answer_logits
+    torch.testing.assert_close(probe.answer_logits(model, masked, gate), expected)
+    assert not torch.allclose(probe.answer_logits(model, train, gate), expected)
+    with pytest.raises(ValueError, match="eq1_words='some' is not allowed"):
+        probe.check_options(2, ("last",), 1, 5, eq1_words="some")
