@@ -223,7 +223,8 @@ def _end_to_end(cfg, updates: int, stack: int = 1) -> tuple[float, dict]:
         run = dataclasses.replace(
             cfg,
             frames=(updates + 1) * cfg.frames_per_update,
-            eval_episodes=1,
+            eval_every=0,  # the training is measured, not its scoring: no evaluation, no final score
+            score=False,
             checkpoint_every=10**6,
             log_every=10**6,
             run_root=tmp,

@@ -396,6 +396,10 @@ class TrainConfig:
     results table (paper silent). Larger than `eval_episodes`: one checkpoint's SGN train accuracy (GA quick seed
     0) ranged 0.51-0.71 over 18 disjoint blocks of 100 episodes, 0.54-0.61 over 5 blocks of 500 (docs/fidelity.md,
     "Trainer"); a score's binomial sd is ≤ 0.05 at 100 episodes, ≤ 0.022 at 500."""
+    score: bool = True
+    """Play the final evaluation and record the run's score (results.json, its results row). False: a measurement
+    run (`emml bench train`'s temporary runs), trained and checkpointed only; an untrained agent's evaluation
+    episodes run to the time limit and were most of a smoke bench's time."""
     diagnose_episodes: int = 20
     """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP; the actor's
     sensitivity reads 5× as many first steps: emml/diagnose.py); 0: none."""
@@ -457,6 +461,7 @@ class TrainConfig:
         "eval_every",
         "eval_episodes",  # how a run is measured, not what it is: the evaluations' size
         "final_eval_episodes",
+        "score",
         "diagnose_episodes",
         "checkpoint_every",
         "log_every",
@@ -525,6 +530,8 @@ class TrainConfig:
         if self.envs_per_worker < 1 or group % self.envs_per_worker:
             k = self.envs_per_worker
             raise ValueError(f"envs_per_worker={k!r} must be a positive divisor of num_envs / env_groups = {group}")
+        if not isinstance(self.score, bool):
+            raise ValueError(f"score={self.score!r} must be true or false")
         if self.compile not in COMPILE:
             raise ValueError(f"compile={self.compile!r}: allowed values are {', '.join(COMPILE)}")
         if self.precision not in PRECISIONS:
