@@ -295,8 +295,8 @@ def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
                 running[child.sentinel] = (child, a, receive)
             for sentinel in wait(list(running)):
                 child, a, receive = running.pop(sentinel)
-                outcome = receive.recv() if receive.poll() else ("failed", f"its process died (exit {child.exitcode})")
                 child.join()
+                outcome = _received(receive, child)
                 _collect(report, a[0], a[1], lambda outcome=outcome: _outcome(*outcome), log)
     except BaseException:
         _end_workers([child for child, _, _ in running.values()])
@@ -315,6 +315,17 @@ def _child(send, a) -> None:
         send.send(("stopped", type(e).__name__))
     except BaseException as e:  # noqa: BLE001 - reported to the launcher, which goes on with the table
         send.send(("failed", f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=3)}"))
+
+
+def _received(receive, child) -> tuple[str, str]:
+    """What a finished child sent, or ('failed', why) when it died without sending (killed, or dead before its
+    target ran: the pipe is then at its end, which `poll` also reports as readable)."""
+    try:
+        if receive.poll():
+            return receive.recv()
+    except (EOFError, OSError):
+        pass
+    return ("failed", f"its process died (exit {child.exitcode})")
 
 
 def _outcome(kind: str, detail: str) -> str:

@@ -192,3 +192,20 @@ def test_an_interrupted_launch_ends_its_parent_run_and_says_what_is_left(trackin
     assert report.stopped == "Ctrl-C" and len(report.unfinished) == 16 and report.done == []
     (parent,) = find_runs("table3", {"emml.role": "parent"})
     assert parent["status"] == "KILLED"  # not RUNNING forever
+
+
+def test_a_child_that_died_without_sending_is_a_failed_run_not_a_broken_launch():
+    """A pipe whose sender is gone reads as ready (`poll`) and then ends (EOFError): the run failed, the launch goes
+    on (it used to raise EOFError out of the pool: a worker dead before its target ran, seen under heavy load)."""
+    import multiprocessing
+    from types import SimpleNamespace
+
+    from emml.launch import _received
+
+    receive, send = multiprocessing.Pipe(duplex=False)
+    send.close()
+    assert receive.poll()
+    assert _received(receive, SimpleNamespace(exitcode=1)) == ("failed", "its process died (exit 1)")
+    receive, send = multiprocessing.Pipe(duplex=False)
+    send.send(("done", "a-run"))
+    assert _received(receive, SimpleNamespace(exitcode=0)) == ("done", "a-run")

@@ -17,7 +17,8 @@ from emml.runs import run_name
 
 LAUNCH = textwrap.dedent(
     """
-    import json, sys
+    import faulthandler, json, signal, sys
+    faulthandler.register(signal.SIGUSR1, all_threads=True)  # the test asks for the stacks if the stop hangs
     from emml.launch import run_table
     from tests.test_launch_stop import slow_train
     report = run_table("table3", "smoke", jobs=2, run_root=sys.argv[1], results_root=sys.argv[2],
@@ -77,7 +78,15 @@ def test_a_stopped_launch_starts_nothing_more_and_leaves_no_worker(tracking, how
         os.killpg(proc.pid, signal.SIGINT)
     else:
         os.kill(proc.pid, signal.SIGTERM)
-    out, err = proc.communicate(timeout=30)
+    try:
+        out, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:  # seen twice under heavy load (a training and a second suite on 2 cores)
+        os.kill(proc.pid, signal.SIGUSR1)
+        time.sleep(2)
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        alive = {w: Path(f"/proc/{w}/cmdline").read_bytes()[:120] for w in workers if Path(f"/proc/{w}").exists()}
+        pytest.fail(f"the launcher did not end within 30 s of the stop; its stacks:\n{err[-6000:]}\nworkers: {alive}")
     assert time.monotonic() - t0 < 10, "the stop took too long"
     lines = log.read_text().splitlines()
     assert len([x for x in lines if x.startswith("start")]) == 2  # no queued run started
