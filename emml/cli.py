@@ -671,6 +671,9 @@ def probe_eqa_cmd(
     eq1_words: str = typer.Option(
         "all", help="Words Eq. 1 sums the channels of: all (as the model) | content (function words left out)."
     ),
+    init: str = typer.Option(
+        "checkpoint", help="Where the retrained GRU and Linear start: checkpoint (its weights) | fresh (a new draw)."
+    ),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Would another question encoder answer the EQA test questions (issue 34)? On the first frames of EQA
@@ -682,7 +685,7 @@ def probe_eqa_cmd(
 
     chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
     try:
-        check_options(episodes, chosen, seeds, steps, batch, lr, eq1_words)
+        check_options(episodes, chosen, seeds, steps, batch, lr, eq1_words, init)
     except ValueError as e:
         _fail(str(e))
     _check_checkpoint(checkpoint)
@@ -690,7 +693,7 @@ def probe_eqa_cmd(
     if not as_json:
         typer.echo(f"probing {checkpoint}: {episodes} first frames per EQA question…", err=True)
     try:
-        result = probe_checkpoint(checkpoint, episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words)
+        result = probe_checkpoint(checkpoint, episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words, init=init)
     except ValueError as e:  # a model without a GA2 gate, a run not scored on EQA
         _fail(str(e))
     _echo(result, as_json, probe_table(result))

@@ -12,12 +12,14 @@ questions the right gate, and which readout of the GRU does (`emml.config.SENTEN
   episode, counting the training questions' episodes first and then the test questions', question by question and
   ``episodes`` per question, resets with ``seed + k`` (default seed 30,000: `emml eval` plays 10,000+ and
   `emml diagnose` 20,000+).
-* Trained: only the x_sent encoder, x_sent = ReLU(Linear(readout(GRU(Embedding(tokens))))), a fresh
-  `emml.models.encoders.TextEncoder` per (readout, encoder seed), whose embedding table is the checkpoint's, copied
+* Trained: only the x_sent encoder, x_sent = ReLU(Linear(readout(GRU(Embedding(tokens))))), a new
+  `emml.models.encoders.TextEncoder` per (readout, encoder seed) whose embedding table is the checkpoint's, copied
   and frozen (the words keep what joint training taught them; the GRU and the Linear are learned), on Eq. 5's answer
   cross-entropy (x_Ans against the episode's answer word) over the training questions' frames: Adam, ``steps``
-  minibatches of ``batch`` frames drawn with replacement. Encoder seed s draws both the initial weights and the
-  minibatches.
+  minibatches of ``batch`` frames drawn with replacement. ``init`` 'checkpoint' (the default) starts the GRU and
+  the Linear from the checkpoint's, so that the readouts differ in what they read and nothing else; 'fresh' draws
+  them anew. Encoder seed s draws the minibatches (and, under 'fresh', the initial weights: a fresh ReLU gate can
+  die early, seen as a train accuracy far below the checkpoint's).
 * Scored: answer accuracy (the argmax of Eq. 5's answer logits is the answer word) on the training and the test
   questions' frames, overall and per question; and, the reference, the same for the checkpoint's own x_sent (the
   gate the fusion reads: `EmmlModel.sentence_gate`), which reproduces the failure.
@@ -60,6 +62,8 @@ LR = 3e-3
 """Adam's learning rate."""
 SEEDS = 3
 """Encoder seeds per readout: 0, 1, ..."""
+INITS = ("checkpoint", "fresh")
+"""Values of ``init``: the retrained GRU and Linear start from the checkpoint's, or from a fresh draw."""
 SPLITS = ("train", "test")
 EQ1_WORDS = ("all", "content")
 """Values of ``eq1_words``: Eq. 1 sums the channels of every word of the question, or of its content words only."""
@@ -70,10 +74,18 @@ IMAGE_BATCH = 256
 
 
 def check_options(
-    episodes: int, readouts, seeds: int, steps: int, batch: int = BATCH, lr: float = LR, eq1_words: str = "all"
+    episodes: int,
+    readouts,
+    seeds: int,
+    steps: int,
+    batch: int = BATCH,
+    lr: float = LR,
+    eq1_words: str = "all",
+    init: str = "checkpoint",
 ) -> None:
     """ValueError naming the first bad option and what it allows (before a checkpoint is loaded)."""
     check_choice("eq1_words", eq1_words, EQ1_WORDS)
+    check_choice("init", init, INITS)
     for name, value in (("episodes", episodes), ("seeds", seeds), ("steps", steps), ("batch", batch)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name}={value!r} must be an integer >= 1")
@@ -187,26 +199,36 @@ def accuracy(model, frames: dict, x_sent: torch.Tensor) -> tuple[float, dict[str
     return float(ok.mean()), per_question
 
 
-def fresh_encoder(model, readout: str, seed: int) -> TextEncoder:
-    """A new x_sent encoder of the checkpoint's sizes reading ``readout``, its GRU and Linear initialised under
-    ``seed`` (the global RNG is restored), its embedding table the checkpoint's, copied and frozen."""
+def fresh_encoder(model, readout: str, seed: int, init: str = "checkpoint") -> TextEncoder:
+    """A new x_sent encoder of the checkpoint's sizes reading ``readout``: its GRU and Linear the checkpoint's
+    (``init='checkpoint'``) or drawn under ``seed`` ('fresh'; the global RNG is restored), its embedding table the
+    checkpoint's, copied and frozen."""
     text = model.text_encoder
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         encoder = TextEncoder(
             text.vocab_size, text.embedding.embedding_dim, text.gru.hidden_size, sentence=True, readout=readout
         )
+    if init == "checkpoint":
+        encoder.load_state_dict(text.state_dict())
     encoder.embedding.weight.data.copy_(text.embedding.weight.detach())
     encoder.embedding.weight.requires_grad_(False)
     return encoder
 
 
 def train_encoder(
-    model, frames: dict, readout: str, seed: int, steps: int = STEPS, batch: int = BATCH, lr: float = LR
+    model,
+    frames: dict,
+    readout: str,
+    seed: int,
+    steps: int = STEPS,
+    batch: int = BATCH,
+    lr: float = LR,
+    init: str = "checkpoint",
 ) -> TextEncoder:
     """A `fresh_encoder` trained on Eq. 5's cross-entropy over ``frames`` (the training questions'), the rest of
     the model frozen; seed ``seed`` draws its initial weights and its minibatches."""
-    encoder = fresh_encoder(model, readout, seed)
+    encoder = fresh_encoder(model, readout, seed, init)
     optimizer = torch.optim.Adam([p for p in encoder.parameters() if p.requires_grad], lr=lr)
     draw = torch.Generator().manual_seed(seed)
     n = len(frames["answer"])
@@ -255,12 +277,13 @@ def probe_eqa(
     lr: float = LR,
     seed: int = SEED,
     eq1_words: str = "all",
+    init: str = "checkpoint",
 ) -> dict:
     """The probe of the module docstring on ``model`` and its run's TrainConfig ``cfg``: the checkpoint encoder's
     scores, then per readout one trained encoder per seed 0..``seeds``-1 and their mean. ValueError (before any
     engine starts) for a bad option or a model or run the probe cannot read (`probe_questions`)."""
     readouts = tuple(dict.fromkeys(readouts))
-    check_options(episodes, readouts, seeds, steps, batch, lr, eq1_words)
+    check_options(episodes, readouts, seeds, steps, batch, lr, eq1_words, init)
     questions = probe_questions(model, cfg)
     result = {
         "model": model.cfg.name,
@@ -272,6 +295,7 @@ def probe_eqa(
         "batch": batch,
         "lr": lr,
         "eq1_words": eq1_words,
+        "init": init,
         "questions": {s: list(q) for s, q in questions.items()},
         "frames": {},
         "checkpoint_encoder": None,
@@ -287,7 +311,7 @@ def probe_eqa(
         for readout in readouts:
             runs = []
             for s in range(seeds):
-                encoder = train_encoder(model, data["train"], readout, s, steps, batch, lr)
+                encoder = train_encoder(model, data["train"], readout, s, steps, batch, lr, init)
                 runs.append({"seed": s, **_scores(model, data, lambda tokens, e=encoder: e(tokens)[1])})
             result["readouts"][readout] = {"runs": runs, "mean": _mean(runs, questions)}
     return result
@@ -303,12 +327,13 @@ def probe_checkpoint(
     lr: float = LR,
     seed: int = SEED,
     eq1_words: str = "all",
+    init: str = "checkpoint",
 ) -> dict:
     """`probe_eqa` on a checkpoint (`emml.runs.load_model`), the options checked before it is loaded; the result
     names the checkpoint."""
-    check_options(episodes, tuple(readouts), seeds, steps, batch, lr, eq1_words)
+    check_options(episodes, tuple(readouts), seeds, steps, batch, lr, eq1_words, init)
     model, cfg = load_model(path)
-    result = probe_eqa(model, cfg, episodes, readouts, seeds, steps, batch, lr, seed, eq1_words)
+    result = probe_eqa(model, cfg, episodes, readouts, seeds, steps, batch, lr, seed, eq1_words, init)
     return {"checkpoint": str(path), **result}
 
 
@@ -320,7 +345,8 @@ def probe_table(result: dict) -> str:
         f"first frames: {result['episodes']} per question (seeds {result['seed']:,}+; {result['frames']['train']} "
         f"train, {result['frames']['test']} test); x_sent's GRU + Linear retrained on the training questions "
         f"({result['steps']} Adam steps, batch {result['batch']}, lr {result['lr']:g}), embedding and x_I frozen; "
-        f"Eq. 1 reads {'every word' if result['eq1_words'] == 'all' else 'the content words'} of the question",
+        f"Eq. 1 reads {'every word' if result['eq1_words'] == 'all' else 'the content words'} of the question; "
+        f"GRU and Linear start from {'the checkpoint' if result['init'] == 'checkpoint' else 'a fresh draw'}",
         "",
         f"{'x_sent encoder':<24}  {'train':>5}  {'test':>5}  per seed (train/test)",
     ]

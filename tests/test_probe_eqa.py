@@ -109,16 +109,21 @@ def test_only_the_gru_and_linear_learn_the_embedding_stays_the_checkpoints(frame
     model, _, data = frames
     before = {k: v.clone() for k, v in model.state_dict().items()}
     rng = torch.get_rng_state()
-    fresh = probe.fresh_encoder(model, "last", seed=0)
-    trained = probe.train_encoder(model, data["train"], "last", seed=0, steps=5, batch=8)
+    fresh = probe.fresh_encoder(model, "last", seed=0, init="fresh")
+    trained = probe.train_encoder(model, data["train"], "last", seed=0, steps=5, batch=8, init="fresh")
     assert torch.equal(torch.get_rng_state(), rng)  # the global RNG untouched
     assert torch.equal(trained.embedding.weight, model.text_encoder.embedding.weight)
     assert not trained.embedding.weight.requires_grad
     assert not torch.equal(trained.gru.weight_ih_l0, fresh.gru.weight_ih_l0)
     assert not torch.equal(trained.linear.weight, fresh.linear.weight)
     assert all(torch.equal(v, before[k]) for k, v in model.state_dict().items())  # the checkpoint's model frozen
-    again = probe.train_encoder(model, data["train"], "last", seed=0, steps=5, batch=8)
+    again = probe.train_encoder(model, data["train"], "last", seed=0, steps=5, batch=8, init="fresh")
     assert torch.equal(again.linear.weight, trained.linear.weight)  # the seed draws weights and minibatches
+    start = probe.fresh_encoder(model, "mean", seed=0)  # init 'checkpoint': the readout is all that differs
+    assert all(torch.equal(v, model.text_encoder.state_dict()[k]) for k, v in start.state_dict().items())
+    assert start.readout == "mean" and not start.embedding.weight.requires_grad
+    with pytest.raises(ValueError, match="init='warm' is not allowed"):
+        probe.check_options(2, ("last",), 1, 5, init="warm")
 
 
 def test_the_readouts_give_different_encoders(frames):
