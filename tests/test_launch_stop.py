@@ -19,6 +19,10 @@ LAUNCH = textwrap.dedent(
     """
     import faulthandler, json, signal, sys
     faulthandler.register(signal.SIGUSR1, all_threads=True)  # the test asks for the stacks if the stop hangs
+    # a terminal's process: Ctrl-C raises KeyboardInterrupt. A suite started in the background by a shell without
+    # job control (`make test &`, nohup) inherits SIGINT ignored, and Python then keeps it ignored: the launcher
+    # never saw the stop (the stacks showed it still waiting on its runs 30 s after the Ctrl-C)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from emml.launch import run_table
     from tests.test_launch_stop import slow_train
     report = run_table("table3", "smoke", jobs=2, run_root=sys.argv[1], results_root=sys.argv[2],
