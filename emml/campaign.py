@@ -133,8 +133,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
             if not isinstance(raw.get(key), str) or not raw[key]:
                 raise ValueError(f"{path}: {where}.{key} is required (a non-empty string)")
         if raw["table"] not in tables:
-            allowed = ", ".join([*tables, *(f"{EXPERIMENT_PREFIX}{e}" for e in list_experiments())])
-            raise ValueError(f"{path}: {where}.table={raw['table']!r} is unknown; allowed: {allowed}")
+            raise ValueError(f"{path}: {where}.table={raw['table']!r} is unknown; allowed: {', '.join(tables)}")
         if raw["profile"] not in profiles:
             raise ValueError(f"{path}: {where}.profile={raw['profile']!r} is unknown; allowed: {', '.join(profiles)}")
         only = raw.get("only", {})

@@ -344,11 +344,7 @@ class ModelConfig:
                 f"name='dual_attention' with spatial_attention=True (got name={self.name!r}, "
                 f"spatial_attention={self.spatial_attention}); allowed there: None or a number > 0"
             )
-        if self.sentence_readout not in SENTENCE_READOUTS:
-            raise ValueError(
-                f"ModelConfig.sentence_readout={self.sentence_readout!r} is unknown; allowed: "
-                + ", ".join(SENTENCE_READOUTS)
-            )
+        check_choice("ModelConfig.sentence_readout", self.sentence_readout, SENTENCE_READOUTS)
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
         if self.control not in CONTROLS:
@@ -363,6 +359,10 @@ class ModelConfig:
             if not isinstance(value, bool):
                 raise ValueError(f"ModelConfig.{name}={value!r} must be True or False")
         return self
+
+
+MODEL_OPTIONS: tuple[str, ...] = tuple(f.name for f in fields(ModelConfig))
+"""The names `TrainConfig.model_options` may set: the fields of `ModelConfig`."""
 
 
 @dataclass
@@ -490,10 +490,11 @@ class TrainConfig:
         training starts (`emml.rl.hardware.check_runnable`)."""
         if not isinstance(self.model, str) or not PLAIN_NAME.fullmatch(self.model):
             raise ValueError(f"model={self.model!r} must be a model registry name (`emml models`)")
-        unknown = sorted(set(self.model_options) - {f.name for f in fields(ModelConfig)})
+        unknown = sorted(set(self.model_options) - set(MODEL_OPTIONS))
         if unknown:
-            known = ", ".join(f.name for f in fields(ModelConfig))
-            raise ValueError(f"model_options: unknown ModelConfig field(s) {unknown}; allowed: {known}")
+            raise ValueError(
+                f"model_options: unknown ModelConfig field(s) {unknown}; allowed: {', '.join(MODEL_OPTIONS)}"
+            )
         check_choice("env.difficulty", self.env.difficulty, ENV_DIFFICULTIES)
         self.env.validate()
         self.ppo.validate()
@@ -615,9 +616,8 @@ def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") ->
             if section not in ("env", "ppo", "model_options"):
                 raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo', 'model_options'")
             if section == "model_options":
-                known = [f.name for f in fields(ModelConfig)]
-                if name not in known:
-                    raise ValueError(f"{source} {key!r}: unknown model option; known: {', '.join(known)}")
+                if name not in MODEL_OPTIONS:
+                    raise ValueError(f"{source} {key!r}: unknown model option; known: {', '.join(MODEL_OPTIONS)}")
                 cfg.model_options = {**cfg.model_options, name: value}
                 continue
             target = getattr(cfg, section)

@@ -291,11 +291,11 @@ def _model_name(path: Path, key: str, value) -> str:
 
 def _config(path: Path, key: str, model: str, overrides: dict) -> TrainConfig:
     """The validated TrainConfig that ``overrides`` give ``model``; a bad override fails naming ``key``."""
-    from emml.models import check_model  # the registry's own check of the model's options (it imports torch)
+    from emml.models import model_config  # the model registry's check of the options (it imports torch)
 
     try:
         cfg = apply_overrides(TrainConfig(model=model), overrides, source="override").validate()
-        check_model(cfg.model, cfg.model_options)
+        model_config(cfg.model, **cfg.model_options)
         return cfg
     except ValueError as e:
         raise _err(path, key, str(e)) from e

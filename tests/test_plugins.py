@@ -114,7 +114,7 @@ def test_every_list_of_models_derives_from_the_registry(sandbox):
         ModelConfig,
         build_model,
         check_architecture,
-        check_model,
+        model_config,
         register_model,
     )
 
@@ -134,7 +134,7 @@ def test_every_list_of_models_derives_from_the_registry(sandbox):
 
     assert list(MODELS)[-1] == "probe" and "probe" in ARCHITECTURES
     assert check_architecture(ModelConfig(name="probe").validate()).name == "probe"
-    assert check_model(TrainConfig(model="probe").validate().model, {}).name == "probe"
+    assert model_config(TrainConfig(model="probe").validate().model).name == "probe"
     row = models_json()["probe"]
     assert row["description"] == "Probe: x_S = vec(x_I)" and row["source"] == __name__ and row["parameters"] > 0
     model = build_model("probe", 6, 60, 108, 20)

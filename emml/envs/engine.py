@@ -174,8 +174,8 @@ def _drop_dead_records() -> None:
     with _LOCK:
         live = set(_LIVE)
     for path in records_dir().glob(f"{os.getpid()}-*"):
-        pid = int(path.name.split("-")[1]) if path.name.split("-")[1].isdigit() else None
-        if pid is not None and pid not in live and not _alive(pid):
+        pid = path.name.partition("-")[2]
+        if pid.isdigit() and int(pid) not in live and not _alive(int(pid)):
             with contextlib.suppress(FileNotFoundError):
                 path.unlink()
 

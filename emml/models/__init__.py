@@ -43,12 +43,6 @@ def model_config(name: str, **overrides: Any) -> ModelConfig:
     return check_architecture(replace(ModelConfig(), **{**spec.options, **overrides}).validate())
 
 
-def check_model(name: str, options: dict) -> ModelConfig:
-    """The `ModelConfig` a run's `TrainConfig.model` and `model_options` give, through the registry (plugins loaded):
-    an unknown name or option, or a bad value, fails naming it."""
-    return model_config(name, **options)
-
-
 def state_formula(cfg: ModelConfig) -> str:
     """x_S as the code computes it for `cfg` (its fusion's `state_formula`; Dual-Attention:
     `DualAttention.state_formula`); '' where the registry entry's description says it."""
@@ -93,7 +87,6 @@ __all__ = [
     "ModelOutput",
     "ModelSpec",
     "build_model",
-    "check_model",
     "check_architecture",
     "conv_output_size",
     "count_parameters",

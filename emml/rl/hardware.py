@@ -3,7 +3,7 @@
 any run starts.
 
 `TrainConfig.validate` checks the values (it is a leaf and imports no torch); these are the checks that ask the model
-registry (the model's name and options, plugins loaded: `emml.models.check_model`) and the machine: a C++ compiler
+registry (the model's name and options, plugins loaded: `emml.models.model_config`) and the machine: a C++ compiler
 for `compile='on'` on a CPU (emml/rl/compiled.py), native bf16 arithmetic for `precision='bf16'`
 (emml/rl/precision.py), a CUDA device for `device='cuda'`. Each failure is a ValueError naming the field, its value
 and what to use instead (the CLI prints it and exits 2).
@@ -14,7 +14,7 @@ from __future__ import annotations
 import torch
 
 from emml.config import TrainConfig
-from emml.models import check_model
+from emml.models import model_config
 from emml.rl.compiled import check_compile
 from emml.rl.precision import check_precision
 
@@ -37,5 +37,5 @@ def check_hardware(cfg: TrainConfig) -> TrainConfig:
 def check_runnable(cfg: TrainConfig) -> TrainConfig:
     """Refuse, before any compute, what ``cfg`` (validated) asks of the model registry or of this machine that they
     cannot give: an unknown model or model option, or a compile, device or precision setting; returns ``cfg``."""
-    check_model(cfg.model, cfg.model_options)
+    model_config(cfg.model, **cfg.model_options)  # names an unknown model or option, a bad value
     return check_hardware(cfg)

@@ -341,9 +341,10 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
     finals = []
     for r, t in enumerate(trainers):
         run_model, state = learner.run_model(r), learner.optimizer_state(r)
-        final = t._eval(run_model, frames, final=True) if cfg.score else {}  # a measurement run is not scored
-        t._checkpoint(run_model, state, update, frames, finished=False)
-        if cfg.score:
+        final = {}
+        if cfg.score:  # a measurement run is not scored
+            final = t._eval(run_model, frames, final=True)
+            t._checkpoint(run_model, state, update, frames, finished=False)
             t._write_results(final, frames)
         t._checkpoint(run_model, state, update, frames, finished=True)
         finals.append({**final, "_frames": frames})
