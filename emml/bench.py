@@ -183,6 +183,7 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     def one_update():
         state = model.initial_state(B, device=device)
         buffer.set_initial_state(state)
+        state = model.acting_state(state)  # as the sampler acts (a frame window's conv cache)
         with torch.no_grad():
             for t in range(T):  # acting: one batched step at a time, as in a rollout
                 out, state = model(

@@ -101,7 +101,7 @@ def play(model, envs, plan: list[tuple[int, dict | None]], device, on_step=None)
         playing.append(started)
         started += 1
         active.append(True)
-    state = model.initial_state(len(envs), device=device)
+    state = model.acting_state(model.initial_state(len(envs), device=device))  # weights fixed: one conv cache
     episode_start = torch.ones(1, len(envs), dtype=torch.bool, device=device)
     while finished < len(plan):
         batch = {k: np.stack([o[k] for o in obs_list]) for k in obs_list[0]}

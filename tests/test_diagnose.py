@@ -68,6 +68,9 @@ class _Scripted(torch.nn.Module):
     def initial_state(self, n, device=None):
         return {"h": torch.zeros(n, 1)}
 
+    def acting_state(self, state):  # no frame window: nothing to cache (EmmlModel.acting_state)
+        return state
+
     def forward(self, obs, state, episode_start):
         t, b = obs["time"].shape
         logits = torch.zeros(t, b, 4)

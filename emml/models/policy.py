@@ -25,6 +25,8 @@ NUM_ACTIONS = 4
 """Navigation actions (the harness's action set size)."""
 NUM_TASKS = 2
 """Task indicator classes: 0 = SGN, 1 = EQA."""
+FRAME_LOGITS = "frame_logits"
+"""Acting state key (`EmmlModel.acting_state`): the conv logits of the K-1 frames a frame window carries."""
 
 
 @dataclass
@@ -165,7 +167,9 @@ class EmmlModel(nn.Module):
     features are recomputed each call (so gradients reach them in PPO replay).
     At an episode start the window is padded by repeating the episode's first
     frame (a fresh `initial_state` without an episode_start flag pads with
-    black frames).
+    black frames). Acting may carry the K-1 frames' conv logits as well
+    (`acting_state`, key FRAME_LOGITS): without gradients each step then runs
+    the conv stack on its new frame only, not on all K.
     """
 
     def __init__(self, cfg: ModelConfig, vocab_size: int, height: int, width: int, max_steps: int) -> None:
@@ -252,6 +256,24 @@ class EmmlModel(nn.Module):
             )
         return state
 
+    def acting_state(self, state: dict[str, Tensor]) -> dict[str, Tensor]:
+        """``state`` for acting without gradients: with a frame window, plus FRAME_LOGITS, the conv logits of its
+        carried frames under the current weights, which later no-grad calls carry along instead of recomputing the
+        K-1 frames' conv at every step (PACMAN acts ~K times cheaper). Valid while the weights stay: take it afresh
+        after an update. Without a window, ``state`` itself."""
+        if not self.window:
+            return state
+        frames = state["frames"]
+        with torch.no_grad():
+            logits = self.image_encoder(frames.flatten(0, 1)).unflatten(0, frames.shape[:2])
+        return {**state, FRAME_LOGITS: logits}
+
+    @staticmethod
+    def replay_state(state: dict[str, Tensor]) -> dict[str, Tensor]:
+        """``state`` without the acting cache (`acting_state`): what a rollout stores for the PPO replay, which
+        recomputes the carried frames' conv so that gradients reach it."""
+        return {k: v for k, v in state.items() if k != FRAME_LOGITS}
+
     def _window_positions(self, episode_start: Tensor) -> Tensor:
         """(T, B, K) index into the [carried K-1 frames; T new frames] sequence.
 
@@ -269,20 +291,29 @@ class EmmlModel(nn.Module):
 
     def _fuse_window(self, obs, state, episode_start, x_sent):
         """The fusion over the last K frames' x_I (N, K, V, h, w) (PACMAN); the aux logits of the T new frames and
-        the K-1 raw frames carried to the next call."""
+        the K-1 raw frames carried to the next call (their conv logits too under FRAME_LOGITS when ``state`` holds
+        them: `acting_state`)."""
         t_len, batch = episode_start.shape
         carried = state["frames"].transpose(0, 1)  # (K-1, B, 3, H, W)
         images = torch.cat([carried, obs["image"]], dim=0)  # (T+K-1, B, 3, H, W)
-        logits = self.image_encoder(images.flatten(0, 1))
-        logits = logits.unflatten(0, images.shape[:2])  # (T+K-1, B, V, h, w)
+        cached = state.get(FRAME_LOGITS)
+        if cached is not None and not torch.is_grad_enabled():  # acting: the carried frames' conv is in the state
+            new = self.image_encoder(obs["image"].flatten(0, 1)).unflatten(0, (t_len, batch))
+            logits = torch.cat([cached.transpose(0, 1).to(new.dtype), new], dim=0)
+        else:
+            logits = self.image_encoder(images.flatten(0, 1))
+            logits = logits.unflatten(0, images.shape[:2])  # (T+K-1, B, V, h, w)
         pos = self._window_positions(episode_start)  # (T, B, K)
         cols = torch.arange(batch, device=pos.device)[None, :, None]
         frames = torch.sigmoid(logits[pos, cols])  # (T, B, K, V, h, w)
         n = t_len * batch
         fused = self.fusion(frames.flatten(0, 1), None, x_sent)
-        new_frames = images[pos[-1, :, 1:], torch.arange(batch, device=pos.device)[:, None]]
+        last = (pos[-1, :, 1:], torch.arange(batch, device=pos.device)[:, None])  # the K-1 frames carried on
+        carry = {"frames": images[last]}
+        if cached is not None:
+            carry[FRAME_LOGITS] = logits[last].detach()
         aux = logits[self.window - 1 :].reshape(n, *logits.shape[2:])
-        return fused, aux, new_frames
+        return fused, aux, carry
 
     def forward(
         self, obs: dict[str, Tensor], state: dict[str, Tensor], episode_start: Tensor
@@ -301,7 +332,8 @@ class EmmlModel(nn.Module):
         x_sent = self.gate(tokens, x_sent)  # diagnostic 'type_gate': Eq. 4's gate from the word types
         new_state: dict[str, Tensor] = {}
         if self.window:
-            fused, aux, new_state["frames"] = self._fuse_window(obs, state, episode_start, x_sent)
+            fused, aux, carry = self._fuse_window(obs, state, episode_start, x_sent)
+            new_state.update(carry)
         else:
             aux = self.image_encoder(image.flatten(0, 1))  # (N, V, h, w)
             x_image = torch.sigmoid(aux) if self.cfg.x_image == "sigmoid" else torch.relu(aux)  # x_I from conv3

@@ -71,6 +71,13 @@ class StackedModels(nn.Module):
     def initial_state(self, batch_size: int, device=None) -> dict[str, Tensor]:
         return self.template[0].initial_state(batch_size, device=device)
 
+    def acting_state(self, state: dict[str, Tensor]) -> dict[str, Tensor]:
+        """``state`` itself: stacked runs recompute a frame window's conv at each step (no acting cache)."""
+        return state
+
+    def replay_state(self, state: dict[str, Tensor]) -> dict[str, Tensor]:
+        return self.template[0].replay_state(state)
+
     def forward_runs(self, obs: dict[str, Tensor], state: dict[str, Tensor], episode_start: Tensor):
         """Interleaved inputs -> ({ModelOutput field: (N, T, B, ...)}, new state {key: (N, B, ...)})."""
         n = self.runs

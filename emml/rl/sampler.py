@@ -131,7 +131,8 @@ class Sampler:
         """Fill ``buffer`` with ``num_steps`` steps of every actor, acting with ``model`` (sampled moves, argmax
         answer word), and leave the observation after the last step in ``self.obs`` for bootstrapping."""
         T = self.cfg.num_steps
-        buffer.set_initial_state(self.state)
+        buffer.set_initial_state(model.replay_state(self.state))
+        self.state = model.acting_state(self.state)  # a frame window's conv cache, under the weights of this rollout
         self.timing = dict.fromkeys(self.timing, 0.0)
         pending = [False] * self.groups
         learner_threads = torch.get_num_threads()

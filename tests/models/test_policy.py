@@ -12,6 +12,7 @@ from emml.models import (
     check_architecture,
     model_table,
 )
+from emml.models.policy import FRAME_LOGITS
 
 V, H, W, MAX_STEPS = 6, 60, 108, 20
 
@@ -185,6 +186,50 @@ def test_pacman_stepwise_equals_sequence():
         torch.testing.assert_close(getattr(seq, f), step[f], atol=1e-5, rtol=1e-4)
     assert torch.equal(seq_state["frames"], step_state["frames"])
     torch.testing.assert_close(seq_state["h"], step_state["h"], atol=1e-5, rtol=1e-4)
+
+
+def test_pacman_acting_cache_equals_recomputing_the_window():
+    """`acting_state` carries the K-1 frames' conv logits: stepping with it gives the outputs and the raw frames of
+    stepping without it (and of the whole sequence at once), runs the conv on one frame per step, and is ignored
+    where gradients are on (the PPO replay recomputes the window so that gradients reach every frame's conv)."""
+    torch.manual_seed(0)
+    model = build_model("pacman", V, 36, 36, MAX_STEPS)
+    t, b = 9, 3
+    obs = make_obs(t, b, 36, 36, seed=11)
+    es = starts(t, b)
+    es[4, 0] = es[6, 2] = True
+    frames_seen = []
+    hook = model.image_encoder.register_forward_hook(lambda m, args, out: frames_seen.append(args[0].shape[0]))
+    with torch.no_grad():
+        plain, plain_state = _pacman_run_stepwise(model, obs, es, model.initial_state(b))
+        acting = model.acting_state(model.initial_state(b))
+        frames_seen.clear()
+        cached, cached_state = _pacman_run_stepwise(model, obs, es, acting)
+        hook.remove()
+        seq, _ = model(obs, model.initial_state(b), es)
+    assert frames_seen == [b] * t  # the new frame of each env only (without the cache: K frames each)
+    for f in ("logits", "value", "answer_logits"):
+        torch.testing.assert_close(cached[f], plain[f], atol=1e-5, rtol=1e-4)
+        torch.testing.assert_close(cached[f], getattr(seq, f), atol=1e-5, rtol=1e-4)
+    assert torch.equal(cached_state["frames"], plain_state["frames"])
+    with torch.no_grad():  # the carried logits are those of the carried frames
+        want = model.image_encoder(cached_state["frames"].flatten(0, 1)).unflatten(0, (b, 4))
+    torch.testing.assert_close(cached_state[FRAME_LOGITS], want, atol=1e-5, rtol=1e-4)
+    assert FRAME_LOGITS not in model.replay_state(cached_state)
+    # with gradients on, a (stale) cache is not read: the carried frames' conv is recomputed and gets gradients
+    stale = dict(cached_state, **{FRAME_LOGITS: torch.zeros_like(cached_state[FRAME_LOGITS])})
+    one = {k: v[:1] for k, v in obs.items()}
+    no_start = torch.zeros(1, b, dtype=torch.bool)
+    out, _ = model(one, stale, no_start)
+    with torch.no_grad():
+        ref, _ = model(one, model.replay_state(cached_state), no_start)
+    torch.testing.assert_close(out.answer_logits, ref.answer_logits, atol=1e-5, rtol=1e-4)
+
+
+def test_acting_state_is_the_state_without_a_window():
+    model = build_model("dual_attention", V, 36, 36, MAX_STEPS)
+    state = model.initial_state(2)
+    assert model.acting_state(state) is state and model.replay_state(state) == state
 
 
 def test_pacman_window_contents_and_reset():

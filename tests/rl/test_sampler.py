@@ -29,6 +29,12 @@ class CountingPolicy(torch.nn.Module):
     def initial_state(self, batch_size, device=None):
         return {"h": torch.zeros(batch_size, 1, device=device)}
 
+    def acting_state(self, state):  # no frame window: nothing to cache (EmmlModel.acting_state)
+        return state
+
+    def replay_state(self, state):
+        return state
+
     def forward(self, obs, state, episode_start):
         T, B = obs["task"].shape
         h = torch.where(episode_start[-1].unsqueeze(-1), torch.zeros_like(state["h"]), state["h"]) + 1

@@ -347,16 +347,19 @@ LEARNING_QUESTIONS = ["what color is the pillar", "what color is the tall pillar
 
 def test_learning_beats_chance(tracking, no_leftovers):
     """EQA on Easy about the pillars (answers red or green: chance 0.5), smoke resolution, with aux labels.
-    PPO must learn to answer and the answer head to read the colour. Measured with this seed (0): 0.90 greedy
-    accuracy after 32k frames; we assert 0.75, 3 sd above chance at 40 episodes. lr 1e-3 instead of the paper's
-    2.5e-4 so that it fits in CI's time. Seed-sensitive: with seed 1 the answer head learns too slowly and the
-    policy settles at 0.40 even after 64k frames; training is deterministic under a seed on CPU, so this test is
-    stable, but it pins one seed. Lockstep (env_groups=1) and double-buffered sampling (2, the default) gave the
-    same accuracies for seeds 0, 1, 2: 0.90, 0.40, 0.95."""
+    PPO must learn to answer and the answer head to read the colour. Measured with this seed (0) at 16k frames
+    (session 14, this config): greedy accuracy 0.925 at 40 episodes and training success 0.88 over the last 100
+    episodes (seed 2: 0.975 and 0.85); its curve (session 13, evaluated every 8k frames) 0.95 / 0.925 / 0.975 / 0.95
+    at 8k / 16k / 24k / 32k, so 16k frames, half the 32k trained until session 14 (CI time), lose nothing. We assert
+    0.75, 3 sd above chance at 40 episodes, and 0.7. lr 1e-3 instead of the paper's 2.5e-4 so that it fits in CI's
+    time. Seed-sensitive: with seed 1 the answer head learns too slowly and the policy settles at 0.40 (0.40 and 0.48
+    at 16k frames; 0.40 even after 64k); training is deterministic under a seed on CPU, so this test is stable, but it
+    pins one seed. Lockstep (env_groups=1) and double-buffered sampling (2, the default) gave the same accuracies for
+    seeds 0, 1, 2: 0.90, 0.40, 0.95."""
     cfg = smoke(
         tracking,
         aux=True,
-        frames=32768,
+        frames=16384,
         num_envs=8,
         num_steps=32,
         final_eval_episodes=40,
