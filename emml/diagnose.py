@@ -88,7 +88,7 @@ def diagnose(
     with playing(model, cfg) as (env,):  # eval mode; on the way out the engine ended and the mode restored
         for i in range(episodes):
             obs, _ = env.reset(seed=seed + i)
-            state, start = model.initial_state(1, device), _starts(1, device)
+            state, start = model.acting_state(model.initial_state(1, device)), _starts(1, device)
             done = False
             while not done and len(labels) < max_frames:
                 out, state = model(_single(obs, device), state, start)
