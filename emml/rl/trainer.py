@@ -49,7 +49,7 @@ from emml.runs import (
     save_results,
 )
 from emml.tasks.language import load_dataset, resolve_vocabulary
-from emml.tracking import Tracker
+from emml.tracking import Tracker, read_mirror
 
 log = logging.getLogger(__name__)
 
@@ -182,6 +182,15 @@ class Trainer:
         return train_loop([self], PlainLearner(model, optimizer, self.cfg), update, frames)[0]
 
     # --- pieces -----------------------------------------------------------------------------------------------
+    def eval_missed(self, frames: int) -> bool:
+        """Whether the evaluation due at ``frames`` (the update that crossed an `eval_every` boundary) is missing from
+        the run's curve: a stop during that evaluation keeps the update (`checkpoint_on_stop`) but not its point, and
+        a run resumed there evaluates first."""
+        every = self.cfg.eval_every
+        if not every or frames == 0 or frames % every >= self.cfg.frames_per_update:
+            return False
+        return not any(step == frames and key.startswith("eval/") for step, key, _ in read_mirror(self.dir / METRICS))
+
     def _eval(self, model, frames: int, final: bool = False) -> dict:
         """Greedy accuracies (logged under eval/): over `final_eval_episodes` per (task, split) for the run's score
         (``final``), `eval_episodes` for the curves."""
@@ -274,6 +283,10 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
         buffer = RolloutBuffer(T, B * n, shapes, device=device)
         sampler.reset(model, seed=env_seeds([t.cfg.seed for t in trainers], update, B))
         next_eval = (frames // cfg.eval_every + 1) * cfg.eval_every if cfg.eval_every else None
+        if update < cfg.num_updates:  # resumed where a stop cut an evaluation short: that point first
+            for r, t in enumerate(trainers):
+                if t.eval_missed(frames):
+                    t._eval(learner.run_model(r), frames)
         bar = tqdm(
             total=cfg.num_updates * cfg.frames_per_update,
             initial=frames,

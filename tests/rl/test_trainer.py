@@ -490,6 +490,28 @@ def test_smoke_numbers_are_not_recorded_under_the_committed_results(tmp_path):
     assert profile_config("smoke").results_root == "scratch/results"  # where smoke numbers go by default
 
 
+def test_a_run_stopped_during_an_evaluation_evaluates_there_when_resumed(tracking, monkeypatch, no_leftovers):
+    """A stop (Ctrl-C / SIGTERM) inside the evaluation after an update keeps that update (its checkpoint is saved
+    at the evaluation's frames); the resumed run plays the evaluation it missed before training on, so the curve
+    has its point (before session 14 it went on to the next one: PACMAN's 900k point was lost so)."""
+    from emml.rl.trainer import Trainer
+
+    real_eval = Trainer._eval
+
+    def stopped(self, model, frames, final=False):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Trainer, "_eval", stopped)
+    cfg = smoke(tracking, frames=256, checkpoint_every=100, eval_every=128, eval_episodes=1, final_eval_episodes=1)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, quiet=True)
+    assert load_checkpoint(run_dir(cfg) / CHECKPOINT)["frames"] == 128  # the update before the evaluation
+    monkeypatch.setattr(Trainer, "_eval", real_eval)
+    result = train(cfg, quiet=True)
+    assert result.resumed and result.frames == 256
+    assert [s for s, _ in metric_history(result.run_id, "eval/sgn_train")] == [128, 256]
+
+
 @pytest.mark.parametrize("where", ["collect", "update"])
 def test_a_stopped_run_keeps_its_last_whole_update(tracking, monkeypatch, where, no_leftovers):
     """Ctrl-C / SIGTERM between checkpoints: stopped while collecting, the run saves the updates it finished (its
