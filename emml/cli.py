@@ -681,11 +681,11 @@ def probe_eqa_cmd(
     checkpoint, frozen) retrained on the training questions' answers per readout and seed; answer accuracy on the
     train and test questions beside the checkpoint's own encoder (emml/probe_eqa.py)."""
     from emml.envs.engine import install_signal_handlers
-    from emml.probe_eqa import check_options, probe_checkpoint, probe_table
+    from emml.probe_eqa import ProbeOptions, probe_checkpoint, probe_table
 
     chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
     try:
-        check_options(episodes, chosen, seeds, steps, batch, lr, eq1_words, init)
+        options = ProbeOptions(episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words, init=init).validate()
     except ValueError as e:
         _fail(str(e))
     _check_checkpoint(checkpoint)
@@ -693,7 +693,7 @@ def probe_eqa_cmd(
     if not as_json:
         typer.echo(f"probing {checkpoint}: {episodes} first frames per EQA question…", err=True)
     try:
-        result = probe_checkpoint(checkpoint, episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words, init=init)
+        result = probe_checkpoint(checkpoint, options)
     except ValueError as e:  # a model without a GA2 gate, a run not scored on EQA
         _fail(str(e))
     _echo(result, as_json, probe_table(result))

@@ -73,28 +73,46 @@ IMAGE_BATCH = 256
 """Frames per conv forward when x_I is computed."""
 
 
-def check_options(
-    episodes: int,
-    readouts,
-    seeds: int,
-    steps: int,
-    batch: int = BATCH,
-    lr: float = LR,
-    eq1_words: str = "all",
-    init: str = "checkpoint",
-) -> None:
-    """ValueError naming the first bad option and what it allows (before a checkpoint is loaded)."""
-    check_choice("eq1_words", eq1_words, EQ1_WORDS)
-    check_choice("init", init, INITS)
-    for name, value in (("episodes", episodes), ("seeds", seeds), ("steps", steps), ("batch", batch)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name}={value!r} must be an integer >= 1")
-    if not readouts:
-        raise ValueError("readouts=() names no readout; choose from " + ", ".join(map(repr, SENTENCE_READOUTS)))
-    for readout in readouts:
-        check_choice("readouts", readout, SENTENCE_READOUTS)
-    if not lr > 0:
-        raise ValueError(f"lr={lr!r} must be > 0")
+@dataclasses.dataclass(frozen=True)
+class ProbeOptions:
+    """How the probe samples its frames and trains its encoders (`emml probe-eqa`'s options); `validate` names the
+    first bad one and what it allows, before a checkpoint is loaded."""
+
+    episodes: int = EPISODES
+    """EQA episodes per question whose first frame is collected (the agent answers there)."""
+    readouts: tuple[str, ...] = SENTENCE_READOUTS
+    """x_sent readouts to retrain (`ModelConfig.sentence_readout` values), each once per seed; repeats count once."""
+    seeds: int = SEEDS
+    """Encoders trained per readout, minibatch seeds 0..seeds-1."""
+    steps: int = STEPS
+    """Adam steps per encoder."""
+    batch: int = BATCH
+    """Frames per minibatch."""
+    lr: float = LR
+    """Adam's learning rate."""
+    seed: int = SEED
+    """First reset seed of the collected episodes."""
+    eq1_words: str = "all"
+    """Words Eq. 1 sums the channels of: one of EQ1_WORDS."""
+    init: str = "checkpoint"
+    """Where the retrained GRU and Linear start: one of INITS."""
+
+    def validate(self) -> ProbeOptions:
+        """These options with the readouts' repeats dropped; ValueError naming the first bad option."""
+        check_choice("eq1_words", self.eq1_words, EQ1_WORDS)
+        check_choice("init", self.init, INITS)
+        for name in ("episodes", "seeds", "steps", "batch"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}={value!r} must be an integer >= 1")
+        readouts = tuple(dict.fromkeys(self.readouts))
+        if not readouts:
+            raise ValueError("readouts=() names no readout; choose from " + ", ".join(map(repr, SENTENCE_READOUTS)))
+        for readout in readouts:
+            check_choice("readouts", readout, SENTENCE_READOUTS)
+        if not self.lr > 0:
+            raise ValueError(f"lr={self.lr!r} must be > 0")
+        return dataclasses.replace(self, readouts=readouts)
 
 
 def probe_questions(model, cfg) -> dict[str, tuple[str, ...]]:
@@ -266,75 +284,44 @@ def _mean(runs: list[dict], questions: dict[str, tuple[str, ...]]) -> dict:
     return mean
 
 
-def probe_eqa(
-    model,
-    cfg,
-    episodes: int = EPISODES,
-    readouts=SENTENCE_READOUTS,
-    seeds: int = SEEDS,
-    steps: int = STEPS,
-    batch: int = BATCH,
-    lr: float = LR,
-    seed: int = SEED,
-    eq1_words: str = "all",
-    init: str = "checkpoint",
-) -> dict:
+def probe_eqa(model, cfg, options: ProbeOptions = ProbeOptions()) -> dict:
     """The probe of the module docstring on ``model`` and its run's TrainConfig ``cfg``: the checkpoint encoder's
-    scores, then per readout one trained encoder per seed 0..``seeds``-1 and their mean. ValueError (before any
-    engine starts) for a bad option or a model or run the probe cannot read (`probe_questions`)."""
-    readouts = tuple(dict.fromkeys(readouts))
-    check_options(episodes, readouts, seeds, steps, batch, lr, eq1_words, init)
+    scores, then per readout one trained encoder per seed 0..``options.seeds``-1 and their mean. ValueError (before
+    any engine starts) for a bad option or a model or run the probe cannot read (`probe_questions`)."""
+    o = options.validate()
     questions = probe_questions(model, cfg)
     result = {
         "model": model.cfg.name,
         "readout": model.text_encoder.readout,
         "x_image": model.cfg.x_image,
-        "episodes": episodes,
-        "seed": seed,
-        "steps": steps,
-        "batch": batch,
-        "lr": lr,
-        "eq1_words": eq1_words,
-        "init": init,
+        **{k: v for k, v in dataclasses.asdict(o).items() if k not in ("readouts", "seeds")},
         "questions": {s: list(q) for s, q in questions.items()},
         "frames": {},
         "checkpoint_encoder": None,
         "readouts": {},
     }
     with _eval_mode(model):
-        data = collect_frames(model, cfg, questions, episodes, seed)
-        mask = eq1_mask(cfg, eq1_words)
+        data = collect_frames(model, cfg, questions, o.episodes, o.seed)
+        mask = eq1_mask(cfg, o.eq1_words)
         for split in SPLITS:
             data[split]["eq1_mask"] = mask
         result["frames"] = {s: len(data[s]["answer"]) for s in SPLITS}
         result["checkpoint_encoder"] = _scores(model, data, model.sentence_gate)
-        for readout in readouts:
+        for readout in o.readouts:
             runs = []
-            for s in range(seeds):
-                encoder = train_encoder(model, data["train"], readout, s, steps, batch, lr, init)
+            for s in range(o.seeds):
+                encoder = train_encoder(model, data["train"], readout, s, o.steps, o.batch, o.lr, o.init)
                 runs.append({"seed": s, **_scores(model, data, lambda tokens, e=encoder: e(tokens)[1])})
             result["readouts"][readout] = {"runs": runs, "mean": _mean(runs, questions)}
     return result
 
 
-def probe_checkpoint(
-    path,
-    episodes: int = EPISODES,
-    readouts=SENTENCE_READOUTS,
-    seeds: int = SEEDS,
-    steps: int = STEPS,
-    batch: int = BATCH,
-    lr: float = LR,
-    seed: int = SEED,
-    eq1_words: str = "all",
-    init: str = "checkpoint",
-) -> dict:
+def probe_checkpoint(path, options: ProbeOptions = ProbeOptions()) -> dict:
     """`probe_eqa` on a checkpoint (`emml.runs.load_model`), the options checked before it is loaded; the result
     names the checkpoint."""
-    check_options(episodes, tuple(readouts), seeds, steps, batch, lr, eq1_words, init)
+    options = options.validate()
     model, cfg = load_model(path)
-    result = probe_eqa(model, cfg, episodes, readouts, seeds, steps, batch, lr, seed, eq1_words, init)
-    return {"checkpoint": str(path), **result}
+    return {"checkpoint": str(path), **probe_eqa(model, cfg, options)}
 
 
 def probe_table(result: dict) -> str:

@@ -60,7 +60,7 @@ def frames(checkpoint):
 
 
 def test_the_result_has_its_documented_structure(checkpoint, no_leftovers):
-    result = probe.probe_checkpoint(checkpoint, readouts=("last", "mean"), **SMALL)
+    result = probe.probe_checkpoint(checkpoint, probe.ProbeOptions(readouts=("last", "mean"), **SMALL))
     questions = {s: [x.text for x in load_dataset("doom").select("eqa", s)] for s in ("train", "test")}
     assert result["checkpoint"] == str(checkpoint) and result["questions"] == questions
     assert result["frames"] == {"train": 2 * 21, "test": 2 * 8} and result["seed"] == probe.SEED
@@ -123,7 +123,7 @@ def test_only_the_gru_and_linear_learn_the_embedding_stays_the_checkpoints(frame
     assert all(torch.equal(v, model.text_encoder.state_dict()[k]) for k, v in start.state_dict().items())
     assert start.readout == "mean" and not start.embedding.weight.requires_grad
     with pytest.raises(ValueError, match="init='warm' is not allowed"):
-        probe.check_options(2, ("last",), 1, 5, init="warm")
+        probe.ProbeOptions(2, ("last",), 1, 5, init="warm").validate()
 
 
 def test_the_readouts_give_different_encoders(frames):
@@ -150,7 +150,7 @@ def test_a_model_without_a_gate_to_probe_is_refused_before_any_engine(monkeypatc
     monkeypatch.setattr(probe, "load_model", lambda path: (model, cfg))
     monkeypatch.setattr(probe, "make_env", _no_engine)
     with pytest.raises(ValueError, match=why):
-        probe.probe_checkpoint("any.pt", **SMALL)
+        probe.probe_checkpoint("any.pt", probe.ProbeOptions(**SMALL))
 
 
 def test_a_run_not_scored_on_eqa_is_refused_before_any_engine(monkeypatch):
@@ -158,7 +158,7 @@ def test_a_run_not_scored_on_eqa_is_refused_before_any_engine(monkeypatch):
     monkeypatch.setattr(probe, "load_model", lambda path: (_model(cfg, words), cfg))
     monkeypatch.setattr(probe, "make_env", _no_engine)
     with pytest.raises(ValueError, match="not scored on EQA"):
-        probe.probe_checkpoint("any.pt", **SMALL)
+        probe.probe_checkpoint("any.pt", probe.ProbeOptions(**SMALL))
 
 
 def _no_engine(cfg):
@@ -217,4 +217,4 @@ def test_eq1_over_the_content_words_masks_the_function_words_only(frames):
     torch.testing.assert_close(probe.answer_logits(model, masked, gate), expected)
     assert not torch.allclose(probe.answer_logits(model, train, gate), expected)
     with pytest.raises(ValueError, match="eq1_words='some' is not allowed"):
-        probe.check_options(2, ("last",), 1, 5, eq1_words="some")
+        probe.ProbeOptions(2, ("last",), 1, 5, eq1_words="some").validate()
