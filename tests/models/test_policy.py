@@ -216,7 +216,8 @@ def test_pacman_acting_cache_equals_recomputing_the_window():
         want = model.image_encoder(cached_state["frames"].flatten(0, 1)).unflatten(0, (b, 4))
     torch.testing.assert_close(cached_state[FRAME_LOGITS], want, atol=1e-5, rtol=1e-4)
     assert FRAME_LOGITS not in model.replay_state(cached_state)
-    # with gradients on, a (stale) cache is not read: the carried frames' conv is recomputed and gets gradients
+    # with gradients on, a (stale) cache is not read: the carried frames' conv is recomputed (what lets gradients
+    # reach it in the PPO replay)
     stale = dict(cached_state, **{FRAME_LOGITS: torch.zeros_like(cached_state[FRAME_LOGITS])})
     one = {k: v[:1] for k, v in obs.items()}
     no_start = torch.zeros(1, b, dtype=torch.bool)
