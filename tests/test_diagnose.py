@@ -14,6 +14,7 @@ from emml.diagnose import average_precision, diagnose, summary_line
 from emml.models import build_model
 from emml.tasks.language import Vocabulary, load_dataset
 from tests.conftest import SMOKE
+from tests.fakes import ScriptedModel
 
 SGN = ("go to the blue torch", "go to the green armor", "go to the yellow keycard")
 
@@ -58,18 +59,12 @@ def test_perfect_detectors_attend_to_the_referent(no_leftovers):
     assert "attention_on_target 1.00" in summary_line(result)
 
 
-class _Scripted(torch.nn.Module):
+class _Scripted(ScriptedModel):
     """Moves by the column of the referent's cells (privileged), or ignores them: two ends of the sensitivity."""
 
     def __init__(self, vocab_size, reacts: bool):
         super().__init__()
         self.vocab_size, self.reacts = vocab_size, reacts
-
-    def initial_state(self, n, device=None):
-        return {"h": torch.zeros(n, 1)}
-
-    def acting_state(self, state):  # no frame window: nothing to cache (EmmlModel.acting_state)
-        return state
 
     def forward(self, obs, state, episode_start):
         t, b = obs["time"].shape

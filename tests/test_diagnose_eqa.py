@@ -14,6 +14,7 @@ from emml.models import build_model
 from emml.models.type_gate import TypeGate
 from emml.tasks.language import Vocabulary, load_dataset
 from tests.conftest import SMOKE
+from tests.fakes import ScriptedModel
 
 QUESTIONS = ("what color is the pillar", "what color is the torch")
 """One training question and one test question: two splits, one row each."""
@@ -68,7 +69,7 @@ def test_each_question_row_is_computed_from_its_episodes(no_leftovers):
     assert all(q in text for q in QUESTIONS) and "GA2 gate (Eq. 4)" in text and "at the referent" in text
 
 
-class _Oracle(torch.nn.Module):
+class _Oracle(ScriptedModel):
     """Answers at once, with the colour whose aux label covers most of the referent's cells (privileged), and
     attends to exactly the referent's cells: every row of the diagnostics is known in advance."""
 
@@ -78,12 +79,6 @@ class _Oracle(torch.nn.Module):
         self.colours = [words.index(w) for w in load_dataset("doom").word_groups["colors"]]
         self.cfg = type("Cfg", (), {"control": "none", "name": "oracle"})
         self.fusion = None
-
-    def initial_state(self, n, device=None):
-        return {"h": torch.zeros(n, 1)}
-
-    def acting_state(self, state):  # no frame window: nothing to cache (EmmlModel.acting_state)
-        return state
 
     def forward(self, obs, state, episode_start):
         t, b = obs["time"].shape

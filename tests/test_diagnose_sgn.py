@@ -27,24 +27,19 @@ from emml.envs.vector import make_env
 from emml.evaluate import evaluate
 from emml.tasks.language import Vocabulary, load_dataset
 from tests.conftest import SMOKE
+from tests.fakes import ScriptedModel
 
 AHEAD = 2
 """The Easy slot straight ahead of the start: walking forward reaches it (in 4 steps at the smoke size)."""
 
 
-class _OneMove(torch.nn.Module):
+class _OneMove(ScriptedModel):
     """Always the same move: 'forward' walks into the object ahead, 'left' turns on the spot until the time-out."""
 
     def __init__(self, move: int, vocab_size: int):
         super().__init__()
         self.move, self.vocab_size = move, vocab_size
         self.cfg = type("Cfg", (), {"control": "none", "name": f"always-{move}"})
-
-    def initial_state(self, n, device=None):
-        return {"h": torch.zeros(n, 1)}
-
-    def acting_state(self, state):  # no frame window: nothing to cache (EmmlModel.acting_state)
-        return state
 
     def forward(self, obs, state, episode_start):
         t, b = obs["time"].shape

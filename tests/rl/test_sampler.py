@@ -17,23 +17,15 @@ from emml.envs.engine import EngineError
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from tests.conftest import SMOKE
+from tests.fakes import ScriptedModel
 
 
-class CountingPolicy(torch.nn.Module):
+class CountingPolicy(ScriptedModel):
     """Uniformly random moves, answer word 0, and a state that counts the steps since the episode started."""
 
     def __init__(self, vocab_size: int):
         super().__init__()
         self.V = vocab_size
-
-    def initial_state(self, batch_size, device=None):
-        return {"h": torch.zeros(batch_size, 1, device=device)}
-
-    def acting_state(self, state):  # no frame window: nothing to cache (EmmlModel.acting_state)
-        return state
-
-    def replay_state(self, state):
-        return state
 
     def forward(self, obs, state, episode_start):
         T, B = obs["task"].shape
