@@ -2,8 +2,10 @@
 
 A campaign file lists `[[steps]]` in the order they are to be trained; a step names a table, a profile, which of
 the table's runs (`only`: RunSpec fields, each one value or a list whose order orders the runs) and, optionally,
-`frames` (a step may train a profile to fewer frames than the profile's, e.g. the paper profile's first 1.5M). A
-step's table is one of the paper's (reproduce/table*.toml) or an experiment beyond them, `experiments/<name>`
+`frames` (a step may train a profile to fewer frames than the profile's, e.g. the paper profile's first 1.5M) and
+`set` (how its runs are measured: TrainConfig.RUNTIME fields such as eval_every, which never change what a run is or
+its name, e.g. the paper profile's first curve evaluated every 100k frames rather than every 500k). A step's
+table is one of the paper's (reproduce/table*.toml) or an experiment beyond them, `experiments/<name>`
 (reproduce/experiments/<name>.toml: a table of one's own, `emml run FILE`, whose rows are the settings an issue
 measures, e.g. issue 34's x_sent readout).
 `emml campaign NAME` trains every unfinished run in that order through the table launcher (emml/launch.py), which
@@ -34,8 +36,10 @@ CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
 EXPERIMENTS_DIR = REPRODUCE_DIR / "experiments"
 """Tables beyond the paper's that a campaign step may name as ``experiments/<name>``."""
 EXPERIMENT_PREFIX = "experiments/"
-STEP_KEYS = ("name", "table", "profile", "only", "frames", "note")
+STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "note")
 TOP_KEYS = ("title", "steps")
+OWN_KEYS = ("frames", "run_root", "results_root")
+"""RUNTIME fields a step may not `set`: its `frames` key sets the first; the campaign's options own the roots."""
 STATES = ("done", "running", "interrupted", "to do")
 """done: finished and recorded; running: a live process holds the run's lock; interrupted: a checkpoint to resume
 from; to do: nothing yet (or a reference row with no run dir here, which is trained again)."""
@@ -57,9 +61,13 @@ class Step:
     """Frames to train each run to, instead of the profile's (None: the profile's)."""
     note: str = ""
     """Why the step is there (free text)."""
+    settings: dict = field(default_factory=dict)
+    """The step's `set`: TrainConfig.RUNTIME field → value for its runs, over the profile's (how a run is measured
+    and run, e.g. eval_every; never what it is: its name and results row stay the table's)."""
 
     def overrides(self) -> dict:
-        return {"frames": self.frames} if self.frames is not None else {}
+        """The dotted TrainConfig overrides the step adds to its runs' own (emml.launch.with_overrides)."""
+        return {**self.settings, **({"frames": self.frames} if self.frames is not None else {})}
 
     @property
     def table_ref(self) -> str:
@@ -142,13 +150,31 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
         frames = raw.get("frames")
         if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
             raise ValueError(f"{path}: {where}.frames={frames!r} must be a positive integer")
-        step = Step(raw["name"], raw["table"], raw["profile"], only, frames, raw.get("note", ""))
+        step = Step(
+            raw["name"], raw["table"], raw["profile"], only, frames, raw.get("note", ""), _settings(path, where, raw)
+        )
         try:  # the selection names runs the table has (the values present are named otherwise)
             select_runs(_declared(step.table_ref, step.profile), step.only)
         except ValueError as e:
             raise ValueError(f"{path}: {where}.only: {e}") from None
         steps.append(step)
     return Campaign(name, path, str(data.get("title", name)), tuple(steps))
+
+
+def _settings(path: Path, where: str, raw: dict) -> dict:
+    """A step's `set`, checked before any compute: only how a run is measured (TrainConfig.RUNTIME less OWN_KEYS),
+    each value of its field's type and range."""
+    from emml.config import TrainConfig, apply_overrides
+
+    settings = raw.get("set", {})
+    allowed = [name for name in TrainConfig.RUNTIME if name not in OWN_KEYS]
+    if not isinstance(settings, dict) or any(k not in allowed for k in settings):
+        raise ValueError(f"{path}: {where}.set must be a table of fields among {', '.join(allowed)}")
+    try:
+        apply_overrides(TrainConfig(), dict(settings), source=f"{where}.set").validate()
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
+    return dict(settings)
 
 
 def _check_keys(path: Path, where: str, data, allowed: tuple[str, ...]) -> None:

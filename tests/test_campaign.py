@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from emml.campaign import load_campaign, pin_worktree, run_campaign, status
+from emml.campaign import load_campaign, pin_worktree, run_campaign, status, step_runs
 from emml.runlock import hold_run
 from tests.test_launch import calls, fake_train
 
@@ -26,6 +26,7 @@ table = "table2"
 profile = "smoke"
 only = { model = "ga", difficulty = "easy", aux = [true, false] }
 frames = 128
+set = { eval_every = 64, eval_episodes = 2 }
 """
 
 
@@ -48,6 +49,10 @@ def test_steps_train_in_order_and_a_rerun_skips_what_is_finished(tracking, campa
         ("second", "ga-easy-noaux-s0-smoke", "to do"),
     ]
     assert before[2].target == 128 and before[0].target == 512  # a step's frames, else the profile's
+    (first, _), (second, _) = (step_runs(step)[0] for step in plan.steps)
+    measured = second.to_config("smoke")  # a step's set, else the profile's; the run's name stays the table's
+    assert (measured.eval_every, measured.eval_episodes) == (64, 2)
+    assert (first.to_config("smoke").eval_every, first.to_config("smoke").eval_episodes) == (0, 3)
     reports = run_campaign(plan, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
     assert [c[0] for c in calls(tracking)] == [r.run_name for r in before]  # the declared order
     assert [len(r.done) for r in reports] == [2, 2]
@@ -81,6 +86,15 @@ def test_status_shows_a_run_held_by_a_live_process_as_running(tracking, campaign
         ),
         ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nframes = 0\n', r"frames=0 must be a positive"),
         ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nepochs = 3\n', r"unknown key\(s\) epochs"),
+        (
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nset = { "ppo.lr" = 1.0 }\n',
+            r"steps\[0\].set must be a table of fields among eval_every, eval_episodes",
+        ),
+        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nset = { eval_every = -1 }\n', r"eval_every=-1"),
+        (
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nset = { eval_episodes = "many" }\n',
+            r"steps\[0\].set 'eval_episodes'",
+        ),
         ("title = 'x'\n", r"'steps' must be a non-empty array"),
     ],
 )
@@ -96,6 +110,8 @@ def test_a_bad_campaign_fails_naming_the_file_and_the_key(campaigns, text, messa
 def test_the_reference_campaign_loads():
     plan = load_campaign("reference")
     assert plan.steps[0].table == "table2" and any(s.profile == "paper" and s.frames for s in plan.steps)
+    paper = next(s for s in plan.steps if s.profile == "paper")  # its curve has the quick runs' points (100k apart)
+    assert paper.overrides() == {"eval_every": 100_000, "eval_episodes": 100, "frames": 1_500_000}
     experiment = next(s for s in plan.steps if s.table == "experiments/eqa_readout")  # issue 34's experiment
     assert Path(experiment.table_ref).is_file()
 
