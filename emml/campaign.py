@@ -29,12 +29,10 @@ from pathlib import Path
 
 import tomllib
 
-from emml.registry import REPRODUCE_DIR, RunSpec
+from emml.registry import EXPERIMENTS_DIR, REPRODUCE_DIR, RunSpec, list_experiments
 from emml.runs import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
-EXPERIMENTS_DIR = REPRODUCE_DIR / "experiments"
-"""Tables beyond the paper's that a campaign step may name as ``experiments/<name>``."""
 EXPERIMENT_PREFIX = "experiments/"
 STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "note")
 TOP_KEYS = ("title", "steps")
@@ -106,11 +104,6 @@ class RunStatus:
 
 
 def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
-    return sorted(p.stem for p in directory.glob("*.toml"))
-
-
-def list_experiments(directory: Path = EXPERIMENTS_DIR) -> list[str]:
-    """Names of the experiment tables (reproduce/experiments/*.toml), sorted."""
     return sorted(p.stem for p in directory.glob("*.toml"))
 
 

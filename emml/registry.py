@@ -225,6 +225,17 @@ def list_tables(directory: Path = REPRODUCE_DIR) -> list[str]:
     return sorted(p.stem for p in directory.glob("table*.toml"))
 
 
+EXPERIMENTS_DIR = REPRODUCE_DIR / "experiments"
+"""Tables beyond the paper's (reproduce/experiments/<name>.toml): a setting an issue measures, e.g. issue 34's x_sent
+readout. A campaign step names one as ``experiments/<name>`` (emml/campaign.py); `emml reports` reports those with
+results."""
+
+
+def list_experiments(directory: Path = EXPERIMENTS_DIR) -> list[str]:
+    """Names of the experiment tables (reproduce/experiments/*.toml), sorted."""
+    return sorted(p.stem for p in directory.glob("*.toml"))
+
+
 OWN_TABLES: dict[str, Path] = {}
 """Tables of one's own loaded from a .toml path in this process (`load_table('./my_table.toml')`): name (the file's
 stem) -> file, so that loading them again by name (the launcher, reports) finds them."""

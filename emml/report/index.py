@@ -16,22 +16,28 @@ READING_ORDER = ("quick", "paper")
 def profiles_with_results(results_root: str | Path = "results") -> dict[str, list[str]]:
     """Profile → the tables that have a results CSV for it (demo rows are the demo's own), quick first, then
     paper, then the others; never a profile whose numbers are not results (smoke: `emml.profiles.is_scratch`), even
-    if a CSV of it lies here."""
+    if a CSV of it lies here. The experiments beyond the paper's tables (reproduce/experiments/<name>.toml, e.g.
+    issue 34's eqa_readout) with results are listed after the paper's tables, by name, loadable by it."""
     from emml.profiles import is_scratch, load_profiles
-    from emml.registry import list_tables, load_table
+    from emml.registry import EXPERIMENTS_DIR, list_experiments, list_tables, load_table, own_table
 
     known = load_profiles()
+    experiments = set(list_experiments())
     out: dict[str, list[str]] = {}
-    for csv in sorted(project_path(results_root).glob("table*/*.csv")):
-        if csv.stem in known and not is_scratch(csv.stem):
-            out.setdefault(csv.stem, []).append(csv.parent.name)
+    for csv in sorted(project_path(results_root).glob("*/*.csv")):
+        name = csv.parent.name
+        if csv.stem not in known or is_scratch(csv.stem) or not (name.startswith("table") or name in experiments):
+            continue
+        if name in experiments:
+            own_table(EXPERIMENTS_DIR / f"{name}.toml")  # `load_table(name)` finds it from here on
+        out.setdefault(csv.stem, []).append(name)
     for profile, tables in out.items():  # a table whose only runs so far are another's (Table 3's DA Multi-Task)
         for name in list_tables():
             table = load_table(name)
             borrowed = {row.from_table for row in table.rows if row.from_table}
             if name not in tables and borrowed & set(tables) and _has_runs(table, profile, results_root):
                 tables.append(name)
-        tables.sort()
+        tables.sort(key=lambda t: (t in experiments, t))
     rank = {p: i for i, p in enumerate(READING_ORDER)}
     return dict(sorted(out.items(), key=lambda kv: (rank.get(kv[0], len(rank)), kv[0])))
 
@@ -118,6 +124,7 @@ def write_reports(
         "read from their configs. Smoke runs (512 frames) are not results and are never listed.",
         "",
     ]
+    drawn: set[str] = set()  # the best runs whose figures are drawn: a table borrowing one draws it once
     for profile, tables in profiles_with_results(results_root).items():
         lines += [f"## Profile `{profile}`", ""]
         for table in tables:
@@ -142,8 +149,9 @@ def write_reports(
             lines += [f"  - note: {n}" for n in notes if n not in missing]
             log(f"{table} [{profile}]: {len(paths)} files")
             best = best_checkpoint(table, profile, results_root=results_root, run_root=run_root)
-            if best is not None:
+            if best is not None and best[1] not in drawn:
                 ckpt, name = best
+                drawn.add(name)
                 no_aux = variant_dir(config_of(ckpt.parent), run_root, aux=False) / CHECKPOINT
                 figs = figures(ckpt, out, no_aux if no_aux.exists() else None)
                 plt.close("all")

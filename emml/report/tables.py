@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from emml.env_kinds import ENV_KINDS, env_label
-from emml.registry import REPRODUCE_DIR, Table, load_table
+from emml.registry import REPRODUCE_DIR, Table, load_table, table_path
 from emml.results import read_results
 from emml.tracking import project_path, project_root
 
@@ -165,8 +165,12 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
     """What the table shows, under which profile, frames and seeds, and how it was made."""
     from emml.profiles import profile_seeds
 
-    number = table.name.removeprefix("table")
-    parts = [f"Ours vs the paper's Table {number} ({table.paper_label}): {table.title}."]
+    paper = table.path.resolve() == table_path(table.name).resolve()  # one of reproduce/table*.toml
+    if paper:
+        parts = [f"Ours vs the paper's Table {table.name.removeprefix('table')} ({table.paper_label}): {table.title}."]
+    else:  # an experiment beyond the paper's tables, or a table of one's own: run and reported by its file
+        parts = [f"{table.title} ({table.paper_label})."]
+    ref = table.name if paper else _shown_path(table.path)
     if constant:
         parts.append(f"Setting: {', '.join(constant)}.")
     if table.placeholder:
@@ -205,10 +209,16 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
             f"The '{profile}' profile is not the paper's protocol (its deviations from the paper, read from the runs' "
             "configs, are listed here): compare orderings, not absolute numbers."
         )
-    parts.append(
-        f"Made by `emml run {table.name} --profile {profile}` and `emml report {table.name} --profile {profile}`."
-    )
+    parts.append(f"Made by `emml run {ref} --profile {profile}` and `emml report {ref} --profile {profile}`.")
     return " ".join(parts)
+
+
+def _shown_path(path: Path) -> str:
+    """A table file as a user types it: relative to the project root when under it."""
+    try:
+        return str(path.resolve().relative_to(project_root().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def shown_runs(

@@ -227,3 +227,14 @@ def test_placeholder_shows_the_papers_numbers(tmp_path, placeholder_table):
     tex = tmp_path / "reports" / "table4-quick.tex"
     report("table4", tmp_path, results_root=tmp_path)
     assert r"\textless{}known\_color\textgreater{}" in tex.read_text()
+
+
+def test_an_experiments_caption_names_its_file_not_a_table_of_the_paper(tmp_path):
+    """Issue 34's experiment is no table of the paper: its caption says what it is and how to run it, by file."""
+    from emml.registry import EXPERIMENTS_DIR
+
+    none = tmp_path / "none"
+    caption = report(str(EXPERIMENTS_DIR / "eqa_readout.toml"), tmp_path, results_root=none)["caption"]
+    assert caption.startswith("Dual-Attention, Doom Easy, Aux: x_sent read from") and "Table" not in caption
+    assert "`emml run reproduce/experiments/eqa_readout.toml --profile quick`" in caption
+    assert report("table3", tmp_path, results_root=none)["caption"].startswith("Ours vs the paper's Table 3")
