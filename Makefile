@@ -81,7 +81,8 @@ campaign-status: setup
 	$(EMML) campaign $(CAMPAIGN) --status
 
 # every profile with results: reports/tableN-PROFILE.{md,tex}, -curves.{png,pdf}, the best Dual-Attention run's
-# figures (when its run dir is here) and reports/index.md linking them all
+# figures (when its run dir is here), the same for the experiments of reproduce/experiments/ with results, and
+# reports/index.md linking them all
 reports: setup
 	$(EMML) reports
 
