@@ -313,6 +313,7 @@ def report_table(
     from emml.report.aggregate import summary
 
     table = load_table(name)
+    name = table.name  # a table file's path (a table of one's own, an experiment) reports under its stem
     out = reports_dir(profile, out)
     path = results_path(name, profile, results_root)
     results = table_results(table, profile, results_root)

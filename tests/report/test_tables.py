@@ -238,3 +238,7 @@ def test_an_experiments_caption_names_its_file_not_a_table_of_the_paper(tmp_path
     assert caption.startswith("Dual-Attention, Doom Easy, Aux: x_sent read from") and "Table" not in caption
     assert "`emml run reproduce/experiments/eqa_readout.toml --profile quick`" in caption
     assert report("table3", tmp_path, results_root=none)["caption"].startswith("Ours vs the paper's Table 3")
+    assert sorted(p.name for p in (tmp_path / "reports").glob("eqa_readout-*")) == [
+        "eqa_readout-quick.md",
+        "eqa_readout-quick.tex",
+    ]  # under its name in the reports folder, given its file's path
