@@ -15,14 +15,11 @@ also carries the 24 furniture sprites and their DECORATE actors (emml/envs/furni
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from emml.envs.furniture import decorate_lump, sprite_lumps
-from emml.envs.wad import pack_wad
+from emml.envs.wad import pack_wad, write_once
 
 
 @dataclass(frozen=True)
@@ -195,16 +192,5 @@ def build_wad(house: House = HOUSE) -> bytes:
 
 
 def wad_path(house: House = HOUSE) -> Path:
-    """Write the WAD once per content into the temp dir (content-addressed and atomic, as emml/envs/wad.py)."""
-    blob = build_wad(house)
-    path = Path(tempfile.gettempdir()) / f"emml-house-{hashlib.sha1(blob).hexdigest()[:12]}.wad"
-    if not path.exists():
-        fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(blob)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-    return path
+    """Write the WAD once per content into the temp dir (emml.envs.wad.write_once)."""
+    return write_once(build_wad(house), "emml-house")

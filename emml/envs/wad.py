@@ -99,16 +99,21 @@ def build_wad(room: Room = ROOM, start: tuple[int, int] = (128, 512)) -> bytes:
 
 
 def wad_path(room: Room = ROOM, start: tuple[int, int] = (128, 512)) -> Path:
-    """Write the WAD once per content into the temp dir (content-addressed, so concurrent writers agree)."""
-    blob = build_wad(room, start)
-    path = Path(tempfile.gettempdir()) / f"emml-doom-{hashlib.sha1(blob).hexdigest()[:12]}.wad"
+    """Write the WAD once per content into the temp dir (`write_once`)."""
+    return write_once(build_wad(room, start), "emml-doom")
+
+
+def write_once(blob: bytes, prefix: str) -> Path:
+    """``blob`` as <tmp>/<prefix>-<sha1[:12]>.wad, written once per content: content-addressed, so concurrent
+    writers agree, and atomic, so a reader never sees half a file."""
+    path = Path(tempfile.gettempdir()) / f"{prefix}-{hashlib.sha1(blob).hexdigest()[:12]}.wad"
     if not path.exists():
         # a private temp name per writer (forked workers share id(blob), so a name built from it collides)
         fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp", dir=path.parent)
         try:
             with os.fdopen(fd, "wb") as f:
                 f.write(blob)
-            os.replace(tmp, path)  # atomic: a reader never sees half a file
+            os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
