@@ -38,6 +38,15 @@ def check_choice(field: str, value, allowed) -> None:
         raise ValueError(f"{field}={value!r} is not allowed; choose one of {', '.join(map(repr, allowed))}")
 
 
+def check_at_least(config, names: tuple[str, ...], minimum: int) -> None:
+    """Raise a ValueError naming the first of ``config``'s integer fields ``names`` below ``minimum`` (1: a positive
+    integer, 0: >= 0)."""
+    for name in names:
+        value = getattr(config, name)
+        if value < minimum:
+            raise ValueError(f"{name}={value!r} must be " + ("a positive integer" if minimum == 1 else f">= {minimum}"))
+
+
 @dataclass
 class DoomConfig:
     """The Doom environment `emml/Doom-v0` (paper §4 'Environments', §5.1, Appendix B)."""
@@ -119,9 +128,7 @@ class DoomConfig:
         from emml.geometry import conv_output_size
 
         conv_output_size(self.height, self.width)  # raises naming height/width when too small
-        for name in ("max_steps", "frame_skip", "max_words"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
+        check_at_least(self, ("max_steps", "frame_skip", "max_words"), 1)
         if self.render != "auto":
             allowed = [f"{w}x{h}" for w, h in RESOLUTIONS_16_9]
             check_choice("render", self.render, ["auto", *allowed])
@@ -500,17 +507,8 @@ class TrainConfig:
         self.ppo.validate()
         check_choice("answer_supervision", self.answer_supervision, ("eqa_steps", "answer_steps"))
         check_choice("device", self.device.split(":")[0], ("cpu", "cuda"))
-        for name in (
-            "frames",
-            "num_envs",
-            "num_steps",
-            "eval_episodes",
-            "final_eval_episodes",
-            "checkpoint_every",
-            "log_every",
-        ):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name}={getattr(self, name)!r} must be a positive integer")
+        positive = ("frames", "num_envs", "num_steps", "eval_episodes", "final_eval_episodes", "checkpoint_every")
+        check_at_least(self, (*positive, "log_every"), 1)
         if self.frames < self.frames_per_update:  # it used to be rounded up to one update, silently
             raise ValueError(
                 f"frames={self.frames!r} is less than one update (num_envs × num_steps = {self.frames_per_update}); "
@@ -545,16 +543,8 @@ class TrainConfig:
             )
         if control != "none" and not self.aux:
             raise ValueError(f"model_options.control={control!r} reads the aux labels: it needs aux=True")
-        for name in (
-            "eval_every",
-            "diagnose_episodes",
-            "threads",
-            "acting_threads",
-            "max_engine_restarts",
-            "engine_restart_window",
-        ):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name}={getattr(self, name)!r} must be >= 0")
+        counts = ("eval_every", "diagnose_episodes", "threads", "acting_threads", "max_engine_restarts")
+        check_at_least(self, (*counts, "engine_restart_window"), 0)
         return self
 
     @property
