@@ -274,6 +274,8 @@ class PPOConfig:
 
 SENTENCE_READOUTS: tuple[str, ...] = ("last", "mean")
 """Values of `ModelConfig.sentence_readout`: the GRU's last output (the paper's reading) or the mean of its outputs."""
+SENTENCE_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
+"""Values of `ModelConfig.sentence_activation`: the paper's ReLU on x_sent's Linear, or softplus (never 0)."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
@@ -321,6 +323,12 @@ class ModelConfig:
     'which') in x_sent. Measured in docs/fidelity.md (issue 34): with 'last', a test question ending in a word no
     training question ends in gets the GA2 gate of the instructions ending in it ('what color is the torch'
     answered 'torch')."""
+    sentence_activation: str = "relu"
+    """The activation on x_sent's Linear (§3: "the linear layer with ReLU activations"; "ReLU activations for
+    sentence embedding ensure aggregation"): 'relu', the paper's, the default; or, opt-in, 'softplus', as
+    non-negative but never 0, so that no gate channel can die. Measured in docs/fidelity.md (issue 34): under ReLU a
+    channel whose pre-activation is negative for every question gets no gradient from the answer loss and its word
+    can never be answered (seed 0: 'blue' with the last readout; 'torch', 'skullkey' and 'blue' with the mean)."""
     x_image: str = "sigmoid"
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
@@ -352,6 +360,7 @@ class ModelConfig:
                 f"spatial_attention={self.spatial_attention}); allowed there: None or a number > 0"
             )
         check_choice("ModelConfig.sentence_readout", self.sentence_readout, SENTENCE_READOUTS)
+        check_choice("ModelConfig.sentence_activation", self.sentence_activation, SENTENCE_ACTIVATIONS)
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
         if self.control not in CONTROLS:
@@ -559,7 +568,7 @@ class TrainConfig:
 
     def spelled_name(self) -> str:
         """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the opt-in
-        model options (state temperature, sentence readout), precision, seed, profile."""
+        model options (state temperature, sentence readout and activation), precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
             parts.append(f"{self.env.tasks}only")
@@ -569,6 +578,8 @@ class TrainConfig:
             parts.append(f"xs{t:g}")
         if (readout := self.model_options.get("sentence_readout", "last")) != "last":  # opt-in: x_sent's readout
             parts.append(f"sent{readout}")
+        if (activation := self.model_options.get("sentence_activation", "relu")) != "relu":  # opt-in: x_sent's
+            parts.append(f"xsent{activation}")
         if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it
             parts.append(self.precision)
         return "-".join([*parts, f"s{self.seed}", self.profile])

@@ -179,6 +179,14 @@ PAPER: tuple[PaperValue, ...] = (
         lambda c: c["model.name"] != "image_only",
     ),
     PaperValue(
+        "x_sent activation",
+        ("model.sentence_activation",),
+        lambda c: ("relu",),
+        "§3: 'the linear layer with ReLU activations'",
+        lambda v: {"relu": "ReLU", "softplus": "softplus (never 0)"}.get(v[0], v[0]),
+        lambda c: c["model.name"] != "image_only",
+    ),
+    PaperValue(
         "diagnostic control",
         ("model.control",),
         lambda c: ("none",),

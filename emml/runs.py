@@ -44,7 +44,8 @@ EVAL_SEED = 10_000
 RUN_FILES = (CHECKPOINT, METRICS, RESULTS)
 """Files any of which makes a folder a run dir."""
 NAMED = ("table", "model", "aux", "seed", "profile", "precision", "env.difficulty", "env.tasks", "env.shaping",
-         "model_options.state_temperature", "model_options.sentence_readout")  # fmt: skip
+         "model_options.state_temperature", "model_options.sentence_readout",
+         "model_options.sentence_activation")  # fmt: skip
 """Identifying fields the run dir's path spells out (its table folder, `TrainConfig.spelled_name`): never repeated by
 `swept`."""
 RESOLVED = ("env.vocabulary", "env.aux_words", "env.aux_labels")

@@ -50,6 +50,15 @@ def test_the_mean_sentence_readout_is_named_where_a_run_uses_it():
     )
 
 
+def test_the_softplus_sentence_activation_is_named_where_a_run_uses_it():
+    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
+    saved["model_options"] = {"sentence_activation": "softplus"}
+    assert (
+        "x_sent activation softplus (never 0) (paper ReLU, §3: 'the linear layer with ReLU activations')"
+        in fidelity.deviations(fidelity.resolve(saved))
+    )
+
+
 def test_our_choices_follow_the_config():
     saved = profile_config("paper", model="dual_attention", aux=True).to_dict()
     choices = fidelity.choices(fidelity.resolve(saved))

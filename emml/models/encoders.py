@@ -122,7 +122,13 @@ class TextEncoder(nn.Module):
     """
 
     def __init__(
-        self, vocab_size: int, embed_dim: int = 32, gru: int = 32, sentence: bool = True, readout: str = "last"
+        self,
+        vocab_size: int,
+        embed_dim: int = 32,
+        gru: int = 32,
+        sentence: bool = True,
+        readout: str = "last",
+        activation: str = "relu",
     ) -> None:
         super().__init__()
         self.vocab_size = vocab_size
@@ -130,6 +136,8 @@ class TextEncoder(nn.Module):
         self.readout = readout
         """Which GRU output the Linear reads: 'last' (after the last word) or 'mean' (over the words);
         `ModelConfig.sentence_readout`."""
+        self.activation = torch.relu if activation == "relu" else F.softplus
+        """x_sent's activation on the Linear: ReLU (§3) or softplus; `ModelConfig.sentence_activation`."""
         self.unrolled = False
         """Run the GRU as its equations in linear ops (`gru_scan`) rather than the fused `nn.GRU` kernel: what
         `torch.func.vmap` can batch over stacked runs (emml/rl/packed.py). Same values within float tolerance."""
@@ -146,19 +154,20 @@ class TextEncoder(nn.Module):
 
     def sentence_embedding(self, tokens: Tensor) -> Tensor:
         """x_sent = ReLU(Linear(GRU(Embedding(tokens))[last non-pad step])), or with readout 'mean' the mean of the
-        GRU's outputs over the non-pad steps in place of the last one (0 for an all-pad row either way)."""
+        GRU's outputs over the non-pad steps in place of the last one (h = 0 for an all-pad row either way); softplus
+        in place of ReLU with activation 'softplus'."""
         n, length = tokens.shape
         embedded = self.embedding(tokens)
         out = gru_scan(self.gru, embedded) if self.unrolled else self.gru(embedded)[0]  # (N, L, gru)
         if self.readout == "mean":
             words = (tokens != 0).unsqueeze(-1).to(out.dtype)  # right-padded: pad steps read nothing
-            return torch.relu(self.linear((out * words).sum(1) / words.sum(1).clamp(min=1)))
+            return self.activation(self.linear((out * words).sum(1) / words.sum(1).clamp(min=1)))
         positions = torch.arange(1, length + 1, device=tokens.device)
         last = ((tokens != 0).long() * positions).amax(dim=1)  # 1-based; 0 = all pad
         index = (last - 1).clamp(min=0).view(n, 1, 1).expand(n, 1, out.shape[-1])
         final = out.gather(1, index).squeeze(1)
         final = final * (last > 0).unsqueeze(1).to(final.dtype)  # all-pad rows -> h = 0
-        return torch.relu(self.linear(final))
+        return self.activation(self.linear(final))
 
     def forward(self, tokens: Tensor) -> tuple[Tensor, Tensor | None]:
         """int64 tokens (N, L) -> (x_BoW (N, V), x_sent (N, V) or None)."""

@@ -185,7 +185,12 @@ class EmmlModel(nn.Module):
         self.image_encoder = ImageEncoder(vocab_size)
         self.fusion = build_fusion(cfg, vocab_size, *self.grid)
         self.text_encoder = TextEncoder(
-            vocab_size, cfg.embed_dim, cfg.gru_text, sentence=self.fusion.uses_sent, readout=cfg.sentence_readout
+            vocab_size,
+            cfg.embed_dim,
+            cfg.gru_text,
+            sentence=self.fusion.uses_sent,
+            readout=cfg.sentence_readout,
+            activation=cfg.sentence_activation,
         )
         self.policy = PolicyModule(
             self.fusion.state_dim,

@@ -159,3 +159,21 @@ def test_the_mean_readout_reads_every_word_and_the_default_reads_the_last():
     assert not torch.allclose(mean(padded)[1][0], last(padded)[1][0])  # a 3-word row: the two readouts differ
     mean.unrolled = True  # the packed trainer's GRU (vmap): the same readout
     torch.testing.assert_close(mean(padded)[1], expected, rtol=1e-5, atol=1e-6)
+
+
+def test_the_softplus_activation_keeps_every_channel_alive_and_the_default_is_relu():
+    """`ModelConfig.sentence_activation` (issue 34): 'softplus' in place of the paper's ReLU on x_sent's Linear, so
+    that a channel whose pre-activation is negative for every sentence still passes a gradient."""
+    torch.manual_seed(0)
+    relu = TextEncoder(vocab_size=6, embed_dim=8, gru=8)
+    soft = TextEncoder(vocab_size=6, embed_dim=8, gru=8, activation="softplus")
+    soft.load_state_dict(relu.state_dict())
+    with torch.no_grad():  # one dead channel: its pre-activation is negative for every sentence
+        relu.linear.bias[3] = soft.linear.bias[3] = -100.0
+    tokens = torch.tensor([[2, 4, 6, 0], [3, 1, 0, 0]])
+    h = relu.gru(relu.embedding(tokens))[0][torch.arange(2), torch.tensor([2, 1])]
+    torch.testing.assert_close(relu(tokens)[1], torch.relu(relu.linear(h)))
+    torch.testing.assert_close(soft(tokens)[1], torch.nn.functional.softplus(soft.linear(h)))
+    for enc in (relu, soft):
+        enc(tokens)[1][:, 3].sum().backward()
+    assert relu.linear.bias.grad[3] == 0 and soft.linear.bias.grad[3] > 0  # only softplus can bring it back

@@ -281,6 +281,7 @@ def test_unknown_model_name_lists_known_names():
         ({"control": "oracle"}, "control"),
         ({"x_image": "tanh"}, "x_image"),
         ({"sentence_readout": "first"}, "sentence_readout"),
+        ({"sentence_activation": "tanh"}, "sentence_activation"),
         ({"state_scale": 1}, "state_scale"),
         ({"state_temperature": 0}, "state_temperature"),
         ({"state_temperature": "sharp"}, "state_temperature"),
