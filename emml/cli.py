@@ -1010,6 +1010,7 @@ def _status_text(plan, rows) -> str:
         return "?" if seconds is None else f"{seconds / 3600:.1f} h"
 
     lines = [f"{plan.name}: {plan.title}"]
+    width = max((len(r.run_name) for r in rows), default=0)
     for step in plan.steps:
         mine = [r for r in rows if r.step == step.name]
         done = sum(r.state == "done" for r in mine)
@@ -1017,7 +1018,7 @@ def _status_text(plan, rows) -> str:
         for r in mine:
             who = f" pid {r.holder.get('pid')} on {r.holder.get('host')}" if r.holder else ""
             left = "" if r.state == "done" else f", ~{hours(r.seconds_left)} left"
-            lines.append(f"  {r.state:<11} {r.run_name:<45} {r.frames:>10,}/{r.target:,} frames{left}{who}")
+            lines.append(f"  {r.state:<11} {r.run_name:<{width}} {r.frames:>10,}/{r.target:,} frames{left}{who}")
     todo = [r.seconds_left for r in rows if r.state != "done"]
     unknown = sum(s is None for s in todo)
     total = sum(s for s in todo if s is not None)
