@@ -674,6 +674,7 @@ def probe_eqa_cmd(
     init: str = typer.Option(
         "checkpoint", help="Where the retrained GRU and Linear start: checkpoint (its weights) | fresh (a new draw)."
     ),
+    activation: str = typer.Option("relu", help="x_sent's activation on the retrained Linear: relu | softplus."),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Would another question encoder answer the EQA test questions (issue 34)? On the first frames of EQA
@@ -685,7 +686,9 @@ def probe_eqa_cmd(
 
     chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
     try:
-        options = ProbeOptions(episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words, init=init).validate()
+        options = ProbeOptions(
+            episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words, init=init, activation=activation
+        ).validate()
     except ValueError as e:
         _fail(str(e))
     _check_checkpoint(checkpoint)

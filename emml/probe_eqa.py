@@ -42,7 +42,7 @@ from contextlib import contextmanager
 import torch
 from torch import nn
 
-from emml.config import SENTENCE_READOUTS, check_choice
+from emml.config import SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
 from emml.diagnose_eqa import gate_missing
 from emml.envs.vector import make_env
 from emml.evaluate import eval_settings
@@ -69,6 +69,9 @@ EQ1_WORDS = ("all", "content")
 """Values of ``eq1_words``: Eq. 1 sums the channels of every word of the question, or of its content words only."""
 CONTENT_GROUPS = ("colors", "objects", "sizes", "superlatives")
 """The dataset's word groups whose words are content words (the others are function words)."""
+CLOSED_BELOW = 0.01
+"""A gate channel below this for every question is closed: its word adds nothing to Eq. 5's logits (under ReLU it
+is exactly 0 and gets no gradient: a dead channel)."""
 IMAGE_BATCH = 256
 """Frames per conv forward when x_I is computed."""
 
@@ -96,11 +99,15 @@ class ProbeOptions:
     """Words Eq. 1 sums the channels of: one of EQ1_WORDS."""
     init: str = "checkpoint"
     """Where the retrained GRU and Linear start: one of INITS."""
+    activation: str = "relu"
+    """x_sent's activation on the retrained Linear (`ModelConfig.sentence_activation` values: relu, the paper's, or
+    softplus)."""
 
     def validate(self) -> ProbeOptions:
         """These options with the readouts' repeats dropped; ValueError naming the first bad option."""
         check_choice("eq1_words", self.eq1_words, EQ1_WORDS)
         check_choice("init", self.init, INITS)
+        check_choice("activation", self.activation, SENTENCE_ACTIVATIONS)
         for name in ("episodes", "seeds", "steps", "batch"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -217,15 +224,21 @@ def accuracy(model, frames: dict, x_sent: torch.Tensor) -> tuple[float, dict[str
     return float(ok.mean()), per_question
 
 
-def fresh_encoder(model, readout: str, seed: int, init: str = "checkpoint") -> TextEncoder:
-    """A new x_sent encoder of the checkpoint's sizes reading ``readout``: its GRU and Linear the checkpoint's
+def fresh_encoder(model, readout: str, seed: int, init: str = "checkpoint", activation: str = "relu") -> TextEncoder:
+    """A new x_sent encoder of the checkpoint's sizes reading ``readout`` under ``activation``: its GRU and Linear the
+    checkpoint's
     (``init='checkpoint'``) or drawn under ``seed`` ('fresh'; the global RNG is restored), its embedding table the
     checkpoint's, copied and frozen."""
     text = model.text_encoder
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         encoder = TextEncoder(
-            text.vocab_size, text.embedding.embedding_dim, text.gru.hidden_size, sentence=True, readout=readout
+            text.vocab_size,
+            text.embedding.embedding_dim,
+            text.gru.hidden_size,
+            sentence=True,
+            readout=readout,
+            activation=activation,
         )
     if init == "checkpoint":
         encoder.load_state_dict(text.state_dict())
@@ -243,10 +256,11 @@ def train_encoder(
     batch: int = BATCH,
     lr: float = LR,
     init: str = "checkpoint",
+    activation: str = "relu",
 ) -> TextEncoder:
     """A `fresh_encoder` trained on Eq. 5's cross-entropy over ``frames`` (the training questions'), the rest of
     the model frozen; seed ``seed`` draws its initial weights and its minibatches."""
-    encoder = fresh_encoder(model, readout, seed, init)
+    encoder = fresh_encoder(model, readout, seed, init, activation)
     optimizer = torch.optim.Adam([p for p in encoder.parameters() if p.requires_grad], lr=lr)
     draw = torch.Generator().manual_seed(seed)
     n = len(frames["answer"])
@@ -266,11 +280,18 @@ def train_encoder(
 
 
 def _scores(model, data: dict, gate) -> dict:
-    """{'train': acc, 'test': acc, 'per_question': {split: {question: acc}}} under the gate ``gate(tokens)``."""
+    """{'train': acc, 'test': acc, 'per_question': {split: {question: acc}}, 'closed': [answer channel, ...]} under
+    the gate ``gate(tokens)``; 'closed': the channels of the questions' answers whose gate is below CLOSED_BELOW for
+    every question of both splits."""
     out = {"per_question": {}}
     with torch.no_grad():
+        peak = None
         for split in SPLITS:
-            out[split], out["per_question"][split] = accuracy(model, data[split], gate(data[split]["tokens"]))
+            x_sent = gate(data[split]["tokens"])
+            out[split], out["per_question"][split] = accuracy(model, data[split], x_sent)
+            peak = x_sent.amax(0) if peak is None else torch.maximum(peak, x_sent.amax(0))
+        answers = torch.cat([data[split]["answer"] for split in SPLITS]).unique()
+        out["closed"] = [int(a) for a in answers if peak[a] < CLOSED_BELOW]
     return out
 
 
@@ -310,7 +331,7 @@ def probe_eqa(model, cfg, options: ProbeOptions = ProbeOptions()) -> dict:
         for readout in o.readouts:
             runs = []
             for s in range(o.seeds):
-                encoder = train_encoder(model, data["train"], readout, s, o.steps, o.batch, o.lr, o.init)
+                encoder = train_encoder(model, data["train"], readout, s, o.steps, o.batch, o.lr, o.init, o.activation)
                 runs.append({"seed": s, **_scores(model, data, lambda tokens, e=encoder: e(tokens)[1])})
             result["readouts"][readout] = {"runs": runs, "mean": _mean(runs, questions)}
     return result
@@ -333,14 +354,18 @@ def probe_table(result: dict) -> str:
         f"train, {result['frames']['test']} test); x_sent's GRU + Linear retrained on the training questions "
         f"({result['steps']} Adam steps, batch {result['batch']}, lr {result['lr']:g}), embedding and x_I frozen; "
         f"Eq. 1 reads {'every word' if result['eq1_words'] == 'all' else 'the content words'} of the question; "
-        f"GRU and Linear start from {'the checkpoint' if result['init'] == 'checkpoint' else 'a fresh draw'}",
+        f"GRU and Linear start from {'the checkpoint' if result['init'] == 'checkpoint' else 'a fresh draw'}; "
+        f"x_sent = {result.get('activation', 'relu')}(Linear)",
         "",
-        f"{'x_sent encoder':<24}  {'train':>5}  {'test':>5}  per seed (train/test)",
+        f"{'x_sent encoder':<24}  {'train':>5}  {'test':>5}  per seed (train/test, closed answer channels)",
     ]
     own = result["checkpoint_encoder"]
-    lines.append(f"{'checkpoint (' + repr(result['readout']) + ')':<24}  {own['train']:5.2f}  {own['test']:5.2f}")
+    lines.append(
+        f"{'checkpoint (' + repr(result['readout']) + ')':<24}  {own['train']:5.2f}  {own['test']:5.2f}  "
+        f"closed {len(own.get('closed', []))}"
+    )
     for readout, r in result["readouts"].items():
-        seeds = "  ".join(f"{x['train']:.2f}/{x['test']:.2f}" for x in r["runs"])
+        seeds = "  ".join(f"{x['train']:.2f}/{x['test']:.2f} ({len(x.get('closed', []))})" for x in r["runs"])
         lines.append(
             f"{'retrained ' + repr(readout):<24}  {r['mean']['train']:5.2f}  {r['mean']['test']:5.2f}  {seeds}"
         )

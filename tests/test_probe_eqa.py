@@ -81,6 +81,8 @@ def test_the_result_has_its_documented_structure(checkpoint, no_leftovers):
     json.dumps(result)  # --json prints it whole
     text = probe.probe_table(result)
     assert "checkpoint ('last')" in text and "retrained 'mean'" in text and "what color is the torch" in text
+    assert result["activation"] == "relu" and "x_sent = relu(Linear)" in text
+    assert all(isinstance(c, int) for r in scores[:1] for c in r["closed"])
 
 
 def test_each_frame_is_its_episodes_first_with_its_own_seed(frames, no_leftovers):
@@ -136,6 +138,23 @@ def test_the_readouts_give_different_encoders(frames):
         assert not torch.allclose(last(tokens)[1], mean(tokens)[1])
 
 
+def test_the_activation_reaches_the_retrained_encoder_and_closed_channels_are_counted(frames):
+    """`ProbeOptions.activation` (issue 34): softplus in place of ReLU on the retrained Linear; `closed` lists the
+    answer channels whose gate stays below CLOSED_BELOW for every question (under ReLU: dead)."""
+    model, _, data = frames
+    soft = probe.train_encoder(model, data["train"], "last", seed=0, steps=5, batch=8, activation="softplus")
+    assert soft.activation is torch.nn.functional.softplus
+    answers = sorted(int(a) for a in torch.cat([data[s]["answer"] for s in ("train", "test")]).unique())
+    shut = probe._scores(model, data, lambda tokens: torch.zeros(len(tokens), model.vocab_size))
+    assert shut["closed"] == answers  # a gate closed everywhere closes every answer channel
+    opened = torch.zeros(model.vocab_size)
+    opened[answers[0]] = 1.0
+    some = probe._scores(model, data, lambda tokens: opened.expand(len(tokens), -1))
+    assert some["closed"] == answers[1:]
+    with pytest.raises(ValueError, match="activation='tanh' is not allowed"):
+        probe.ProbeOptions(activation="tanh").validate()
+
+
 @pytest.mark.parametrize(
     "name, options, why",
     [
@@ -173,6 +192,7 @@ def _no_engine(cfg):
         (["--episodes", "0"], "episodes=0"),
         (["--seeds", "0"], "seeds=0"),
         (["--lr", "0"], "lr=0.0"),
+        (["--activation", "tanh"], "activation='tanh'"),
     ],
 )
 def test_the_cli_names_a_bad_option_before_loading(args, named, tmp_path):
