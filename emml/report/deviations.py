@@ -30,7 +30,8 @@ class ShownRun:
     """SAVED, NO_CONFIG, REFERENCE or DECLARED."""
     skip: frozenset = field(default_factory=frozenset)
     """Fields the run's table row sets on purpose (its overrides, e.g. 'env.shaping' for 'w/o Reward Shaping'): the
-    experiment, not a deviation."""
+    experiment, not a deviation. Only a paper table's rows (reproduce/table*.toml) skip theirs: an experiment's rows
+    (reproduce/experiments/) set what the paper does not, and their reports name it."""
 
 
 def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None, declared: bool = False) -> ShownRun:
@@ -47,7 +48,11 @@ def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None,
     else:
         source = DECLARED if declared else NO_CONFIG if run_dir.exists() else REFERENCE
         saved = spec.to_config(profile).to_dict()
-    skip = frozenset(k.replace("model_options.", "model.") for k in spec.overrides)
+    from emml.registry import list_tables
+
+    # a paper table's row sets its overrides on purpose (Table 3's ablations); an experiment's rows are not the paper's
+    paper_row = spec.table in list_tables()
+    skip = frozenset(k.replace("model_options.", "model.") for k in spec.overrides) if paper_row else frozenset()
     attrs = {"row": spec.row, "difficulty": spec.difficulty, "aux": spec.aux}
     config = fidelity.resolve(saved)
     if row is not None and row.get("eval_episodes") is not None:

@@ -242,3 +242,7 @@ def test_an_experiments_caption_names_its_file_not_a_table_of_the_paper(tmp_path
         "eqa_readout-quick.md",
         "eqa_readout-quick.tex",
     ]  # under its name in the reports folder, given its file's path
+    md = (tmp_path / "reports" / "eqa_readout-quick.md").read_text()  # its rows' settings are not the paper's:
+    assert "- x_sent read from the mean of the GRU's outputs (paper the GRU's last output" in md  # named
+    table3 = (tmp_path / "reports" / "table3-quick.md").read_text()  # a paper table's ablations are its experiment
+    assert "reward shaping" not in table3.split("**Where the paper is silent**")[0].lower()
