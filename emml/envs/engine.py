@@ -358,8 +358,34 @@ def private_mp_tempdir() -> Path:
     return mine
 
 
+_deferring = 0
+"""How many `stop_after` blocks the main thread is inside: while > 0, SIGTERM/SIGHUP wait for the outermost to end."""
+_pending: int | None = None
+"""The signal that arrived inside a `stop_after` block, raised as SystemExit when it ends."""
+
+
 def _raise_exit(signum, frame):
+    global _pending
+    if _deferring:
+        _pending = signum
+        return
     raise SystemExit(128 + signum)
+
+
+@contextlib.contextmanager
+def stop_after():
+    """A block a SIGTERM/SIGHUP does not cut short: the stop (SystemExit, as `install_signal_handlers` raises it)
+    comes when the block ends. The trainer's PPO update runs in one, so that a stopped run keeps it whole
+    (emml/rl/trainer.py, `checkpoint_on_stop`) instead of losing every update since its last checkpoint."""
+    global _deferring, _pending
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+        if not _deferring and _pending is not None:
+            signum, _pending = _pending, None
+            raise SystemExit(128 + signum)
 
 
 def install_signal_handlers() -> None:

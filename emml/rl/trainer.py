@@ -22,6 +22,7 @@ from emml import alloc
 from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.config import TrainConfig
 from emml.diagnose import SCALARS, diagnose, summary_line
+from emml.envs.engine import stop_after
 from emml.envs.labels import channel_mask
 from emml.evaluate import evaluate
 from emml.models import build_model
@@ -304,13 +305,14 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                 t_learn = time.perf_counter()
                 last_value = sampler.last_value(model)
                 buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
-                for t in trainers:
-                    t._consistent = None  # the update changes the model and optimizer step by step
-                stats = learner.update(buffer, mask)
-            update += 1
-            frames += B * T
-            for t in trainers:
-                t._consistent = (update, frames)
+                with stop_after():  # a SIGTERM here stops the run after this update, which it then keeps
+                    for t in trainers:
+                        t._consistent = None  # the update changes the model and optimizer step by step
+                    stats = learner.update(buffer, mask)
+                    update += 1
+                    frames += B * T
+                    for t in trainers:
+                        t._consistent = (update, frames)
             now = time.perf_counter()
             seconds = sampler.timing | {"learn": now - t_learn}
             for part, value in seconds.items():

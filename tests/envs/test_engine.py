@@ -143,3 +143,32 @@ def test_the_launcher_records_the_engine_before_it_runs(monkeypatch, no_leftover
     finally:
         env.close()
     assert not record.exists()  # ended: unrecorded as before
+
+
+def test_a_sigterm_inside_stop_after_stops_when_the_block_ends():
+    """The trainer's PPO update runs in `stop_after`: a SIGTERM there lets it finish (so a stopped run keeps it),
+    then stops as `install_signal_handlers` does; outside a block it stops at once."""
+    import signal
+
+    from emml.envs.engine import install_signal_handlers, stop_after
+
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    install_signal_handlers()
+    try:
+        finished = []
+        with pytest.raises(SystemExit) as stop:
+            with stop_after():
+                with stop_after():  # nested: the outermost block decides
+                    os.kill(os.getpid(), signal.SIGTERM)
+                    finished.append("inner")
+                finished.append("outer")
+        assert finished == ["inner", "outer"] and stop.value.code == 128 + signal.SIGTERM
+        with stop_after():
+            finished.append("no signal")  # a block with no signal ends as usual
+        with pytest.raises(SystemExit):
+            os.kill(os.getpid(), signal.SIGTERM)
+            finished.append("never")
+        assert finished[-1] == "no signal"
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
