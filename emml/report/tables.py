@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from emml.env_kinds import ENV_KINDS, env_label
-from emml.registry import REPRODUCE_DIR, Table, load_table, table_path
+from emml.registry import REPRODUCE_DIR, Table, list_tables, load_table
 from emml.results import read_results
 from emml.tracking import project_path, project_root
 
@@ -165,7 +165,7 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
     """What the table shows, under which profile, frames and seeds, and how it was made."""
     from emml.profiles import profile_seeds
 
-    paper = table.path.resolve() == table_path(table.name).resolve()  # one of reproduce/table*.toml
+    paper = table.name in list_tables()  # one of reproduce/table*.toml (as emml/report/deviations.py decides)
     if paper:
         parts = [f"Ours vs the paper's Table {table.name.removeprefix('table')} ({table.paper_label}): {table.title}."]
     else:  # an experiment beyond the paper's tables, or a table of one's own: run and reported by its file
