@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
 import typer
@@ -919,8 +920,10 @@ def run_table(
     if report.stopped:
         from emml.plugins import configured
 
-        plugins = [f"--plugin {p}" for p in configured()]  # a model of one's own needs its plugin to resume
-        again = " ".join(["emml", *plugins, "run", table, "--profile", profile, *(f"--only {o}" for o in only)])
+        plugins = [arg for p in configured() for arg in ("--plugin", p)]  # a model of one's own needs its plugin
+        only_args = [arg for o in only for arg in ("--only", o)]
+        # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
+        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *only_args])
         _echo(data, as_json, _stopped_line(report, again))
         raise typer.Exit(130)
     _echo(

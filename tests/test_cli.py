@@ -175,3 +175,21 @@ def test_train_on_a_full_disk_fails_in_one_line_and_its_mlflow_run_ends_failed(t
     assert not [p for p in folder.iterdir() if p.name.endswith(".tmp") or p.name == CHECKPOINT]
     (run,) = mlflow.search_runs(experiment_names=["test"], output_format="list")
     assert run.info.status == "FAILED"
+
+
+def test_a_stopped_run_prints_a_resume_command_the_shell_reads_back(monkeypatch):
+    """The resume line of a stopped `emml run` quotes each --only value: a row label has spaces."""
+    import shlex
+
+    import emml.launch
+    from emml.launch import LaunchReport
+
+    def stopped(table, profile, **kwargs):
+        return LaunchReport(table=table, profile=profile, backend="local", total=1, stopped="signal SIGTERM")
+
+    monkeypatch.setattr(emml.launch, "run_table", stopped)
+    result = runner.invoke(app, ["run", "table3", "--only", "row=w/o Reward Shaping", "--only", "seed=0"])
+    assert result.exit_code == 130, result.output
+    again = result.output.split("resume with: ", 1)[1].strip()
+    argv = ["emml", "run", "table3", "--profile", "quick", "--only", "row=w/o Reward Shaping", "--only", "seed=0"]
+    assert shlex.split(again) == argv
