@@ -237,6 +237,23 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
     return out
 
 
+def wall_seconds(rows: list[RunStatus], at_once: int) -> float:
+    """Estimated wall-clock seconds to finish the campaign with `at_once` runs side by side: each step is a launch
+    (emml.launch.run_table) whose queue fills the free slot in the step's order, and the next step starts when the
+    step's last run ends. Runs with no estimate (``seconds_left`` None) count 0."""
+    steps: dict[str, list[float]] = {}
+    for r in rows:
+        if r.state != "done":
+            steps.setdefault(r.step, []).append(r.seconds_left or 0.0)
+    total = 0.0
+    for seconds in steps.values():
+        slots = [0.0] * max(1, at_once)
+        for s in seconds:
+            slots[slots.index(min(slots))] += s
+        total += max(slots)
+    return total
+
+
 def _frames_logged(metrics: Path) -> int:
     """The last frame a run's metrics mirror holds (0 without one): read from its tail, cheaply."""
     if not metrics.exists():

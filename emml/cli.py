@@ -973,7 +973,7 @@ def campaign(
         _fail(str(e))
     if show_status:
         rows = status(plan, run_root, results_root)
-        _echo([asdict(r) for r in rows], as_json, _status_text(plan, rows))
+        _echo([asdict(r) for r in rows], as_json, _status_text(plan, rows, _runs_at_once(jobs, device), device))
         return
     if pin:  # re-exec from a worktree of HEAD, writing into this checkout's runs, results and MLflow store
         try:
@@ -1009,8 +1009,25 @@ def campaign(
         raise typer.Exit(1)
 
 
-def _status_text(plan, rows) -> str:
-    """--status as text: one line per run, by step, and the estimated time left."""
+def _runs_at_once(jobs: int, device: str) -> int:
+    """`jobs`, or when 0 what a launch on `device` would take (emml.launch.default_jobs); a device that is not one,
+    or (for the default) that this machine lacks, fails by name."""
+    from emml.config import check_choice
+    from emml.launch import default_jobs
+    from emml.rl.hardware import check_device
+
+    try:
+        check_choice("device", device.split(":")[0], ("cpu", "cuda"))
+        if not jobs:
+            check_device(device)
+    except ValueError as e:
+        _fail(f"{e} (or give --jobs N to estimate for N runs at a time)")
+    return jobs or default_jobs(device)
+
+
+def _status_text(plan, rows, at_once: int = 1, device: str = "cpu") -> str:
+    """--status as text: one line per run, by step, and the estimated time left with `at_once` runs side by side."""
+    from emml.campaign import wall_seconds
 
     def hours(seconds: float | None) -> str:
         return "?" if seconds is None else f"{seconds / 3600:.1f} h"
@@ -1028,9 +1045,16 @@ def _status_text(plan, rows) -> str:
     todo = [r.seconds_left for r in rows if r.state != "done"]
     unknown = sum(s is None for s in todo)
     total = sum(s for s in todo if s is not None)
+    measured = "training frames/s and evaluation seconds measured from this machine's runs of each profile"
+    if at_once == 1:
+        left = f"~{hours(total)} on this machine (one at a time; {measured})"
+    else:  # each step a launch of `at_once` slots; a step of one run holds the machine alone (emml.campaign)
+        left = (
+            f"~{hours(total)} of run time, ~{hours(wall_seconds(rows, at_once))} on this machine with {at_once} "
+            f"runs at a time on {device}, step by step (--jobs; {measured}, under the packing they trained at)"
+        )
     lines.append(
-        f"left: {len(todo)} runs, ~{hours(total)} on this machine (one at a time; training frames/s and evaluation "
-        "seconds measured from this machine's runs of each profile)"
+        f"left: {len(todo)} runs, {left}"
         + (f"; {unknown} runs of a profile not yet measured here are not counted" if unknown else "")
     )
     return "\n".join(lines)

@@ -200,3 +200,30 @@ def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_
     assert args[args.index("--run-root") + 1] == str(project_path("runs"))  # the checkout's, not the tree's
     assert args[args.index("--results-root") + 1] == str(project_path("results"))
     assert "--no-pin" in args and seen["env"]["MLFLOW_TRACKING_URI"]
+
+
+def test_wall_time_fills_each_steps_slots_in_order_and_steps_follow_each_other():
+    from emml.campaign import RunStatus, wall_seconds
+
+    def run(step, seconds, state="to do"):
+        return RunStatus(step, "table2", "quick", f"{step}-{seconds}", state, 0, 100, None, seconds)
+
+    rows = [run("a", 10.0), run("a", 20.0), run("a", 5.0), run("a", 99.0, "done"), run("b", 7.0), run("b", None)]
+    assert wall_seconds(rows, 1) == 10 + 20 + 5 + 7  # one at a time: the sum; done and unmeasured runs count 0
+    assert wall_seconds(rows, 2) == 20 + 7  # a: 10 then 5 beside 20; b: alone, after a's last run
+    assert wall_seconds(rows, 8) == 20 + 7
+
+
+def test_cli_status_says_how_many_runs_at_a_time_and_refuses_a_device_by_name(tracking):
+    from typer.testing import CliRunner
+
+    from emml.cli import app
+
+    runner = CliRunner()
+    roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
+    result = runner.invoke(app, ["campaign", "reference", "--status", "--jobs", "1", *roots])
+    assert result.exit_code == 0 and "(one at a time;" in result.output, result.output
+    result = runner.invoke(app, ["campaign", "reference", "--status", "--jobs", "8", "--device", "cuda", *roots])
+    assert result.exit_code == 0 and "with 8 runs at a time on cuda" in result.output, result.output
+    result = runner.invoke(app, ["campaign", "reference", "--status", "--device", "tpu", *roots])
+    assert result.exit_code == 2 and "device='tpu' is not allowed" in result.output, result.output
