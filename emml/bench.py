@@ -152,10 +152,16 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     from emml.tasks.language import Vocabulary, load_dataset
 
     env, device = cfg.env, torch.device(cfg.device)
-    vocab = Vocabulary.from_dataset(load_dataset(env.dataset))
+    dataset = load_dataset(env.dataset)
+    vocab = Vocabulary.from_dataset(dataset)
     V, (h, w), T = len(vocab), conv_output_size(env.height, env.width), cfg.num_steps
     B = cfg.num_envs * stack
-    models = [build_model(cfg.model, V, env.height, env.width, env.max_steps) for _ in range(stack)]
+    models = [  # the run's model: its options (`--set model_options.…`) included
+        build_model(cfg.model, V, env.height, env.width, env.max_steps, **cfg.model_options).read_words(
+            vocab.words, dataset.content_words()
+        )
+        for _ in range(stack)
+    ]
     model = (StackedModels(models) if stack > 1 else models[0]).to(device)
     if wants_compile(cfg.compile, device) and stack == 1:
         compile_model(model)

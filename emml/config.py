@@ -276,6 +276,9 @@ SENTENCE_READOUTS: tuple[str, ...] = ("last", "mean")
 """Values of `ModelConfig.sentence_readout`: the GRU's last output (the paper's reading) or the mean of its outputs."""
 SENTENCE_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
 """Values of `ModelConfig.sentence_activation`: the paper's ReLU on x_sent's Linear, or softplus (never 0)."""
+EQ1_WORDS: tuple[str, ...] = ("all", "content")
+"""Values of `ModelConfig.eq1_words`: Eq. 1 gates x_I with every word of the text (the paper's x_BoW), or with its
+content words only."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
@@ -329,6 +332,15 @@ class ModelConfig:
     non-negative but never 0, so that no gate channel can die. Measured in docs/fidelity.md (issue 34): under ReLU a
     channel whose pre-activation is negative for every question gets no gradient from the answer loss and its word
     can never be answered (seed 0: 'blue' with the last readout; 'torch', 'skullkey' and 'blue' with the mean)."""
+    eq1_words: str = "all"
+    """Dual-Attention with GA1: the words whose channels Eq. 1 gates x_I with. 'all', the paper's x_BoW of every word
+    of the text (the default); or, opt-in, 'content', the dataset's content words only (objects, colours, sizes,
+    superlatives: `Dataset.content_words`), so that the function words ('what', 'which', 'is', 'the', 'color', ...)
+    do not add their channels to the attention scores of Eq. 2. x_sent still reads every word. The paper is silent
+    on the function words: "a particular feature map is activated if and only if the corresponding word occurs in
+    the textual input" (§3.1). Measured in docs/fidelity.md (issue 34): their channels, all-zero in the aux labels,
+    learn to fire on the kinds of object that were referents of training questions and pull the attention off a
+    test question's referent."""
     x_image: str = "sigmoid"
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
@@ -361,6 +373,13 @@ class ModelConfig:
             )
         check_choice("ModelConfig.sentence_readout", self.sentence_readout, SENTENCE_READOUTS)
         check_choice("ModelConfig.sentence_activation", self.sentence_activation, SENTENCE_ACTIVATIONS)
+        check_choice("ModelConfig.eq1_words", self.eq1_words, EQ1_WORDS)
+        if self.eq1_words != "all" and not (self.name == "dual_attention" and self.ga1):
+            raise ValueError(
+                f"ModelConfig.eq1_words={self.eq1_words!r} chooses the words of Eq. 1: only for "
+                f"name='dual_attention' with ga1=True (got name={self.name!r}, ga1={self.ga1}); allowed there: "
+                + ", ".join(map(repr, EQ1_WORDS))
+            )
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
         if self.control not in CONTROLS:
@@ -568,7 +587,7 @@ class TrainConfig:
 
     def spelled_name(self) -> str:
         """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the opt-in
-        model options (state temperature, sentence readout and activation), precision, seed, profile."""
+        model options (state temperature, sentence readout and activation, Eq. 1 words), precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
             parts.append(f"{self.env.tasks}only")
@@ -580,6 +599,8 @@ class TrainConfig:
             parts.append(f"sent{readout}")
         if (activation := self.model_options.get("sentence_activation", "relu")) != "relu":  # opt-in: x_sent's
             parts.append(f"xsent{activation}")
+        if (eq1 := self.model_options.get("eq1_words", "all")) != "all":  # opt-in: Eq. 1 over the content words
+            parts.append(f"eq1{eq1}")
         if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it
             parts.append(self.precision)
         return "-".join([*parts, f"s{self.seed}", self.profile])

@@ -187,6 +187,14 @@ PAPER: tuple[PaperValue, ...] = (
         lambda c: c["model.name"] != "image_only",
     ),
     PaperValue(
+        "Eq. 1 gates with",
+        ("model.eq1_words",),
+        lambda c: ("all",),
+        "§3.1: x_BoW of every word of the text",
+        lambda v: {"all": "every word", "content": "the content words only (function words out)"}.get(v[0], v[0]),
+        lambda c: c["model.name"] == "dual_attention" and c["model.ga1"],
+    ),
+    PaperValue(
         "diagnostic control",
         ("model.control",),
         lambda c: ("none",),

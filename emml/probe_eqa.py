@@ -67,8 +67,6 @@ INITS = ("checkpoint", "fresh")
 SPLITS = ("train", "test")
 EQ1_WORDS = ("all", "content")
 """Values of ``eq1_words``: Eq. 1 sums the channels of every word of the question, or of its content words only."""
-CONTENT_GROUPS = ("colors", "objects", "sizes", "superlatives")
-"""The dataset's word groups whose words are content words (the others are function words)."""
 CLOSED_BELOW = 0.01
 """A gate channel below this for every question is closed: its word adds nothing to Eq. 5's logits (under ReLU it
 is exactly 0 and gets no gradient: a dead channel)."""
@@ -197,12 +195,11 @@ def collect_frames(model, cfg, questions: dict[str, tuple[str, ...]], episodes: 
 
 
 def eq1_mask(cfg, eq1_words: str) -> torch.Tensor | None:
-    """(V,) 1 for the words Eq. 1 reads under ``eq1_words`` ('content': the dataset's `CONTENT_GROUPS`), None for
-    'all'."""
+    """(V,) 1 for the words Eq. 1 reads under ``eq1_words`` ('content': `Dataset.content_words`), None for 'all'."""
     if eq1_words == "all":
         return None
     dataset = load_dataset(cfg.env.dataset)
-    content = {w for g in CONTENT_GROUPS for w in dataset.word_groups[g]}
+    content = dataset.content_words()
     words = resolve_vocabulary(cfg.env.vocabulary, dataset).words
     return torch.tensor([w in content for w in words], dtype=torch.float32)
 

@@ -45,7 +45,7 @@ RUN_FILES = (CHECKPOINT, METRICS, RESULTS)
 """Files any of which makes a folder a run dir."""
 NAMED = ("table", "model", "aux", "seed", "profile", "precision", "env.difficulty", "env.tasks", "env.shaping",
          "model_options.state_temperature", "model_options.sentence_readout",
-         "model_options.sentence_activation")  # fmt: skip
+         "model_options.sentence_activation", "model_options.eq1_words")  # fmt: skip
 """Identifying fields the run dir's path spells out (its table folder, `TrainConfig.spelled_name`): never repeated by
 `swept`."""
 RESOLVED = ("env.vocabulary", "env.aux_words", "env.aux_labels")
@@ -208,11 +208,13 @@ def load_model(path, device: str = "cpu", control: str | None = None):
     if control is not None:
         cfg.model_options = {**cfg.model_options, "control": control}
     env = cfg.env
+    from emml.tasks.language import load_dataset
+
     model = build_model(cfg.model, len(ckpt["vocabulary"]), env.height, env.width, env.max_steps, **cfg.model_options)
+    model.read_words(tuple(ckpt["vocabulary"]), load_dataset(env.dataset).content_words())
     model.load_state_dict(ckpt["model"])
     if model.cfg.control == "type_gate":  # the word-type gate needs the run's words and the dataset's types
         from emml.models.type_gate import TypeGate
-        from emml.tasks.language import load_dataset
 
         model.type_gate = TypeGate(tuple(ckpt["vocabulary"]), load_dataset(env.dataset))
     return model.to(device), cfg

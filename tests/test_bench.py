@@ -42,9 +42,13 @@ def test_bench_train_stacks_runs_in_one_model(tracking, no_leftovers):
     cfg = profile_config("smoke", "easy", model="dual_attention", aux=True)
     r = bench_train(cfg, updates=1, stack=2)
     assert r["stack"] == 2 and r["model_only_fps"] > 0 and r["stacked_model_only_fps"] > 0
-    assert math.isclose(r["stacked_model_only_gain"], r["stacked_model_only_fps"] / r["model_only_fps"], rel_tol=0.01)
     assert r["end_to_end_fps"] > 0 and r["stacked_end_to_end_fps"] > 0
-    assert math.isclose(r["stacked_end_to_end_gain"], r["stacked_end_to_end_fps"] / r["end_to_end_fps"], rel_tol=0.01)
+    for gain, stacked, single in (("stacked_model_only_gain", "stacked_model_only_fps", "model_only_fps"),
+                                  ("stacked_end_to_end_gain", "stacked_end_to_end_fps", "end_to_end_fps")):  # fmt: skip
+        # the gain is of the measured rates, the fps are printed to 0.1: a few frames/s on a busy machine (tests
+        # beside a training) move their ratio by more than 1%
+        ratio = r[stacked] / r[single]
+        assert abs(r[gain] - ratio) <= 0.05 * (1 + ratio) / r[single] + 1e-3, (r[gain], ratio)
 
 
 def test_bench_alloc_runs_each_allocator_in_its_own_process(monkeypatch):

@@ -79,3 +79,13 @@ def test_a_config_saved_before_a_field_existed_reads_it_as_the_run_did():
         saved.pop(key, None)
     cfg = fidelity.resolve(saved)
     assert cfg["precision"] == "fp32" and cfg["score_episodes"] == saved["eval_episodes"]
+
+
+def test_eq1_over_the_content_words_is_named_where_a_run_uses_it():
+    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
+    assert not any(d.startswith("Eq. 1") for d in fidelity.deviations(fidelity.resolve(saved)))
+    saved["model_options"] = {"eq1_words": "content"}
+    assert (
+        "Eq. 1 gates with the content words only (function words out) (paper every word, §3.1: x_BoW of every word "
+        "of the text)" in fidelity.deviations(fidelity.resolve(saved))
+    )

@@ -98,6 +98,8 @@ def test_a_model_option_is_set_from_the_command_line_and_recorded():
     assert run_name(mean) == "dual_attention-easy-noaux-sentmean-s0-paper"  # issue 34's opt-in readout, spelled
     soft = apply_overrides(TrainConfig(), {"model_options.sentence_activation": "softplus"}).validate()
     assert run_name(soft) == "dual_attention-easy-noaux-xsentsoftplus-s0-paper"  # and its opt-in activation
+    content = apply_overrides(TrainConfig(), {"model_options.eq1_words": "content"}).validate()
+    assert run_name(content) == "dual_attention-easy-noaux-eq1content-s0-paper"  # and its opt-in Eq. 1 words
 
 
 def test_a_bf16_run_is_named_apart_from_its_fp32_run():

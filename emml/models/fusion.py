@@ -89,6 +89,9 @@ class DualAttention(Fusion):
         x_Ans  = softmax_V(sum_{j,k} x_GA2[:, j, k])  (Eq. 5)
         x_S    = h*w * vec(x_spat)                    (``state_scale``, the default; the paper: vec(x_spat))
 
+    Opt-in, ``eq1_words='content'`` (`ModelConfig.eq1_words`): Eq. 1 gates with x_BoW * m, m the run's content
+    words (1) and function words (0), set from the run's words by `read_words` or restored with a checkpoint.
+
     Ablation switches (Section 4, "Ablation tests"):
 
     * ``ga1=False`` (w/o GA1): no BoW gating; x_spat = softmax(sum_i x_I[i]).
@@ -114,9 +117,15 @@ class DualAttention(Fusion):
         spatial: bool = True,
         state_scale: bool = False,
         state_temperature: float | None = None,
+        eq1_words: str = "all",
     ) -> None:
         super().__init__()
         self.ga1, self.ga2, self.spatial = ga1, ga2, spatial
+        # eq1_mask (V,): the words Eq. 1 gates with under eq1_words='content' (a buffer, saved with the weights);
+        # None: every word, and no buffer, so that the paper's unit saves what it always saved
+        self.register_buffer("eq1_mask", torch.ones(vocab_size) if eq1_words == "content" else None)
+        self.eq1_ready = False
+        """Whether `eq1_mask` holds the run's words (`read_words`, or a checkpoint's state dict), not its ones."""
         self.state_temperature = state_temperature
         self.state_scale = float(height * width) if state_scale and spatial else 1.0
         self.uses_bow = ga1
@@ -134,7 +143,21 @@ class DualAttention(Fusion):
             spatial=cfg.spatial_attention,
             state_scale=cfg.state_scale,
             state_temperature=cfg.state_temperature,
+            eq1_words=cfg.eq1_words,
         )
+
+    def read_words(self, mask: Tensor) -> None:
+        """Set Eq. 1's word mask (V,): 1 for a content word, 0 for a function word (eq1_words='content' only)."""
+        if self.eq1_mask is None:
+            raise RuntimeError("read_words: this unit gates Eq. 1 with every word (eq1_words='all')")
+        with torch.no_grad():
+            self.eq1_mask.copy_(mask)
+        self.eq1_ready = True
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+        if self.eq1_mask is not None and prefix + "eq1_mask" in state_dict:  # a checkpoint holds the run's words
+            self.eq1_ready = True
 
     @classmethod
     def state_formula(cls, cfg) -> str:
@@ -155,7 +178,15 @@ class DualAttention(Fusion):
         scores of Eq. 1-2 only, as a separate sum, so that an instruction without the new words gives bit for
         bit the scores it gave before; Eq. 3-5 keep the V channels (the new words answer no question)."""
         n, v, h, w = x_image.shape
-        x_ga1 = gated_attention(x_image, x_bow[:, :v]) if self.ga1 else x_image  # Eq. 1
+        words = x_bow[:, :v] if self.ga1 else None
+        if self.eq1_mask is not None:  # opt-in: Eq. 1 over the content words only
+            if not self.eq1_ready:
+                raise RuntimeError(
+                    "eq1_words='content' needs the run's words: EmmlModel.read_words(words, dataset) after building "
+                    "the model, or load a checkpoint's state dict"
+                )
+            words = words * self.eq1_mask
+        x_ga1 = gated_attention(x_image, words) if self.ga1 else x_image  # Eq. 1
         if self.spatial:
             scores = x_ga1.sum(dim=1)  # Eq. 2: sum over channels
             if x_extra is not None and self.ga1:  # §5.4: the appended channels, gated by their words (Eq. 1)

@@ -212,6 +212,17 @@ class EmmlModel(nn.Module):
         """Control 'type_gate': the module that builds Eq. 4's gate from the dataset's word types
         (emml/models/type_gate.py; `emml.runs.load_model` attaches it, as it needs the run's words)."""
 
+    def read_words(self, words: tuple[str, ...], content: frozenset[str]) -> EmmlModel:
+        """What the model needs of the run's vocabulary (`words`, in channel order) beyond its size: under
+        `ModelConfig.eq1_words` = 'content', Eq. 1's mask of the `content` words (the dataset's
+        `Dataset.content_words()`). A no-op for every other model; returns ``self``."""
+        if len(words) != self.vocab_size:
+            raise ValueError(f"read_words: {len(words)} words for a model of {self.vocab_size} channels")
+        if getattr(self.fusion, "eq1_mask", None) is not None:
+            mask = torch.tensor([w in content for w in words], dtype=torch.float32)
+            self.fusion.read_words(mask.to(self.fusion.eq1_mask.device))
+        return self
+
     def vmappable(self) -> EmmlModel:
         """Switch this model to the ops `torch.func.vmap` can batch over stacked copies (emml/rl/packed.py): the
         instruction GRU from linear ops, no acting cache (it keys on host values), the default memory format.

@@ -141,6 +141,7 @@ class Trainer:
         model = build_model(
             cfg.model, len(self.vocab), env_cfg.height, env_cfg.width, env_cfg.max_steps, **cfg.model_options
         ).to(self.device)
+        model.read_words(self.vocab.words, load_dataset(env_cfg.dataset).content_words())
         optimizer = make_optimizer(model.parameters(), cfg.ppo) if build else None
         update, frames = 0, 0
         if saved is not None:

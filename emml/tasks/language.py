@@ -69,6 +69,11 @@ class Dataset:
                 return s
         raise ValueError(f"instruction/question {text!r} is not in the {self.name} dataset")
 
+    def content_words(self) -> frozenset[str]:
+        """The words that fill a sentence's slots (every word group: objects, colours, sizes, superlatives); the
+        others are the templates' function words ('go', 'to', 'the', 'what', 'which', 'is', 'color', ...)."""
+        return frozenset(w for group in self.word_groups.values() for w in group)
+
     def answer_words(self) -> tuple[str, ...]:
         """Every word that can answer a question: the values of the attributes questions ask for."""
         attrs = {s.answer_attribute for s in self.sentences if s.kind == "eqa"}

@@ -197,3 +197,29 @@ def test_state_temperature_hands_the_policy_a_sharper_map_without_gradient():
     (grad_plain,) = torch.autograd.grad(plain.answer_logits.sum(), x_i)
     (grad_sharp,) = torch.autograd.grad(sharp.answer_logits.sum(), x_i)
     torch.testing.assert_close(grad_sharp, grad_plain)  # the answer's gradient into the detectors is unchanged
+
+
+def test_eq1_over_the_content_words_drops_the_function_words_channels_from_the_attention():
+    """`eq1_words='content'` (issue 34): a function word's channel, firing on the wrong object, moves the paper's
+    x_spat (Eq. 1-2) and not the content-word one's; the mask must be set (or restored) before use."""
+    function = 4  # a fifth channel, the word 'what': its detector fires on the torch (column 1)
+    x_i = torch.zeros(1, 5, 1, 2)
+    x_i[0, :4] = _scene()[0]
+    x_i[0, function, 0, 1] = 3.0
+    bow = torch.tensor([[1.0, 0.0, 0.0, 0.0, 1.0]])  # 'what ... pillar'
+    sent = torch.tensor([[0.0, 0.0, 1.0, 1.0, 0.0]])
+    paper = DualAttention(5, 1, 2)(x_i, bow, sent)
+    assert paper.attention[0, 0, 1] > paper.attention[0, 0, 0]  # pulled onto the torch by 'what'
+    unit = DualAttention(5, 1, 2, eq1_words="content")
+    with pytest.raises(RuntimeError, match="needs the run's words"):
+        unit(x_i, bow, sent)
+    unit.read_words(torch.tensor([1.0, 1.0, 1.0, 1.0, 0.0]))
+    content = unit(x_i, bow, sent)
+    assert content.attention[0, 0, 0] > content.attention[0, 0, 1]  # on the pillar, as the content word says
+    torch.testing.assert_close(content.attention, DualAttention(5, 1, 2)(x_i, bow * unit.eq1_mask, sent).attention)
+    restored = DualAttention(5, 1, 2, eq1_words="content")
+    restored.load_state_dict(unit.state_dict())  # a checkpoint carries the mask
+    torch.testing.assert_close(restored(x_i, bow, sent).attention, content.attention)
+    with pytest.raises(RuntimeError, match="eq1_words='all'"):
+        DualAttention(5, 1, 2).read_words(torch.ones(5))
+    assert "eq1_mask" not in DualAttention(5, 1, 2).state_dict()  # the paper's unit: checkpoints unchanged

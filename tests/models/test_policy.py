@@ -282,6 +282,9 @@ def test_unknown_model_name_lists_known_names():
         ({"x_image": "tanh"}, "x_image"),
         ({"sentence_readout": "first"}, "sentence_readout"),
         ({"sentence_activation": "tanh"}, "sentence_activation"),
+        ({"eq1_words": "nouns"}, "eq1_words"),
+        ({"name": "ga", "eq1_words": "content"}, "eq1_words"),
+        ({"ga1": False, "eq1_words": "content"}, "eq1_words"),
         ({"state_scale": 1}, "state_scale"),
         ({"state_temperature": 0}, "state_temperature"),
         ({"state_temperature": "sharp"}, "state_temperature"),
@@ -406,3 +409,19 @@ def test_text_cache_gives_the_uncached_outputs_bit_for_bit(name):
     groups[1]["tokens"][0, 0, 0] = 1 + groups[1]["tokens"][0, 0, 0] % V  # a new instruction in one group
     act(4)
     assert cached.text_cache.misses == 4
+
+
+def test_read_words_masks_eq1_with_the_datasets_content_words_and_is_a_no_op_elsewhere():
+    from emml.tasks.language import Vocabulary, load_dataset
+
+    dataset = load_dataset("doom")
+    words = Vocabulary.from_dataset(dataset).words
+    model = build_model("dual_attention", len(words), H, W, MAX_STEPS, eq1_words="content")
+    model.read_words(words, dataset.content_words())
+    kept = {w for w, m in zip(words, model.fusion.eq1_mask.tolist()) if m}
+    assert kept == {"red", "green", "blue", "yellow", "torch", "pillar", "keycard", "skullkey", "armor", "short",
+                    "tall", "smallest", "largest"}  # fmt: skip
+    plain = build_model("dual_attention", len(words), H, W, MAX_STEPS)
+    assert plain.read_words(words, dataset.content_words()) is plain and plain.fusion.eq1_mask is None
+    with pytest.raises(ValueError, match="3 words for a model of"):
+        plain.read_words(words[:3], dataset.content_words())

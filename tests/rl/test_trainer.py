@@ -551,3 +551,20 @@ def test_a_stopped_run_keeps_its_last_whole_update(tracking, monkeypatch, where,
     assert result.resumed and result.frames == 512
     steps = [s for s, _ in metric_history(result.run_id, "charts/update")]
     assert steps == list(range(64, 513, 64))  # one value per step
+
+
+def test_eq1_over_the_content_words_trains_resumes_and_reloads_with_the_runs_words(tracking, no_leftovers):
+    """`model_options.eq1_words = 'content'` (issue 34): the trainer sets Eq. 1's mask from the run's words, the
+    checkpoint carries it, a resumed run and `load_model` read it back."""
+    from emml.runs import load_model
+    from emml.tasks.language import load_dataset
+
+    over = {"model_options.eq1_words": "content", "eval_episodes": 1, "final_eval_episodes": 1}
+    first = train(smoke(tracking, aux=True, frames=64, **over), quiet=True)
+    assert "eq1content" in first.run_dir.name
+    resumed = train(smoke(tracking, aux=True, frames=128, **over), quiet=True)
+    assert resumed.run_dir == first.run_dir and resumed.frames == 128
+    model, cfg = load_model(resumed.run_dir / CHECKPOINT)
+    content = load_dataset(cfg.env.dataset).content_words()
+    assert model.fusion.eq1_ready
+    assert [bool(m) for m in model.fusion.eq1_mask.tolist()] == [w in content for w in cfg.env.vocabulary]
