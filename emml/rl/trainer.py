@@ -306,7 +306,8 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                 t_learn = time.perf_counter()
                 last_value = sampler.last_value(model)
                 buffer.compute_returns(last_value, cfg.ppo.gamma, cfg.ppo.gae_lambda)
-                with stop_after():  # a SIGTERM here stops the run after this update, which it then keeps
+                # a SIGTERM here stops the run after this update and its point of the curve, which it then keeps
+                with stop_after():
                     for t in trainers:
                         t._consistent = None  # the update changes the model and optimizer step by step
                     stats = learner.update(buffer, mask)
@@ -314,20 +315,20 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                     frames += B * T
                     for t in trainers:
                         t._consistent = (update, frames)
-            now = time.perf_counter()
-            seconds = sampler.timing | {"learn": now - t_learn}
+                    now = time.perf_counter()
+                    seconds = sampler.timing | {"learn": now - t_learn}
+                    fps = B * T * n / (now - t_start)
+                    logged = []
+                    for r, t in enumerate(trainers):
+                        metrics = update_metrics(
+                            stats[r], fps / n, sampler.recent_by_run[r], update, sampler.dropped_episodes, seconds
+                        )
+                        if n > 1:
+                            metrics["charts/packed_fps"] = fps
+                        t.tracker.log_metrics(metrics, step=frames)
+                        logged.append(metrics)
             for part, value in seconds.items():
                 since_line[part] += value
-            fps = B * T * n / (now - t_start)
-            logged = []
-            for r, t in enumerate(trainers):
-                metrics = update_metrics(
-                    stats[r], fps / n, sampler.recent_by_run[r], update, sampler.dropped_episodes, seconds
-                )
-                if n > 1:
-                    metrics["charts/packed_fps"] = fps
-                t.tracker.log_metrics(metrics, step=frames)
-                logged.append(metrics)
             first = logged[0]
             bar.update(B * T)
             bar.set_postfix(

@@ -568,3 +568,35 @@ def test_eq1_over_the_content_words_trains_resumes_and_reloads_with_the_runs_wor
     content = load_dataset(cfg.env.dataset).content_words()
     assert model.fusion.eq1_ready
     assert [bool(m) for m in model.fusion.eq1_mask.tolist()] == [w in content for w in cfg.env.vocabulary]
+
+
+def test_a_sigterm_during_an_update_keeps_the_update_and_its_point_of_the_curve(tracking, monkeypatch, no_leftovers):
+    """A SIGTERM that lands inside the PPO update stops the run after it (`stop_after`): the checkpoint holds that
+    update and the metrics mirror its point, so a resumed run's curve misses no update (before session 16 the stop
+    came between the update and its log line, and each stop lost one point)."""
+    import signal
+
+    import emml.rl.trainer as trainer_module
+    from emml.envs.engine import install_signal_handlers
+
+    real_update, calls = trainer_module.ppo_update, {"n": 0}
+
+    def term_on_third(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            os.kill(os.getpid(), signal.SIGTERM)  # held until the update's block ends
+        return real_update(*args, **kwargs)
+
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    install_signal_handlers()
+    monkeypatch.setattr(trainer_module, "ppo_update", term_on_third)
+    cfg = smoke(tracking, frames=512, checkpoint_every=100, eval_every=0)
+    try:
+        with pytest.raises(SystemExit) as stop:
+            train(cfg, quiet=True)
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    assert stop.value.code == 128 + signal.SIGTERM
+    assert load_checkpoint(run_dir(cfg) / CHECKPOINT)["frames"] == 192  # the third update, kept whole
+    assert max(s for s, k, _ in read_mirror(run_dir(cfg) / METRICS) if k == "charts/update") == 192  # and its point
