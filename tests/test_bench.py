@@ -8,17 +8,24 @@ from emml.bench import bench_train
 from emml.profiles import profile_config
 
 
+def assert_ratio(r: dict, ratio: str, num: str, den: str) -> None:
+    """r[ratio] is r[num] / r[den]: of the measured rates, which are printed to 0.1 frames/s, so that at a few
+    frames/s (tests beside a training) the printed ones' ratio may differ by more than 1%."""
+    printed = r[num] / r[den]
+    assert abs(r[ratio] - printed) <= 0.05 * (1 + printed) / r[den] + 1e-3 + 0.01 * printed, (ratio, r[ratio], printed)
+
+
 def test_bench_train_reports_both_throughputs_and_the_split(tmp_path, tracking, no_leftovers):
     cfg = profile_config("smoke", "easy", model="dual_attention", aux=True)
     r = bench_train(cfg, updates=2)
     assert r["model_only_fps"] > 0 and r["end_to_end_fps"] > 0
     assert r["allocator"] == alloc.loaded()
     assert math.isclose(r["model_only_fps"], sum(r["model_only_before_after"]) / 2, rel_tol=0.01)
-    assert math.isclose(r["ratio"], r["end_to_end_fps"] / r["model_only_fps"], rel_tol=0.01)
+    assert_ratio(r, "ratio", "end_to_end_fps", "model_only_fps")
     assert set(r["time_split"]) == {"simulate", "infer", "learn"}
     assert math.isclose(sum(r["time_split"].values()), 1.0, abs_tol=0.01)
     assert r["env_groups"] == 2 and r["lockstep_fps"] > 0  # double buffering is compared with lockstep
-    assert math.isclose(r["double_buffer_gain"], r["end_to_end_fps"] / r["lockstep_fps"], rel_tol=0.01)
+    assert_ratio(r, "double_buffer_gain", "end_to_end_fps", "lockstep_fps")
 
 
 def test_the_time_split_is_over_the_updates_given():
@@ -43,12 +50,8 @@ def test_bench_train_stacks_runs_in_one_model(tracking, no_leftovers):
     r = bench_train(cfg, updates=1, stack=2)
     assert r["stack"] == 2 and r["model_only_fps"] > 0 and r["stacked_model_only_fps"] > 0
     assert r["end_to_end_fps"] > 0 and r["stacked_end_to_end_fps"] > 0
-    for gain, stacked, single in (("stacked_model_only_gain", "stacked_model_only_fps", "model_only_fps"),
-                                  ("stacked_end_to_end_gain", "stacked_end_to_end_fps", "end_to_end_fps")):  # fmt: skip
-        # the gain is of the measured rates, the fps are printed to 0.1: a few frames/s on a busy machine (tests
-        # beside a training) move their ratio by more than 1%
-        ratio = r[stacked] / r[single]
-        assert abs(r[gain] - ratio) <= 0.05 * (1 + ratio) / r[single] + 1e-3, (r[gain], ratio)
+    assert_ratio(r, "stacked_model_only_gain", "stacked_model_only_fps", "model_only_fps")
+    assert_ratio(r, "stacked_end_to_end_gain", "stacked_end_to_end_fps", "end_to_end_fps")
 
 
 def test_bench_alloc_runs_each_allocator_in_its_own_process(monkeypatch):
