@@ -138,7 +138,7 @@ def write_reports(
             curve_paths, notes = plot_table(table, profile, results_root, out, run_root)
             plt.close("all")
             paths += [Path(p) for p in curve_paths]
-            runs = f"{len(df)} runs, frames {', '.join(f'{f:,}' for f in frames)}"
+            runs = f"{len(df)} run{'s' if len(df) != 1 else ''}, frames {', '.join(f'{f:,}' for f in frames)}"
             lines.append(f"- **{table}** ({runs}): " + ", ".join(f"[{p.name}]({p.name})" for p in paths))
             missing = [n for n in notes if ": no curve (" in n]
             if missing:
