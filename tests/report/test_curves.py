@@ -33,7 +33,9 @@ def test_plot_table_skips_runs_without_history(tracking, tmp_path):
     csv = tmp_path / "results" / "table3" / "quick.csv"
     csv.parent.mkdir(parents=True)
     pd.DataFrame(rows).to_csv(csv, index=False)
-    paths, notes = plot_table("table3", "quick", results_root=tmp_path / "results", out=tmp_path / "reports")
+    paths, notes = plot_table(  # a private run root: the checkout's runs/ may hold a run of that name
+        "table3", "quick", results_root=tmp_path / "results", out=tmp_path / "reports", run_root=tracking["run_root"]
+    )
     assert [p.name for p in paths] == ["table3-quick-curves.png", "table3-quick-curves.pdf"]
     assert all(p.stat().st_size > 1000 for p in paths)
     assert any("da_no_sa-easy-aux-s0-quick" in n and "no curve (MLflow run" in n for n in notes)
