@@ -1012,12 +1012,12 @@ def campaign(
 def _runs_at_once(jobs: int, device: str) -> int:
     """`jobs`, or when 0 what a launch on `device` would take (emml.launch.default_jobs); a device that is not one,
     or (for the default) that this machine lacks, fails by name."""
-    from emml.config import check_choice
+    from emml.config import check_device_name
     from emml.launch import default_jobs
     from emml.rl.hardware import check_device
 
     try:
-        check_choice("device", device.split(":")[0], ("cpu", "cuda"))
+        check_device_name(device)
         if not jobs:
             check_device(device)
     except ValueError as e:

@@ -38,6 +38,16 @@ def check_choice(field: str, value, allowed) -> None:
         raise ValueError(f"{field}={value!r} is not allowed; choose one of {', '.join(map(repr, allowed))}")
 
 
+DEVICES: tuple[str, ...] = ("cpu", "cuda")
+"""Kinds of `TrainConfig.device` ('cuda' may name a GPU: 'cuda:1')."""
+
+
+def check_device_name(device: str) -> None:
+    """Raise a ValueError naming the field 'device' and its allowed kinds (whether the machine has it is
+    `emml.rl.hardware.check_device`)."""
+    check_choice("device", device.split(":")[0], DEVICES)
+
+
 def check_at_least(config, names: tuple[str, ...], minimum: int) -> None:
     """Raise a ValueError naming the first of ``config``'s integer fields ``names`` below ``minimum`` (1: a positive
     integer, 0: >= 0)."""
@@ -534,7 +544,7 @@ class TrainConfig:
         self.env.validate()
         self.ppo.validate()
         check_choice("answer_supervision", self.answer_supervision, ("eqa_steps", "answer_steps"))
-        check_choice("device", self.device.split(":")[0], ("cpu", "cuda"))
+        check_device_name(self.device)
         positive = ("frames", "num_envs", "num_steps", "eval_episodes", "final_eval_episodes", "checkpoint_every")
         check_at_least(self, (*positive, "log_every"), 1)
         if self.frames < self.frames_per_update:  # it used to be rounded up to one update, silently

@@ -42,11 +42,12 @@ from contextlib import contextmanager
 import torch
 from torch import nn
 
-from emml.config import SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
+from emml.config import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
 from emml.diagnose_eqa import gate_missing
 from emml.envs.vector import make_env
 from emml.evaluate import eval_settings
 from emml.models.encoders import TextEncoder
+from emml.models.policy import word_mask
 from emml.runs import load_model
 from emml.tasks.language import load_dataset, resolve_vocabulary
 
@@ -65,8 +66,6 @@ SEEDS = 3
 INITS = ("checkpoint", "fresh")
 """Values of ``init``: the retrained GRU and Linear start from the checkpoint's, or from a fresh draw."""
 SPLITS = ("train", "test")
-EQ1_WORDS = ("all", "content")
-"""Values of ``eq1_words``: Eq. 1 sums the channels of every word of the question, or of its content words only."""
 CLOSED_BELOW = 0.01
 """A gate channel below this for every question is closed: its word adds nothing to Eq. 5's logits (under ReLU it
 is exactly 0 and gets no gradient: a dead channel)."""
@@ -199,9 +198,7 @@ def eq1_mask(cfg, eq1_words: str) -> torch.Tensor | None:
     if eq1_words == "all":
         return None
     dataset = load_dataset(cfg.env.dataset)
-    content = dataset.content_words()
-    words = resolve_vocabulary(cfg.env.vocabulary, dataset).words
-    return torch.tensor([w in content for w in words], dtype=torch.float32)
+    return word_mask(resolve_vocabulary(cfg.env.vocabulary, dataset).words, dataset.content_words())
 
 
 def answer_logits(model, frames: dict, x_sent: torch.Tensor) -> torch.Tensor:

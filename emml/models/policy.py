@@ -151,6 +151,12 @@ class TextCache:
         return out
 
 
+def word_mask(words: tuple[str, ...], keep: frozenset[str]) -> Tensor:
+    """(V,) 1.0 for each of `words` (in channel order) that is in `keep`, else 0.0: Eq. 1's mask of the content words
+    under `ModelConfig.eq1_words` = 'content' (`EmmlModel.read_words`, emml/probe_eqa.py)."""
+    return torch.tensor([w in keep for w in words], dtype=torch.float32)
+
+
 class EmmlModel(nn.Module):
     """Encoders + fusion unit + policy module; one class for every model.
 
@@ -219,8 +225,7 @@ class EmmlModel(nn.Module):
         if len(words) != self.vocab_size:
             raise ValueError(f"read_words: {len(words)} words for a model of {self.vocab_size} channels")
         if getattr(self.fusion, "eq1_mask", None) is not None:
-            mask = torch.tensor([w in content for w in words], dtype=torch.float32)
-            self.fusion.read_words(mask.to(self.fusion.eq1_mask.device))
+            self.fusion.read_words(word_mask(words, content).to(self.fusion.eq1_mask.device))
         return self
 
     def vmappable(self) -> EmmlModel:
