@@ -12,6 +12,11 @@ Per question of each EQA split the run is scored on, ``episodes`` greedy episode
   Why it sits there: ``ga1_at_referent`` / ``ga1_at_attended`` — per word of the question's bag of words, the mean
   of sigmoid(conv3)[word] over the referent's / the attended object's cells, the terms Eq. 1-2 add up into the
   attention scores (x_I under the default x_image='sigmoid').
+* ``detectors_at_referent`` — what Eq. 5 can read there: sigmoid(conv3)[word] over the referent's cells for every
+  word of the answer's kind (the colours for a colour question, the objects for an object question), mean over the
+  episodes it is in view; ``answer_lead`` the mean over those episodes of the correct answer's value minus its
+  strongest rival's. A negative lead is a detector that takes the referent for something else: with the attention
+  on the referent and the gate open on the right kind, Eq. 5 still answers the rival.
 * ``gate`` — the gate of Eq. 4 per vocabulary channel: x_sent = ReLU(Linear(GRU(T))), a function of the question's
   words only (the same in every episode), or the word-type gate under control 'type_gate'
   (emml/models/type_gate.py); ``gate_summary``: its value on the question's content words, the mean over colour and
@@ -81,6 +86,8 @@ def _summarize(question: str, split: str, records: list[dict], outcomes: list[bo
         "attention_mass_on_referent": None,
         "ga1_at_referent": None,
         "ga1_at_attended": None,
+        "detectors_at_referent": None,
+        "answer_lead": None,
         "gate": None,
         "gate_summary": None,
     }
@@ -102,6 +109,7 @@ def _summarize(question: str, split: str, records: list[dict], outcomes: list[bo
                 means = np.nanmean(np.stack(xs), axis=0)
             row[key] = {words[w]: None if np.isnan(means[w]) else round(float(means[w]), 3) for w in bow}
         row["attended"] = _counts(attended)
+        row.update(_detectors(records, x_ref, words, dataset))
         row["attention_on_referent"] = float(np.mean(on_ref))
         row["attention_mass_on_referent"] = float(np.mean(mass_ref))
     if gate is not None:
@@ -115,6 +123,26 @@ def _summarize(question: str, split: str, records: list[dict], outcomes: list[bo
             "answer_channel": float(np.mean([row["gate"][r["answer"]] for r in records])),
         }
     return row
+
+
+def _detectors(records: list[dict], x_ref: list[np.ndarray], words, dataset) -> dict:
+    """``detectors_at_referent`` and ``answer_lead`` (module docstring) from the episodes where the referent is in
+    view; None where it never is, or the answer's kind is not one of the dataset's word groups."""
+    kinds = [ws for ws in dataset.word_groups.values() if records[0]["answer"] in ws]
+    rows = [(r["answer"], x) for r, x in zip(records, x_ref) if not np.isnan(x).all()]
+    if not kinds or not rows:
+        return {}
+    candidates = [w for w in kinds[0] if w in words]
+    index = [words.index(w) for w in candidates]
+    values = np.stack([x[index] for _, x in rows])  # (episodes in view, candidates)
+    leads = [
+        v[candidates.index(answer)] - np.delete(v, candidates.index(answer)).max()
+        for (answer, _), v in zip(rows, values)
+    ]
+    return {
+        "detectors_at_referent": {w: round(float(m), 3) for w, m in zip(candidates, values.mean(axis=0))},
+        "answer_lead": float(np.mean(leads)),
+    }
 
 
 def _play(model, cfg: DoomConfig, plan, device, batch: int) -> tuple[list[dict], list[bool]]:
@@ -232,6 +260,16 @@ def eqa_table(result: dict) -> str:
             ref, att = r["ga1_at_referent"], r["ga1_at_attended"]
             terms = "  ".join(f"{w} {_num(ref[w])}/{_num(att[w])}" for w in ref)
             lines.append(f"{r['question']:<{width}}  {terms}")
+        lines += [
+            "",
+            "Detectors at the referent (what Eq. 5 reads there): sigmoid(conv3)[w] of each word of the answer's",
+            "kind; lead: the correct answer's minus its strongest rival's, mean over episodes (< 0: the referent",
+            "is taken for another):",
+        ]
+        for r in rows:
+            det = r["detectors_at_referent"] or {}
+            values = "  ".join(f"{w} {v:.2f}" for w, v in det.items())
+            lines.append(f"{r['question']:<{width}}  lead {_num(r['answer_lead']):>5}  {values}")
     if rows[0]["gate"] is not None:
         channels = result["channels"]
         lines += ["", "GA2 gate (Eq. 4) on the object and attribute channels (every channel in --json):"]

@@ -60,6 +60,8 @@ def test_each_question_row_is_computed_from_its_episodes(no_leftovers):
         # attention: per episode, one scene object (or none in view); the Eq. 1 terms are the question's words
         assert sum(r["attended"].values()) == EPISODES and 0 <= r["attention_on_referent"] <= 1
         assert list(r["ga1_at_referent"]) == question.split()
+        assert list(r["detectors_at_referent"]) == list(load_dataset("doom").word_groups["colors"])  # colour answers
+        assert -1 <= r["answer_lead"] <= 1
         # the gate is the model's x_sent for the question, every channel
         tokens = torch.tensor([Vocabulary(tuple(cfg.vocabulary)).encode(question, cfg.max_words)])
         x_sent = model.text_encoder(tokens)[1][0].detach().numpy()
@@ -67,11 +69,13 @@ def test_each_question_row_is_computed_from_its_episodes(no_leftovers):
         assert r["gate_summary"]["question_words"].keys() == {"pillar" if k == 0 else "torch"}
     text = eqa_table(result)
     assert all(q in text for q in QUESTIONS) and "GA2 gate (Eq. 4)" in text and "at the referent" in text
+    assert "Detectors at the referent" in text and "lead" in text
 
 
 class _Oracle(ScriptedModel):
-    """Answers at once, with the colour whose aux label covers most of the referent's cells (privileged), and
-    attends to exactly the referent's cells: every row of the diagnostics is known in advance."""
+    """Answers at once, with the colour whose aux label covers most of the referent's cells (privileged), attends
+    to exactly the referent's cells, and its detectors are the aux labels (sigmoid(±10)): every row of the
+    diagnostics is known in advance."""
 
     def __init__(self, words):
         super().__init__()
@@ -89,7 +93,7 @@ class _Oracle(ScriptedModel):
         logits = torch.zeros(t, b, 4)
         logits[..., 3] = 1.0  # 'answer'
         attention = target / target.sum((-2, -1), keepdim=True).clamp(min=1)
-        aux = torch.zeros(t, b, len(self.words), *target.shape[-2:])
+        aux = (obs["aux"].float() * 2 - 1) * 10  # logits whose sigmoid is the label
         return type(
             "Out", (), {"logits": logits, "answer_logits": answer, "attention": attention, "aux_logits": aux}
         ), state
@@ -105,6 +109,9 @@ def test_an_oracle_gets_every_row_right(no_leftovers):
         assert r["attention_on_referent"] == 1.0 and r["attention_mass_on_referent"] == 1.0
         kind = r["question"].split()[-1]  # 'pillar' or 'torch': the referent's object word
         assert all(words.endswith(kind) for words in r["attended"])
+        # Eq. 5's inputs at the referent: every colour, the referent's own label the highest
+        assert list(r["detectors_at_referent"]) == list(load_dataset("doom").word_groups["colors"])
+        assert r["answer_lead"] > 0  # its own colour covers every cell, a neighbour's at most some
 
 
 def test_under_the_type_gate_the_row_shows_the_gate_that_replaced_x_sent(no_leftovers):
