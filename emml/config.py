@@ -222,6 +222,11 @@ def config_from_dict(cls, values: dict):
     return cls(**fixed)
 
 
+AUX_BALANCES: tuple[str, ...] = ("none", "word")
+"""Values of `PPOConfig.aux_balance`: the aux cross-entropy averaged over every cell (the paper's), or balanced per
+word between the cells labelled 1 and those labelled 0."""
+
+
 @dataclass
 class PPOConfig:
     """Hyper-parameters of the PPO update (paper appendix A unless noted)."""
@@ -252,6 +257,11 @@ class PPOConfig:
     """Weight of the supervised answer cross-entropy. Paper silent on the weight -- our choice."""
     aux_coef: float = 1.0
     """Weight of the spatial auxiliary binary cross-entropy. Paper silent on the weight -- our choice."""
+    aux_balance: str = "none"
+    """How the aux cross-entropy weighs a word's cells (`AUX_BALANCES`): "none", the mean over every cell (the paper:
+    'trained with cross-entropy loss', 'Auxiliary Task'), or "word" (opt-in), per word the mean over the cells
+    labelled 1 and the mean over those labelled 0, halved: a small object's few cells weigh as much as the rest of
+    the frame (issue 34: the keys' detectors)."""
     adam_eps: float = 1e-5
     """Adam epsilon. Paper silent -- our choice (CleanRL/baselines PPO value)."""
 
@@ -262,6 +272,10 @@ class PPOConfig:
         unit = ("gamma", "gae_lambda")
         for f in fields(self):
             v = getattr(self, f.name)
+            if f.name == "aux_balance":
+                if v not in AUX_BALANCES:
+                    raise ValueError(f"PPOConfig.aux_balance={v!r}: allowed values are {', '.join(AUX_BALANCES)}")
+                continue
             if f.name in ("norm_adv", "clip_vloss"):
                 if not isinstance(v, bool):
                     raise ValueError(f"PPOConfig.{f.name} must be a bool, got {v!r}")
@@ -597,7 +611,8 @@ class TrainConfig:
 
     def spelled_name(self) -> str:
         """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the opt-in
-        model options (state temperature, sentence readout and activation, Eq. 1 words), precision, seed, profile."""
+        model options (state temperature, sentence readout and activation, Eq. 1 words), the aux loss's balance,
+        precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
             parts.append(f"{self.env.tasks}only")
@@ -611,6 +626,8 @@ class TrainConfig:
             parts.append(f"xsent{activation}")
         if (eq1 := self.model_options.get("eq1_words", "all")) != "all":  # opt-in: Eq. 1 over the content words
             parts.append(f"eq1{eq1}")
+        if self.ppo.aux_balance != "none":  # opt-in: the aux cross-entropy balanced per word
+            parts.append(f"auxbal{self.ppo.aux_balance}")
         if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it
             parts.append(self.precision)
         return "-".join([*parts, f"s{self.seed}", self.profile])

@@ -195,6 +195,14 @@ PAPER: tuple[PaperValue, ...] = (
         lambda c: c["model.name"] == "dual_attention" and c["model.ga1"],
     ),
     PaperValue(
+        "aux loss",
+        ("ppo.aux_balance",),
+        lambda c: ("none",),
+        "'Auxiliary Task': 'trained with cross-entropy loss'",
+        lambda v: {"none": "cross-entropy over every cell", "word": "cross-entropy balanced per word"}.get(v[0], v[0]),
+        lambda c: c["aux"],
+    ),
+    PaperValue(
         "diagnostic control",
         ("model.control",),
         lambda c: ("none",),

@@ -81,6 +81,18 @@ def test_a_config_saved_before_a_field_existed_reads_it_as_the_run_did():
     assert cfg["precision"] == "fp32" and cfg["score_episodes"] == saved["eval_episodes"]
 
 
+def test_the_balanced_aux_loss_is_named_where_an_aux_run_uses_it():
+    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
+    assert not any(d.startswith("aux loss") for d in fidelity.deviations(fidelity.resolve(saved)))
+    saved["ppo"]["aux_balance"] = "word"
+    assert (
+        "aux loss cross-entropy balanced per word (paper cross-entropy over every cell, 'Auxiliary Task': 'trained "
+        "with cross-entropy loss')" in fidelity.deviations(fidelity.resolve(saved))
+    )
+    saved["aux"] = False  # no aux loss to balance
+    assert not any(d.startswith("aux loss") for d in fidelity.deviations(fidelity.resolve(saved)))
+
+
 def test_eq1_over_the_content_words_is_named_where_a_run_uses_it():
     saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
     assert not any(d.startswith("Eq. 1") for d in fidelity.deviations(fidelity.resolve(saved)))

@@ -18,7 +18,10 @@ from collections.abc import Callable, Iterable, Mapping
 import torch
 import torch.nn.functional as F
 
-from emml.config import PPOConfig  # defined beside TrainConfig (configs are leaves); still importable from here
+from emml.config import (
+    AUX_BALANCES,
+    PPOConfig,  # defined beside TrainConfig (configs are leaves); still importable from here
+)
 from emml.rl.rollout import RolloutBuffer
 
 # ---------------------------------------------------------------------------
@@ -97,7 +100,9 @@ def answer_loss(answer_logits: torch.Tensor, targets: torch.Tensor) -> torch.Ten
     return (ce * keep).sum() / keep.sum().clamp(min=1.0)
 
 
-def aux_loss(aux_logits: torch.Tensor, labels: torch.Tensor, channel_mask: torch.Tensor) -> torch.Tensor:
+def aux_loss(
+    aux_logits: torch.Tensor, labels: torch.Tensor, channel_mask: torch.Tensor, balance: str = "none"
+) -> torch.Tensor:
     """Per-pixel binary cross-entropy (with logits) averaged over supervised channels only.
 
     ``aux_logits`` (..., V, h, w) pre-sigmoid conv3 outputs, ``labels`` (..., V, h, w)
@@ -105,13 +110,27 @@ def aux_loss(aux_logits: torch.Tensor, labels: torch.Tensor, channel_mask: torch
     auxiliary label (the paper gives none for e.g. 'smallest'/'largest').
     Masked-out channels contribute neither loss nor gradient. Zero (graph kept)
     if no channel is supervised. As in `answer_loss`, a weighted mean (no data-dependent shape).
+    ``balance`` (`PPOConfig.aux_balance`): "none", the mean over every entry of a channel (the paper's
+    cross-entropy); "word", per channel the mean over its entries labelled 1 and the mean over those labelled 0,
+    halved (a channel with entries of one label only in the batch: that label's mean).
     """
     if aux_logits.shape != labels.shape:
         raise ValueError(f"aux_logits {tuple(aux_logits.shape)} vs labels {tuple(labels.shape)}")
     if tuple(channel_mask.shape) != (aux_logits.shape[-3],):
         raise ValueError(f"channel_mask must be ({aux_logits.shape[-3]},), got {tuple(channel_mask.shape)}")
     weight = channel_mask.to(device=aux_logits.device, dtype=aux_logits.dtype)[:, None, None]  # (V, 1, 1)
-    bce = F.binary_cross_entropy_with_logits(aux_logits, labels.to(aux_logits.dtype), reduction="none")
+    target = labels.to(aux_logits.dtype)
+    bce = F.binary_cross_entropy_with_logits(aux_logits, target, reduction="none")
+    if balance == "word":
+        dims = tuple(d for d in range(bce.dim()) if d != bce.dim() - 3)  # all but the channel
+        pos = (bce * target).sum(dims) / target.sum(dims).clamp(min=1.0)  # (V,)
+        neg = (bce * (1 - target)).sum(dims) / (1 - target).sum(dims).clamp(min=1.0)
+        sides = (target.sum(dims) > 0).to(bce.dtype) + ((1 - target).sum(dims) > 0).to(bce.dtype)
+        per_word = (pos + neg) / sides.clamp(min=1.0)
+        mask = weight[:, 0, 0]
+        return (per_word * mask).sum() / mask.sum().clamp(min=1.0)
+    if balance != "none":
+        raise ValueError(f"aux balance {balance!r}: allowed values are {', '.join(AUX_BALANCES)}")
     per_channel = aux_logits[..., :1, :, :].numel()  # entries of one channel
     return (bce * weight).sum() / (weight.sum() * per_channel).clamp(min=1.0)
 
@@ -162,7 +181,7 @@ def ppo_losses(
             raise ValueError("aux_labels given but aux_logits is None")
         if aux_channel_mask is None:
             aux_channel_mask = torch.ones(aux_logits.shape[-3], dtype=torch.bool, device=aux_logits.device)
-        aux = aux_loss(aux_logits, aux_labels, aux_channel_mask)
+        aux = aux_loss(aux_logits, aux_labels, aux_channel_mask, cfg.aux_balance)
         out["aux"] = aux
         total = total + cfg.aux_coef * aux
     out["total"] = total

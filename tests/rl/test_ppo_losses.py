@@ -110,6 +110,36 @@ def test_aux_loss_ignores_masked_channels():
     assert none.item() == 0.0 and none.requires_grad
 
 
+def test_aux_loss_balanced_per_word_weighs_a_words_few_cells_as_the_rest():
+    # one channel, 8 cells, 1 labelled: 'none' is the mean of the 8; 'word' the mean of the 1 and of the 7, halved
+    logits = torch.tensor([2.0, -1.0, 0.5, 0.0, -3.0, 1.0, -0.5, 0.25]).reshape(1, 1, 1, 2, 4).requires_grad_()
+    labels = torch.zeros(1, 1, 1, 2, 4, dtype=torch.uint8)
+    labels[..., 0, 1] = 1
+    bce = F.binary_cross_entropy_with_logits(logits, labels.float(), reduction="none").flatten()
+    on = labels.flatten().bool()
+    mask = torch.tensor([True])
+    torch.testing.assert_close(aux_loss(logits, labels, mask, "none"), bce.mean())
+    balanced = aux_loss(logits, labels, mask, "word")
+    torch.testing.assert_close(balanced, (bce[on].mean() + bce[~on].mean()) / 2)
+    # the labelled cell gets 1/2 of the weight (not 1/8): its gradient 4x the paper's mean
+    balanced.backward()
+    g_word = logits.grad.flatten()[on].clone()
+    logits.grad = None
+    aux_loss(logits, labels, mask, "none").backward()
+    torch.testing.assert_close(g_word, 4 * logits.grad.flatten()[on])
+    # a channel with no labelled cell in the batch: the mean over its cells; masked channels: no loss, no gradient
+    two = torch.zeros(1, 1, 3, 2, 4)
+    two[:, :, 0] = logits.detach()
+    lab = torch.zeros(1, 1, 3, 2, 4, dtype=torch.uint8)
+    lab[:, :, 0] = labels[:, :, 0]
+    bce0 = F.binary_cross_entropy_with_logits(two[:, :, 1], torch.zeros(1, 1, 2, 4))
+    torch.testing.assert_close(
+        aux_loss(two, lab, torch.tensor([True, True, False]), "word"), (balanced.detach() + bce0) / 2
+    )
+    with pytest.raises(ValueError, match="allowed values are none, word"):
+        aux_loss(logits, labels, mask, "class")
+
+
 def _batch(T: int = 3, B: int = 2, V: int = 5) -> tuple[dict, torch.Generator]:
     """One minibatch's inputs of `ppo_losses` (no aux), and the generator to draw more from."""
     g = torch.Generator().manual_seed(0)
