@@ -261,7 +261,8 @@ class PPOConfig:
     """How the aux cross-entropy weighs a word's cells (`AUX_BALANCES`): "none", the mean over every cell (the paper:
     'trained with cross-entropy loss', 'Auxiliary Task'), or "word" (opt-in), per word the mean over the cells
     labelled 1 and the mean over those labelled 0, halved: a small object's few cells weigh as much as the rest of
-    the frame (issue 34: the keys' detectors)."""
+    the frame. Retraining a checkpoint's conv on the aux labels alone, it learned the keys no better than the plain
+    mean (docs/fidelity.md, "Nor is the aux loss's weighting")."""
     adam_eps: float = 1e-5
     """Adam epsilon. Paper silent -- our choice (CleanRL/baselines PPO value)."""
 
