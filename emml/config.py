@@ -304,6 +304,9 @@ SENTENCE_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
 EQ1_WORDS: tuple[str, ...] = ("all", "content")
 """Values of `ModelConfig.eq1_words`: Eq. 1 gates x_I with every word of the text (the paper's x_BoW), or with its
 content words only."""
+ANSWER_GRADS: tuple[str, ...] = ("all", "gate")
+"""Values of `ModelConfig.answer_grad`: Eq. 5's answer loss trains the conv and x_sent (the paper's, end to end),
+or x_sent only."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
@@ -366,6 +369,14 @@ class ModelConfig:
     the textual input" (§3.1). Measured in docs/fidelity.md (issue 34): their channels, all-zero in the aux labels,
     learn to fire on the kinds of object that were referents of training questions and pull the attention off a
     test question's referent."""
+    answer_grad: str = "all"
+    """Dual-Attention with GA2: what Eq. 5's answer loss trains. 'all', the conv (through x_I and the map of Eq. 1-3)
+    and the GA2 gate's encoder x_sent, as end-to-end training does (the default; the paper stops no gradient); or,
+    opt-in, 'gate', x_sent only: x_SA is read with its gradient stopped in Eq. 4-5, so that the detectors learn from
+    the aux labels and the policy, not from the answers (without aux labels, the policy alone). Values are
+    unchanged. Measured in docs/fidelity.md (issue 34): retraining a checkpoint's conv offline on EQA frames, the
+    answer loss beside the aux loss holds the keys' detectors at AP 0.11-0.33 where the aux loss alone reaches
+    0.81-0.86."""
     x_image: str = "sigmoid"
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
@@ -404,6 +415,13 @@ class ModelConfig:
                 f"ModelConfig.eq1_words={self.eq1_words!r} chooses the words of Eq. 1: only for "
                 f"name='dual_attention' with ga1=True (got name={self.name!r}, ga1={self.ga1}); allowed there: "
                 + ", ".join(map(repr, EQ1_WORDS))
+            )
+        check_choice("ModelConfig.answer_grad", self.answer_grad, ANSWER_GRADS)
+        if self.answer_grad != "all" and not (self.name == "dual_attention" and self.ga2):
+            raise ValueError(
+                f"ModelConfig.answer_grad={self.answer_grad!r} keeps the answer loss to the GA2 gate: only for "
+                f"name='dual_attention' with ga2=True (got name={self.name!r}, ga2={self.ga2}); allowed there: "
+                + ", ".join(map(repr, ANSWER_GRADS))
             )
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
@@ -612,7 +630,8 @@ class TrainConfig:
 
     def spelled_name(self) -> str:
         """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the opt-in
-        model options (state temperature, sentence readout and activation, Eq. 1 words), the aux loss's balance,
+        model options (state temperature, sentence readout and activation, Eq. 1 words, the answer loss's reach), the
+        aux loss's balance,
         precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
@@ -627,6 +646,8 @@ class TrainConfig:
             parts.append(f"xsent{activation}")
         if (eq1 := self.model_options.get("eq1_words", "all")) != "all":  # opt-in: Eq. 1 over the content words
             parts.append(f"eq1{eq1}")
+        if (grad := self.model_options.get("answer_grad", "all")) != "all":  # opt-in: the answer loss's reach
+            parts.append(f"ans{grad}")
         if self.ppo.aux_balance != "none":  # opt-in: the aux cross-entropy balanced per word
             parts.append(f"auxbal{self.ppo.aux_balance}")
         if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it

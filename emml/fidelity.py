@@ -195,6 +195,16 @@ PAPER: tuple[PaperValue, ...] = (
         lambda c: c["model.name"] == "dual_attention" and c["model.ga1"],
     ),
     PaperValue(
+        "answer loss trains",
+        ("model.answer_grad",),
+        lambda c: ("all",),
+        "§3: Eq. 1-5 trained end to end",
+        lambda v: {"all": "the conv and x_sent", "gate": "x_sent only (x_SA's gradient stopped in Eq. 4)"}.get(
+            v[0], v[0]
+        ),
+        lambda c: c["model.name"] == "dual_attention" and c["model.ga2"],
+    ),
+    PaperValue(
         "aux loss",
         ("ppo.aux_balance",),
         lambda c: ("none",),

@@ -45,7 +45,8 @@ RUN_FILES = (CHECKPOINT, METRICS, RESULTS)
 """Files any of which makes a folder a run dir."""
 NAMED = ("table", "model", "aux", "seed", "profile", "precision", "env.difficulty", "env.tasks", "env.shaping",
          "model_options.state_temperature", "model_options.sentence_readout",
-         "model_options.sentence_activation", "model_options.eq1_words", "ppo.aux_balance")  # fmt: skip
+         "model_options.sentence_activation", "model_options.eq1_words", "model_options.answer_grad",
+         "ppo.aux_balance")  # fmt: skip
 """Identifying fields the run dir's path spells out (its table folder, `TrainConfig.spelled_name`): never repeated by
 `swept`."""
 RESOLVED = ("env.vocabulary", "env.aux_words", "env.aux_labels")

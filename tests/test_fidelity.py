@@ -81,6 +81,16 @@ def test_a_config_saved_before_a_field_existed_reads_it_as_the_run_did():
     assert cfg["precision"] == "fp32" and cfg["score_episodes"] == saved["eval_episodes"]
 
 
+def test_an_answer_loss_kept_to_the_gate_is_named_where_a_run_uses_it():
+    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
+    assert not any(d.startswith("answer loss") for d in fidelity.deviations(fidelity.resolve(saved)))
+    saved["model_options"] = {"answer_grad": "gate"}
+    assert (
+        "answer loss trains x_sent only (x_SA's gradient stopped in Eq. 4) (paper the conv and x_sent, §3: Eq. 1-5 "
+        "trained end to end)" in fidelity.deviations(fidelity.resolve(saved))
+    )
+
+
 def test_the_balanced_aux_loss_is_named_where_an_aux_run_uses_it():
     saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
     assert not any(d.startswith("aux loss") for d in fidelity.deviations(fidelity.resolve(saved)))

@@ -100,6 +100,8 @@ def test_a_model_option_is_set_from_the_command_line_and_recorded():
     assert run_name(soft) == "dual_attention-easy-noaux-xsentsoftplus-s0-paper"  # and its opt-in activation
     content = apply_overrides(TrainConfig(), {"model_options.eq1_words": "content"}).validate()
     assert run_name(content) == "dual_attention-easy-noaux-eq1content-s0-paper"  # and its opt-in Eq. 1 words
+    answer = apply_overrides(TrainConfig(aux=True), {"model_options.answer_grad": "gate"}).validate()
+    assert run_name(answer) == "dual_attention-easy-aux-ansgate-s0-paper"  # and its opt-in answer-loss reach
     balanced = apply_overrides(TrainConfig(aux=True), {"ppo.aux_balance": "word"}).validate()
     assert run_name(balanced) == "dual_attention-easy-aux-auxbalword-s0-paper"  # and its opt-in aux balance
     with pytest.raises(ValueError, match="PPOConfig.aux_balance='class': allowed values are none, word"):

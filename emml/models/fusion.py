@@ -91,6 +91,8 @@ class DualAttention(Fusion):
 
     Opt-in, ``eq1_words='content'`` (`ModelConfig.eq1_words`): Eq. 1 gates with x_BoW * m, m the run's content
     words (1) and function words (0), set from the run's words by `read_words` or restored with a checkpoint.
+    Opt-in, ``answer_grad='gate'`` (`ModelConfig.answer_grad`): Eq. 4 reads x_SA with its gradient stopped, so that
+    the answer loss trains x_sent only; every value is unchanged.
 
     Ablation switches (Section 4, "Ablation tests"):
 
@@ -118,9 +120,11 @@ class DualAttention(Fusion):
         state_scale: bool = False,
         state_temperature: float | None = None,
         eq1_words: str = "all",
+        answer_grad: str = "all",
     ) -> None:
         super().__init__()
         self.ga1, self.ga2, self.spatial = ga1, ga2, spatial
+        self.answer_grad = answer_grad
         # eq1_mask (V,): the words Eq. 1 gates with under eq1_words='content' (a buffer, saved with the weights);
         # None: every word, and no buffer, so that the paper's unit saves what it always saved
         self.register_buffer("eq1_mask", torch.ones(vocab_size) if eq1_words == "content" else None)
@@ -144,6 +148,7 @@ class DualAttention(Fusion):
             state_scale=cfg.state_scale,
             state_temperature=cfg.state_temperature,
             eq1_words=cfg.eq1_words,
+            answer_grad=cfg.answer_grad,
         )
 
     def read_words(self, mask: Tensor) -> None:
@@ -203,6 +208,8 @@ class DualAttention(Fusion):
             x_spat = None
             x_sa = x_image  # w/o SA: Eq. 2-3 removed
             state = x_ga1.reshape(n, -1)  # w/o SA: x_S = vec(x_GA1)
+        if self.answer_grad == "gate":  # opt-in: the answer loss trains x_sent only, not the conv
+            x_sa = x_sa.detach()
         x_ga2 = gated_attention(x_sa, x_sent) if self.ga2 else x_sa  # Eq. 4
         answer_logits = x_ga2.sum(dim=(2, 3))  # Eq. 5: sum over H, W (softmax outside)
         return FusionOutput(state=state, answer_logits=answer_logits, attention=x_spat)

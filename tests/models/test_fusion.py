@@ -199,6 +199,24 @@ def test_state_temperature_hands_the_policy_a_sharper_map_without_gradient():
     torch.testing.assert_close(grad_sharp, grad_plain)  # the answer's gradient into the detectors is unchanged
 
 
+def test_answer_grad_gate_keeps_the_answer_loss_out_of_the_detectors():
+    """`answer_grad='gate'` (issue 34): the same values; Eq. 5's answer reaches x_sent as before and x_I not at all,
+    while the state (the policy's path into the detectors) keeps its gradient."""
+    x_i = _scene().requires_grad_()
+    bow = torch.tensor([[0.0, 1.0, 1.0, 0.0]])
+    sent = torch.tensor([[0.0, 0.0, 1.0, 1.0]], requires_grad=True)
+    plain, gate = DualAttention(4, 1, 2)(x_i, bow, sent), DualAttention(4, 1, 2, answer_grad="gate")(x_i, bow, sent)
+    torch.testing.assert_close(gate.answer_logits, plain.answer_logits)
+    torch.testing.assert_close(gate.state, plain.state)
+    grad_i, grad_sent = torch.autograd.grad(plain.answer_logits[0, 2], (x_i, sent))
+    assert grad_i.abs().sum() > 0  # the paper's unit: the answer trains the detectors
+    gate_i, gate_sent = torch.autograd.grad(gate.answer_logits[0, 2], (x_i, sent), allow_unused=True)
+    assert gate_i is None or gate_i.abs().sum() == 0
+    torch.testing.assert_close(gate_sent, grad_sent)
+    (state_i,) = torch.autograd.grad(gate.state[0, 0], x_i)
+    assert state_i.abs().sum() > 0  # the policy still trains them through x_S
+
+
 def test_eq1_over_the_content_words_drops_the_function_words_channels_from_the_attention():
     """`eq1_words='content'` (issue 34): a function word's channel, firing on the wrong object, moves the paper's
     x_spat (Eq. 1-2) and not the content-word one's; the mask must be set (or restored) before use."""
