@@ -388,6 +388,17 @@ class ModelConfig:
     evaluation only: `emml eval CKPT --control type_gate`): Eq. 4's x_sent := a gate from the dataset's word types
     that opens the channels of the attribute a question asks for (emml/models/type_gate.py), no labels read."""
 
+    def _unit_option(self, field: str, allowed: tuple[str, ...], part: str, what: str) -> None:
+        """An opt-in option of the Dual-Attention unit: one of ``allowed``, and other than the paper's (the first)
+        only for name='dual_attention' with its ``part`` ('ga1', 'ga2') on."""
+        value, on = getattr(self, field), getattr(self, part)
+        check_choice(f"ModelConfig.{field}", value, allowed)
+        if value != allowed[0] and not (self.name == "dual_attention" and on):
+            raise ValueError(
+                f"ModelConfig.{field}={value!r} {what}: only for name='dual_attention' with {part}=True (got "
+                f"name={self.name!r}, {part}={on}); allowed there: " + ", ".join(map(repr, allowed))
+            )
+
     def validate(self) -> ModelConfig:
         """The fields' values: raise `ValueError` naming the offending field; return self when valid. Whether `name`
         is registered and declares the ablations switched off is the model registry's check
@@ -409,20 +420,8 @@ class ModelConfig:
             )
         check_choice("ModelConfig.sentence_readout", self.sentence_readout, SENTENCE_READOUTS)
         check_choice("ModelConfig.sentence_activation", self.sentence_activation, SENTENCE_ACTIVATIONS)
-        check_choice("ModelConfig.eq1_words", self.eq1_words, EQ1_WORDS)
-        if self.eq1_words != "all" and not (self.name == "dual_attention" and self.ga1):
-            raise ValueError(
-                f"ModelConfig.eq1_words={self.eq1_words!r} chooses the words of Eq. 1: only for "
-                f"name='dual_attention' with ga1=True (got name={self.name!r}, ga1={self.ga1}); allowed there: "
-                + ", ".join(map(repr, EQ1_WORDS))
-            )
-        check_choice("ModelConfig.answer_grad", self.answer_grad, ANSWER_GRADS)
-        if self.answer_grad != "all" and not (self.name == "dual_attention" and self.ga2):
-            raise ValueError(
-                f"ModelConfig.answer_grad={self.answer_grad!r} keeps the answer loss to the GA2 gate: only for "
-                f"name='dual_attention' with ga2=True (got name={self.name!r}, ga2={self.ga2}); allowed there: "
-                + ", ".join(map(repr, ANSWER_GRADS))
-            )
+        self._unit_option("eq1_words", EQ1_WORDS, "ga1", "chooses the words of Eq. 1")
+        self._unit_option("answer_grad", ANSWER_GRADS, "ga2", "keeps the answer loss to the GA2 gate")
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
         if self.control not in CONTROLS:
