@@ -262,7 +262,7 @@ class PPOConfig:
     'trained with cross-entropy loss', 'Auxiliary Task'), or "word" (opt-in), per word the mean over the cells
     labelled 1 and the mean over those labelled 0, halved: a small object's few cells weigh as much as the rest of
     the frame. Retraining a checkpoint's conv on the aux labels alone, it learned the keys no better than the plain
-    mean (docs/fidelity.md, "Nor is the aux loss's weighting")."""
+    mean (docs/fidelity.md, "The aux loss's weighting is not what holds them back")."""
     adam_eps: float = 1e-5
     """Adam epsilon. Paper silent -- our choice (CleanRL/baselines PPO value)."""
 
@@ -274,8 +274,7 @@ class PPOConfig:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "aux_balance":
-                if v not in AUX_BALANCES:
-                    raise ValueError(f"PPOConfig.aux_balance={v!r}: allowed values are {', '.join(AUX_BALANCES)}")
+                check_choice("PPOConfig.aux_balance", v, AUX_BALANCES)
                 continue
             if f.name in ("norm_adv", "clip_vloss"):
                 if not isinstance(v, bool):
@@ -630,8 +629,7 @@ class TrainConfig:
     def spelled_name(self) -> str:
         """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the opt-in
         model options (state temperature, sentence readout and activation, Eq. 1 words, the answer loss's reach), the
-        aux loss's balance,
-        precision, seed, profile."""
+        aux loss's balance, precision, seed, profile."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
             parts.append(f"{self.env.tasks}only")

@@ -104,7 +104,7 @@ def test_a_model_option_is_set_from_the_command_line_and_recorded():
     assert run_name(answer) == "dual_attention-easy-aux-ansgate-s0-paper"  # and its opt-in answer-loss reach
     balanced = apply_overrides(TrainConfig(aux=True), {"ppo.aux_balance": "word"}).validate()
     assert run_name(balanced) == "dual_attention-easy-aux-auxbalword-s0-paper"  # and its opt-in aux balance
-    with pytest.raises(ValueError, match="PPOConfig.aux_balance='class': allowed values are none, word"):
+    with pytest.raises(ValueError, match="PPOConfig.aux_balance='class' is not allowed; choose one of 'none', 'word'"):
         apply_overrides(TrainConfig(), {"ppo.aux_balance": "class"}).validate()
 
 

@@ -21,6 +21,7 @@ import torch.nn.functional as F
 from emml.config import (
     AUX_BALANCES,
     PPOConfig,  # defined beside TrainConfig (configs are leaves); still importable from here
+    check_choice,
 )
 from emml.rl.rollout import RolloutBuffer
 
@@ -118,6 +119,7 @@ def aux_loss(
         raise ValueError(f"aux_logits {tuple(aux_logits.shape)} vs labels {tuple(labels.shape)}")
     if tuple(channel_mask.shape) != (aux_logits.shape[-3],):
         raise ValueError(f"channel_mask must be ({aux_logits.shape[-3]},), got {tuple(channel_mask.shape)}")
+    check_choice("balance", balance, AUX_BALANCES)
     weight = channel_mask.to(device=aux_logits.device, dtype=aux_logits.dtype)[:, None, None]  # (V, 1, 1)
     target = labels.to(aux_logits.dtype)
     bce = F.binary_cross_entropy_with_logits(aux_logits, target, reduction="none")
@@ -129,8 +131,6 @@ def aux_loss(
         per_word = (pos + neg) / sides.clamp(min=1.0)
         mask = weight[:, 0, 0]
         return (per_word * mask).sum() / mask.sum().clamp(min=1.0)
-    if balance != "none":
-        raise ValueError(f"aux balance {balance!r}: allowed values are {', '.join(AUX_BALANCES)}")
     per_channel = aux_logits[..., :1, :, :].numel()  # entries of one channel
     return (bce * weight).sum() / (weight.sum() * per_channel).clamp(min=1.0)
 

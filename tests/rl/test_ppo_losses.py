@@ -136,7 +136,7 @@ def test_aux_loss_balanced_per_word_weighs_a_words_few_cells_as_the_rest():
     torch.testing.assert_close(
         aux_loss(two, lab, torch.tensor([True, True, False]), "word"), (balanced.detach() + bce0) / 2
     )
-    with pytest.raises(ValueError, match="allowed values are none, word"):
+    with pytest.raises(ValueError, match="balance='class' is not allowed; choose one of 'none', 'word'"):
         aux_loss(logits, labels, mask, "class")
 
 
