@@ -40,23 +40,39 @@ def test_a_changed_field_is_a_deviation_unless_the_row_sets_it():
     assert fidelity.deviations(cfg, frozenset({"env.shaping"})) == ["learning rate 0.0001 (paper 0.00025, App. A)"]
 
 
-def test_the_mean_sentence_readout_is_named_where_a_run_uses_it():
+@pytest.mark.parametrize(
+    "options, absent, named",
+    [
+        (
+            {"sentence_readout": "mean"},
+            "x_sent",
+            "x_sent read from the mean of the GRU's outputs (paper the GRU's last output, §3: 'a GRU followed by a "
+            "linear layer', its final state)",
+        ),
+        (
+            {"sentence_activation": "softplus"},
+            "x_sent activation",
+            "x_sent activation softplus (never 0) (paper ReLU, §3: 'the linear layer with ReLU activations')",
+        ),
+        (
+            {"eq1_words": "content"},
+            "Eq. 1",
+            "Eq. 1 gates with the content words only (function words out) (paper every word, §3.1: x_BoW of every "
+            "word of the text)",
+        ),
+        (
+            {"answer_grad": "gate"},
+            "answer loss",
+            "answer loss trains x_sent only (x_SA's gradient stopped in Eq. 4) (paper the conv and x_sent, §3: Eq. "
+            "1-5 trained end to end)",
+        ),
+    ],
+)
+def test_an_opt_in_model_option_is_named_where_a_run_uses_it(options, absent, named):
     saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
-    assert not any("x_sent" in d for d in fidelity.deviations(fidelity.resolve(saved)))
-    saved["model_options"] = {"sentence_readout": "mean"}
-    assert (
-        "x_sent read from the mean of the GRU's outputs (paper the GRU's last output, §3: 'a GRU followed by a "
-        "linear layer', its final state)" in fidelity.deviations(fidelity.resolve(saved))
-    )
-
-
-def test_the_softplus_sentence_activation_is_named_where_a_run_uses_it():
-    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
-    saved["model_options"] = {"sentence_activation": "softplus"}
-    assert (
-        "x_sent activation softplus (never 0) (paper ReLU, §3: 'the linear layer with ReLU activations')"
-        in fidelity.deviations(fidelity.resolve(saved))
-    )
+    assert not any(absent in d for d in fidelity.deviations(fidelity.resolve(saved)))
+    saved["model_options"] = options
+    assert named in fidelity.deviations(fidelity.resolve(saved))
 
 
 def test_our_choices_follow_the_config():
@@ -81,16 +97,6 @@ def test_a_config_saved_before_a_field_existed_reads_it_as_the_run_did():
     assert cfg["precision"] == "fp32" and cfg["score_episodes"] == saved["eval_episodes"]
 
 
-def test_an_answer_loss_kept_to_the_gate_is_named_where_a_run_uses_it():
-    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
-    assert not any(d.startswith("answer loss") for d in fidelity.deviations(fidelity.resolve(saved)))
-    saved["model_options"] = {"answer_grad": "gate"}
-    assert (
-        "answer loss trains x_sent only (x_SA's gradient stopped in Eq. 4) (paper the conv and x_sent, §3: Eq. 1-5 "
-        "trained end to end)" in fidelity.deviations(fidelity.resolve(saved))
-    )
-
-
 def test_the_balanced_aux_loss_is_named_where_an_aux_run_uses_it():
     saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
     assert not any(d.startswith("aux loss") for d in fidelity.deviations(fidelity.resolve(saved)))
@@ -101,13 +107,3 @@ def test_the_balanced_aux_loss_is_named_where_an_aux_run_uses_it():
     )
     saved["aux"] = False  # no aux loss to balance
     assert not any(d.startswith("aux loss") for d in fidelity.deviations(fidelity.resolve(saved)))
-
-
-def test_eq1_over_the_content_words_is_named_where_a_run_uses_it():
-    saved = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
-    assert not any(d.startswith("Eq. 1") for d in fidelity.deviations(fidelity.resolve(saved)))
-    saved["model_options"] = {"eq1_words": "content"}
-    assert (
-        "Eq. 1 gates with the content words only (function words out) (paper every word, §3.1: x_BoW of every word "
-        "of the text)" in fidelity.deviations(fidelity.resolve(saved))
-    )
