@@ -29,11 +29,10 @@ from pathlib import Path
 
 import tomllib
 
-from emml.registry import EXPERIMENTS_DIR, REPRODUCE_DIR, RunSpec, list_experiments
+from emml.registry import EXPERIMENT_PREFIX, REPRODUCE_DIR, RunSpec, list_experiments
 from emml.runs import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
-EXPERIMENT_PREFIX = "experiments/"
 STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "note")
 TOP_KEYS = ("title", "steps")
 OWN_KEYS = ("frames", "run_root", "results_root")
@@ -66,13 +65,6 @@ class Step:
     def overrides(self) -> dict:
         """The dotted TrainConfig overrides the step adds to its runs' own (emml.launch.with_overrides)."""
         return {**self.settings, **({"frames": self.frames} if self.frames is not None else {})}
-
-    @property
-    def table_ref(self) -> str:
-        """What `emml.registry.load_table` loads: the table's name, or an experiment's file."""
-        if self.table.startswith(EXPERIMENT_PREFIX):
-            return str(EXPERIMENTS_DIR / f"{self.table.removeprefix(EXPERIMENT_PREFIX)}.toml")
-        return self.table
 
 
 @dataclass(frozen=True)
@@ -147,7 +139,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
             raw["name"], raw["table"], raw["profile"], only, frames, raw.get("note", ""), _settings(path, where, raw)
         )
         try:  # the selection names runs the table has (the values present are named otherwise)
-            select_runs(_declared(step.table_ref, step.profile), step.only)
+            select_runs(_declared(step.table, step.profile), step.only)
         except ValueError as e:
             raise ValueError(f"{path}: {where}.only: {e}") from None
         steps.append(step)
@@ -195,7 +187,7 @@ def step_runs(
     from emml.launch import run_states, select_runs, with_overrides
 
     if states is None:
-        states = run_states(step.table_ref, step.profile, run_root, results_root)
+        states = run_states(step.table, step.profile, run_root, results_root)
     return [
         (with_overrides(spec, step.overrides(), step.profile), state)
         for spec, state in select_runs(states, step.only).values()
@@ -214,7 +206,7 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
     for step in campaign.steps:
         key = (step.table, step.profile)
         if key not in read:  # run_states reads every run dir's checkpoint: once per table and profile
-            read[key] = run_states(step.table_ref, step.profile, run_root, results_root)
+            read[key] = run_states(step.table, step.profile, run_root, results_root)
         for spec, launch_state in step_runs(step, run_root, results_root, read[key]):
             cfg = spec.to_config(step.profile, **fields)
             directory = run_dir(cfg)
@@ -324,7 +316,7 @@ def run_campaign(
         log(f"[{campaign.name} {i}/{len(campaign.steps)}] {step.name}: {step.table} [{step.profile}]")
         reports.append(
             run_table(
-                step.table_ref,
+                step.table,
                 step.profile,
                 jobs=jobs,
                 run_root=run_root,

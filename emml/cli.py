@@ -865,7 +865,9 @@ def list_experiments(
 @app.command("run")
 def run_table(
     table: str = typer.Argument(
-        ..., help="table2 | table3 | table4 | table5 (reproduce/<table>.toml), or a table file of your own (x.toml)"
+        ...,
+        help="table2 | table3 | table4 | table5 (reproduce/<table>.toml), experiments/<name> "
+        "(reproduce/experiments/<name>.toml), or a table file of your own (x.toml)",
     ),
     profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
     backend: str = typer.Option("local", help="local (process pool) | slurm (submitit)"),

@@ -231,9 +231,23 @@ readout. A campaign step names one as ``experiments/<name>`` (emml/campaign.py);
 results."""
 
 
+EXPERIMENT_PREFIX = "experiments/"
+"""How an experiment table is named wherever a table name goes: `emml run experiments/eqa_gate`, a campaign step's
+``table = "experiments/eqa_gate"`` (reproduce/experiments/eqa_gate.toml)."""
+
+
 def list_experiments(directory: Path = EXPERIMENTS_DIR) -> list[str]:
     """Names of the experiment tables (reproduce/experiments/*.toml), sorted."""
     return sorted(p.stem for p in directory.glob("*.toml"))
+
+
+def experiment_file(name: str) -> Path:
+    """reproduce/experiments/<x>.toml for ``name = "experiments/<x>"``; an unknown one fails naming those there are."""
+    file = EXPERIMENTS_DIR / f"{name.removeprefix(EXPERIMENT_PREFIX)}.toml"
+    if not file.is_file():
+        known = ", ".join(repr(EXPERIMENT_PREFIX + e) for e in list_experiments())
+        raise ValueError(f"table={name!r} is unknown; the experiments are {known}")
+    return file
 
 
 OWN_TABLES: dict[str, Path] = {}
@@ -256,13 +270,17 @@ def own_table(path: str | Path) -> str:
 
 def load_table(name: str, path: Path | None = None) -> Table:
     """Load and validate reproduce/<name>.toml (or `path`); `name` may also be the path of a .toml file of one's
-    own (its name is then the file's stem, `own_table`)."""
-    if path is None and name.endswith(".toml"):
+    own (its name is then the file's stem, `own_table`), or ``experiments/<x>`` (reproduce/experiments/<x>.toml,
+    named ``<x>`` as a file of one's own is)."""
+    if path is None and name.startswith(EXPERIMENT_PREFIX):
+        name = own_table(experiment_file(name))
+    elif path is None and name.endswith(".toml"):
         name = own_table(name)
     if path is None:
         path = OWN_TABLES.get(name) or table_path(name)
         if not path.exists():
-            raise ValueError(f"table={name!r} is unknown; choose one of {', '.join(map(repr, list_tables()))}")
+            known = [*list_tables(), *(EXPERIMENT_PREFIX + e for e in list_experiments())]
+            raise ValueError(f"table={name!r} is unknown; choose one of {', '.join(map(repr, known))}")
     try:
         with open(path, "rb") as f:
             data = tomllib.load(f)

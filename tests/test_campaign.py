@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from emml.campaign import load_campaign, pin_worktree, run_campaign, status, step_runs
+from emml.registry import load_table
 from emml.runlock import hold_run
 from tests.test_launch import calls, fake_train
 
@@ -113,7 +114,7 @@ def test_the_reference_campaign_loads():
     paper = next(s for s in plan.steps if s.profile == "paper")  # its curve has the quick runs' points (100k apart)
     assert paper.overrides() == {"eval_every": 100_000, "eval_episodes": 100, "frames": 1_500_000}
     experiment = next(s for s in plan.steps if s.table == "experiments/eqa_readout")  # issue 34's experiment
-    assert Path(experiment.table_ref).is_file()
+    assert load_table(experiment.table).name == "eqa_readout"
 
 
 def test_an_experiment_step_trains_its_own_rows_and_borrows_the_papers(tracking, campaigns):

@@ -164,8 +164,20 @@ def test_placeholder_declares_no_runs(tmp_path):
 
 
 def test_unknown_table_lists_the_known_ones():
-    with pytest.raises(ValueError, match="table2"):
+    with pytest.raises(ValueError, match="table2.*'experiments/eqa_gate'"):
         load_table("table9")
+
+
+def test_an_experiment_loads_by_the_name_a_campaign_step_gives_it():
+    """`emml run experiments/eqa_gate` and a campaign step's table = "experiments/eqa_gate" load
+    reproduce/experiments/eqa_gate.toml under the plain name its runs and results are filed by."""
+    table = load_table("experiments/eqa_gate")
+    assert table.name == "eqa_gate" and table.path == REPRODUCE_DIR / "experiments" / "eqa_gate.toml"
+    assert load_table("eqa_gate").name == "eqa_gate"  # loaded once, found again by that name (the launcher)
+    with pytest.raises(
+        ValueError, match="table='experiments/nope' is unknown; the experiments are .*'experiments/eqa_gate'"
+    ):
+        load_table("experiments/nope")
 
 
 @pytest.mark.parametrize("name, cells", [("table2", 56), ("table3", 28), ("table4", 16), ("table5", 28)])
