@@ -170,6 +170,7 @@ def oracle(
     from emml.envs.vector import make_env
 
     install_signal_handlers()
+    _defer_to_learners()
     gym_id = _gym_id(env_name)
     if video is not None and gym_id != DOOM_ID:
         _fail(f"--video records Doom episodes only; leave it out with --env {env_name}")
@@ -366,6 +367,16 @@ def models(
     )
 
 
+def _defer_to_learners() -> None:
+    """A command that plays or scores models but trains none yields the CPU to the trainings running beside it
+    (emml.rl.contention.defer_to_learners), and says so."""
+    from emml.rl.contention import defer_to_learners
+
+    message = defer_to_learners()
+    if message:
+        typer.echo(message, err=True)
+
+
 def _use_tcmalloc() -> None:
     """Re-exec once under tcmalloc when installed, else tune glibc in-process (~2x CPU training speed either way,
     docs/throughput.md); EMML_MALLOC picks one (emml.alloc.CHOICES)."""
@@ -508,6 +519,7 @@ def eval_checkpoint(
 
     _check_checkpoint(checkpoint)
     install_signal_handlers()
+    _defer_to_learners()
     if not as_json:
         typer.echo(f"evaluating {checkpoint}: {episodes} greedy episodes per task and split…", err=True)
     try:
@@ -549,6 +561,7 @@ def rescore_runs(
         except (NotFinished, NoProvenance) as e:
             _fail(str(e))
     install_signal_handlers()
+    _defer_to_learners()
     data, lines = [], []
     for run in runs:
         if not as_json:
@@ -590,6 +603,7 @@ def transfer(
 
     _check_checkpoint(checkpoint)
     install_signal_handlers()
+    _defer_to_learners()
     new_words = tuple(w.strip() for w in words.split(",") if w.strip())
     try:
         scores = transfer_checkpoint(checkpoint, new_words, episodes=episodes, seed=seed, detector=detector)
@@ -636,6 +650,7 @@ def diagnose(
 
     _check_checkpoint(checkpoint)
     install_signal_handlers()
+    _defer_to_learners()
     try:
         check_choice("split", split, ("train", "test", "both"))
         result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed, eqa_episodes, control)
@@ -694,6 +709,7 @@ def probe_eqa_cmd(
         _fail(str(e))
     _check_checkpoint(checkpoint)
     install_signal_handlers()
+    _defer_to_learners()
     if not as_json:
         typer.echo(f"probing {checkpoint}: {episodes} first frames per EQA question…", err=True)
     try:
@@ -728,6 +744,7 @@ def visualize_channels(
 
     models = _models(checkpoint, *([compare] if compare else []))
     install_signal_handlers()
+    _defer_to_learners()
     out = _out(out)
     path = out / f"channels-{checkpoint.parent.name}.png"
     channels_figure([(label, m) for label, m, _ in models], models[0][2].env, path, seed=seed)
@@ -753,6 +770,7 @@ def visualize_attention(
         _fail(str(e))
     ((_, model, cfg),) = _models(checkpoint)
     install_signal_handlers()
+    _defer_to_learners()
     out = _out(out)
     ep = record_episode(model, cfg.env, task, seed)
     path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
@@ -770,6 +788,7 @@ def visualize_house(
     from emml.report.house_views import house_views
 
     install_signal_handlers()
+    _defer_to_learners()
     path = house_views(_out(out) / "house-views.png", seed=seed)
     typer.echo(f"wrote {path}")
 
@@ -787,6 +806,7 @@ def video(
 
     ((_, model, cfg),) = _models(checkpoint)
     install_signal_handlers()
+    _defer_to_learners()
     out = _out(out)
     tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
     for task in tasks:
@@ -1106,6 +1126,7 @@ def reports(out: Path = typer.Option(None, help="Output folder (default: reports
 
     _check_store()  # the curves read MLflow
     install_signal_handlers()
+    _defer_to_learners()
     typer.echo(f"wrote {write_reports(_out(out) if out else None, log=typer.echo)}")
 
 

@@ -1,5 +1,7 @@
 import json
 
+import pytest
+import typer
 from typer.testing import CliRunner
 
 from emml.cli import app
@@ -193,3 +195,30 @@ def test_a_stopped_run_prints_a_resume_command_the_shell_reads_back(monkeypatch)
     again = result.output.split("resume with: ", 1)[1].strip()
     argv = ["emml", "run", "table3", "--profile", "quick", "--only", "row=w/o Reward Shaping", "--only", "seed=0"]
     assert shlex.split(again) == argv
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ("oracle",),
+        ("eval",),
+        ("rescore",),
+        ("transfer",),
+        ("diagnose",),
+        ("probe-eqa",),
+        ("video",),
+        ("reports",),
+        ("visualize", "channels"),
+        ("visualize", "attention"),
+        ("visualize", "house"),
+    ],
+)
+def test_commands_that_train_nothing_yield_the_cpu_to_trainings(command):
+    """Each command that plays or scores a model beside a campaign defers to it (tests/rl/test_contention.py:
+    lowest priority, one thread), after its inputs are checked and before it plays."""
+    import inspect
+
+    group = typer.main.get_command(app)
+    for name in command:
+        group = group.commands[name]
+    assert "_defer_to_learners()" in inspect.getsource(group.callback)

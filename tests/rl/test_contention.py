@@ -1,6 +1,10 @@
 """Other learners are found from /proc (a fake one here) and share the cores with a warning."""
 
-from emml.rl.contention import other_learners, share_cores
+import os
+import subprocess
+import sys
+
+from emml.rl.contention import LOWEST_PRIORITY, other_learners, share_cores
 
 
 def _proc(tmp_path, pid: int, argv: list[str], ppid: int = 1, state: str = "S"):
@@ -33,3 +37,29 @@ def test_cores_are_shared_and_an_explicit_choice_is_kept():
     assert threads == 1 and "1 other emml learner(s) running (pid 123)" in warning and "threads=N" in warning
     assert share_cores(0, cores=16, others=[1, 2, 3])[0] == 4
     assert share_cores(2, cores=2, others=[123])[0] == 2
+
+
+def test_a_campaign_is_a_learner_and_its_status_is_not(tmp_path):
+    """A campaign trains in its own process (or a forked child of it): a `train` beside it shares the cores."""
+    _proc(tmp_path, 100, ["/x/.venv/bin/python", "-m", "emml.cli", "campaign", "reference", "--no-pin"])
+    _proc(tmp_path, 200, ["/x/.venv/bin/emml", "campaign", "reference", "--status"])
+    assert other_learners(tmp_path) == [100]
+
+
+def test_a_command_beside_a_learner_yields_the_cpu_to_it():
+    """Beside a learner, a command that trains nothing takes the lowest priority and one thread; with none beside
+    it, it keeps both. Run in subprocesses (nice only rises); the learners are given, /proc's reading is above."""
+
+    def probe(others: list[int]) -> list[str]:
+        code = (
+            "import os, torch; from emml.rl.contention import defer_to_learners; torch.set_num_threads(2); "
+            f"m = defer_to_learners({others!r}); print(os.nice(0), torch.get_num_threads()); print(m)"
+        )
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split(
+            "\n"
+        )
+
+    first, message = probe([4242])[:2]
+    assert first == f"{LOWEST_PRIORITY} 1"
+    assert "1 emml learner(s) running (pid 4242)" in message and f"nice {LOWEST_PRIORITY}" in message
+    assert probe([])[:2] == [f"{os.nice(0)} 2", "None"]
