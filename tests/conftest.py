@@ -115,6 +115,19 @@ def no_leftovers():
 def pytest_configure(config):
     worker = os.environ.get("PYTEST_XDIST_WORKER", "main")  # one store per worker: sqlite takes one writer at a time
     os.environ.setdefault("MLFLOW_TRACKING_URI", f"sqlite:////tmp/emml-tests-mlflow-{worker}.db")
+    from emml.rl.contention import other_learners, yield_cpu
+
+    learners = other_learners()
+    if learners:  # a training on this machine (a campaign): the suite takes only the CPU time it leaves
+        config.stash[YIELDED] = f"beside emml learner(s) {', '.join(map(str, learners))}: tests run at {yield_cpu()}"
+
+
+YIELDED = pytest.StashKey[str]()
+"""What `pytest_configure` did to keep from slowing a training beside the suite (shown in the report header)."""
+
+
+def pytest_report_header(config):
+    return config.stash.get(YIELDED, None)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -48,18 +48,25 @@ def test_a_campaign_is_a_learner_and_its_status_is_not(tmp_path):
 
 def test_a_command_beside_a_learner_yields_the_cpu_to_it():
     """Beside a learner, a command that trains nothing takes the lowest priority and one thread; with none beside
-    it, it keeps both. Run in subprocesses (nice only rises); the learners are given, /proc's reading is above."""
+    it, it keeps both; one that yields already is left as it is. Run in subprocesses (nice only rises); the learners
+    are given, /proc's reading is above."""
 
-    def probe(others: list[int]) -> list[str]:
-        code = (
+    def probe(others: list[int], policy: str = "SCHED_OTHER") -> list[str]:
+        code = (  # from the default policy (a suite beside a campaign runs at SCHED_IDLE: tests/conftest.py)
             "import os, torch; from emml.rl.contention import defer_to_learners; torch.set_num_threads(2); "
-            f"m = defer_to_learners({others!r}); print(os.nice(0), torch.get_num_threads()); print(m)"
+            f"os.sched_setscheduler(0, os.{policy}, os.sched_param(0)); "
+            f"m = defer_to_learners({others!r}); print(os.nice(0), torch.get_num_threads(), os.sched_getscheduler(0));"
+            " print(m)"
         )
         return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split(
             "\n"
         )
 
     first, message = probe([4242])[:2]
-    assert first == f"{LOWEST_PRIORITY} 1"
-    assert "1 emml learner(s) running (pid 4242)" in message and f"nice {LOWEST_PRIORITY}" in message
-    assert probe([])[:2] == [f"{os.nice(0)} 2", "None"]
+    assert first == f"{LOWEST_PRIORITY} 1 {os.SCHED_IDLE}"
+    assert message == (
+        "1 emml learner(s) running (pid 4242): this command runs on CPU time they leave (SCHED_IDLE, one thread)"
+        " so as not to slow them."
+    )
+    assert probe([])[:2] == [f"{os.nice(0)} 2 {os.SCHED_OTHER}", "None"]
+    assert probe([4242], "SCHED_IDLE")[:2] == [f"{os.nice(0)} 2 {os.SCHED_IDLE}", "None"]
