@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from emml.env_kinds import ENV_KINDS, env_label
-from emml.registry import REPRODUCE_DIR, Table, list_tables, load_table
+from emml.registry import EXPERIMENT_PREFIX, EXPERIMENTS_DIR, REPRODUCE_DIR, Table, list_tables, load_table
 from emml.results import read_results
 from emml.tracking import project_path, project_root
 
@@ -214,7 +214,10 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
 
 
 def _shown_path(path: Path) -> str:
-    """A table file as a user types it: relative to the project root when under it."""
+    """A table file as a user types it: ``experiments/<name>`` for reproduce/experiments/<name>.toml, else relative to
+    the project root when under it."""
+    if path.resolve().parent == EXPERIMENTS_DIR.resolve():
+        return EXPERIMENT_PREFIX + path.stem
     try:
         return str(path.resolve().relative_to(project_root().resolve()))
     except ValueError:

@@ -230,13 +230,14 @@ def test_placeholder_shows_the_papers_numbers(tmp_path, placeholder_table):
 
 
 def test_an_experiments_caption_names_its_file_not_a_table_of_the_paper(tmp_path):
-    """Issue 34's experiment is no table of the paper: its caption says what it is and how to run it, by file."""
+    """Issue 34's experiment is no table of the paper: its caption says what it is and how to run it, by the name
+    `emml run` and a campaign step give it."""
     from emml.registry import EXPERIMENTS_DIR
 
     none = tmp_path / "none"
     caption = report(str(EXPERIMENTS_DIR / "eqa_readout.toml"), tmp_path, results_root=none)["caption"]
     assert caption.startswith("Dual-Attention, Doom Easy, Aux: x_sent read from") and "Table" not in caption
-    assert "`emml run reproduce/experiments/eqa_readout.toml --profile quick`" in caption
+    assert "`emml run experiments/eqa_readout --profile quick`" in caption  # as a campaign step names it
     assert report("table3", tmp_path, results_root=none)["caption"].startswith("Ours vs the paper's Table 3")
     assert sorted(p.name for p in (tmp_path / "reports").glob("eqa_readout-*")) == [
         "eqa_readout-quick.md",
