@@ -93,11 +93,12 @@ def yield_cpu() -> str:
     return "SCHED_IDLE"
 
 
-def _policy() -> int | None:
+def _yielded() -> bool:
+    """Whether this process runs at SCHED_IDLE already (a test suite beside a campaign: tests/conftest.py)."""
     try:
-        return os.sched_getscheduler(0)
-    except (AttributeError, OSError):
-        return None
+        return os.sched_getscheduler(0) == os.SCHED_IDLE
+    except (AttributeError, OSError):  # not Linux: nothing tells, so not yielded
+        return False
 
 
 def defer_to_learners(others: list[int] | None = None) -> str | None:
@@ -108,7 +109,7 @@ def defer_to_learners(others: list[int] | None = None) -> str | None:
     import torch
 
     others = other_learners() if others is None else others
-    if not others or _policy() == getattr(os, "SCHED_IDLE", None):  # none to yield to, or yielded already
+    if not others or _yielded():
         return None
     how = yield_cpu()
     torch.set_num_threads(1)
