@@ -29,7 +29,7 @@ from pathlib import Path
 
 import tomllib
 
-from emml.registry import EXPERIMENT_PREFIX, REPRODUCE_DIR, RunSpec, list_experiments
+from emml.registry import REPRODUCE_DIR, RunSpec
 from emml.runs import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
@@ -103,7 +103,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
     from emml.launch import ONLY_FIELDS, select_runs
     from emml.profiles import load_profiles
-    from emml.registry import list_tables
+    from emml.registry import table_names
 
     path = directory / f"{name}.toml"
     if not path.is_file():
@@ -118,7 +118,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     if not isinstance(raw_steps, list) or not raw_steps:
         raise ValueError(f"{path}: 'steps' must be a non-empty array of tables ([[steps]])")
     steps, profiles = [], load_profiles()
-    tables = [*list_tables(), *(f"{EXPERIMENT_PREFIX}{e}" for e in list_experiments())]
+    tables = table_names()
     for i, raw in enumerate(raw_steps):
         where = f"steps[{i}]"
         _check_keys(path, where, raw, STEP_KEYS)

@@ -241,6 +241,11 @@ def list_experiments(directory: Path = EXPERIMENTS_DIR) -> list[str]:
     return sorted(p.stem for p in directory.glob("*.toml"))
 
 
+def table_names() -> list[str]:
+    """Every name `load_table` takes for a table of reproduce/: table2..5, then experiments/<name>."""
+    return [*list_tables(), *(EXPERIMENT_PREFIX + e for e in list_experiments())]
+
+
 def experiment_file(name: str) -> Path:
     """reproduce/experiments/<x>.toml for ``name = "experiments/<x>"``; an unknown one fails naming those there are."""
     file = EXPERIMENTS_DIR / f"{name.removeprefix(EXPERIMENT_PREFIX)}.toml"
@@ -279,8 +284,7 @@ def load_table(name: str, path: Path | None = None) -> Table:
     if path is None:
         path = OWN_TABLES.get(name) or table_path(name)
         if not path.exists():
-            known = [*list_tables(), *(EXPERIMENT_PREFIX + e for e in list_experiments())]
-            raise ValueError(f"table={name!r} is unknown; choose one of {', '.join(map(repr, known))}")
+            raise ValueError(f"table={name!r} is unknown; choose one of {', '.join(map(repr, table_names()))}")
     try:
         with open(path, "rb") as f:
             data = tomllib.load(f)
