@@ -166,11 +166,9 @@ def oracle(
 ):
     """Accuracy of the scripted expert (privileged state): every episode must be solvable."""
     from emml.agents.oracle import run_oracle
-    from emml.envs.engine import install_signal_handlers
     from emml.envs.vector import make_env
 
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     gym_id = _gym_id(env_name)
     if video is not None and gym_id != DOOM_ID:
         _fail(f"--video records Doom episodes only; leave it out with --env {env_name}")
@@ -205,9 +203,8 @@ def bench_env(
 ):
     """Raw ViZDoom vs our env (labels off/on), and the vector env with 1 and 2 workers."""
     from emml.bench import bench_env as run
-    from emml.envs.engine import install_signal_handlers
 
-    install_signal_handlers()
+    _own_engines(defer=False)
     _, cfg = _env_config(_gym_id(env_name), difficulty, height=height, width=width, interpolation=interpolation)
     result = run(cfg, steps=steps, vector_steps=steps)
     text = [f"{env_name} env bench at {width}x{height} (render {result['render']}):"]
@@ -239,7 +236,6 @@ def bench_train_cmd(
     """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
     with --runs N, the aggregate of N packed runs against the raw simulator limit of the machine's cores."""
     from emml.bench import PARTS, bench_train
-    from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
     from emml.rl.hardware import check_runnable
 
@@ -251,7 +247,7 @@ def bench_train_cmd(
     if part not in PARTS:
         _fail(f"--part {part!r}: allowed values are {', '.join(PARTS)}")
     _use_tcmalloc()
-    install_signal_handlers()
+    _own_engines(defer=False)
     r = bench_train(cfg, updates, runs, part=part, stack=stack)
     if stack > 1:
         lines = [
@@ -367,11 +363,16 @@ def models(
     )
 
 
-def _defer_to_learners() -> None:
-    """A command that plays or scores models but trains none yields the CPU to the trainings running beside it
-    (emml.rl.contention.defer_to_learners), and says so."""
+def _own_engines(defer: bool = True) -> None:
+    """The ViZDoom engines this command starts end with it, on SIGINT/SIGTERM too
+    (emml.envs.engine.install_signal_handlers). With `defer`, a command that plays or scores models but trains none
+    yields the CPU to the trainings running beside it (emml.rl.contention.defer_to_learners), and says so."""
+    from emml.envs.engine import install_signal_handlers
     from emml.rl.contention import defer_to_learners
 
+    install_signal_handlers()
+    if not defer:
+        return
     message = defer_to_learners()
     if message:
         typer.echo(message, err=True)
@@ -423,7 +424,6 @@ def train(
 ):
     """Train one run (resumes it if interrupted; a finished run is not retrained); with --pack-seeds, several
     seeds of it in one process, each written as its own run."""
-    from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
     from emml.rl.hardware import check_runnable
 
@@ -456,7 +456,7 @@ def train(
             f"{cfg.frames_per_update:,}: {cfg.num_updates * cfg.frames_per_update:,} frames",
             err=True,
         )
-    install_signal_handlers()
+    _own_engines(defer=False)
     from emml.checkpoint import CheckpointError
     from emml.diskspace import NoSpaceError
     from emml.rl.trainer import train as run
@@ -514,12 +514,10 @@ def eval_checkpoint(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Greedy accuracy of a checkpoint on SGN/EQA train/test (reproducible under --seed)."""
-    from emml.envs.engine import install_signal_handlers
     from emml.runs import evaluate_checkpoint
 
     _check_checkpoint(checkpoint)
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     if not as_json:
         typer.echo(f"evaluating {checkpoint}: {episodes} greedy episodes per task and split…", err=True)
     try:
@@ -544,7 +542,6 @@ def rescore_runs(
     results-table row rewritten, training provenance kept, scored_sha / eval_episodes / eval_seed recorded."""
     from emml.checkpoint import load_checkpoint
     from emml.config import TrainConfig
-    from emml.envs.engine import install_signal_handlers
     from emml.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
     from emml.runlock import RunLocked
 
@@ -560,8 +557,7 @@ def rescore_runs(
             training_record(rdir, ckpt, cfg)
         except (NotFinished, NoProvenance) as e:
             _fail(str(e))
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     data, lines = [], []
     for run in runs:
         if not as_json:
@@ -597,13 +593,11 @@ def transfer(
 ):
     """Table 4 on one checkpoint (§5.4): append detectors for new words, score every SGN test instruction that
     holds one, without fine-tuning; rows as in reproduce/table4.toml."""
-    from emml.envs.engine import install_signal_handlers
     from emml.registry import load_table
     from emml.transfer import transfer_checkpoint
 
     _check_checkpoint(checkpoint)
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     new_words = tuple(w.strip() for w in words.split(",") if w.strip())
     try:
         scores = transfer_checkpoint(checkpoint, new_words, episodes=episodes, seed=seed, detector=detector)
@@ -645,12 +639,10 @@ def diagnose(
     from emml.diagnose import diagnose_checkpoint, summary_line
     from emml.diagnose_eqa import eqa_table
     from emml.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
-    from emml.envs.engine import install_signal_handlers
     from emml.tasks.language import check_choice
 
     _check_checkpoint(checkpoint)
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     try:
         check_choice("split", split, ("train", "test", "both"))
         result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed, eqa_episodes, control)
@@ -697,7 +689,6 @@ def probe_eqa_cmd(
     episodes, conv and Dual-Attention frozen, x_sent's encoder (GRU + Linear; the embedding copied from the
     checkpoint, frozen) retrained on the training questions' answers per readout and seed; answer accuracy on the
     train and test questions beside the checkpoint's own encoder (emml/probe_eqa.py)."""
-    from emml.envs.engine import install_signal_handlers
     from emml.probe_eqa import ProbeOptions, probe_checkpoint, probe_table
 
     chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
@@ -708,8 +699,7 @@ def probe_eqa_cmd(
     except ValueError as e:
         _fail(str(e))
     _check_checkpoint(checkpoint)
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     if not as_json:
         typer.echo(f"probing {checkpoint}: {episodes} first frames per EQA question…", err=True)
     try:
@@ -739,12 +729,10 @@ def visualize_channels(
     seed: int = 0,
 ):
     """The channel figure: per word, its aux label, each model's conv3 channel, and the frame."""
-    from emml.envs.engine import install_signal_handlers
     from emml.report.visualize import channels_figure
 
     models = _models(checkpoint, *([compare] if compare else []))
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     out = _out(out)
     path = out / f"channels-{checkpoint.parent.name}.png"
     channels_figure([(label, m) for label, m, _ in models], models[0][2].env, path, seed=seed)
@@ -760,7 +748,6 @@ def visualize_attention(
     rows: int = typer.Option(6, min=1, help="Steps shown, spread over the episode."),
 ):
     """The attention figure: one greedy episode, rows over time (frame, x_spat, x_Ans, action), x_sent on top."""
-    from emml.envs.engine import install_signal_handlers
     from emml.report.visualize import attention_figure, record_episode
     from emml.tasks.language import check_choice
 
@@ -769,8 +756,7 @@ def visualize_attention(
     except ValueError as e:
         _fail(str(e))
     ((_, model, cfg),) = _models(checkpoint)
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     out = _out(out)
     ep = record_episode(model, cfg.env, task, seed)
     path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
@@ -784,11 +770,9 @@ def visualize_house(
     seed: int = 0,
 ):
     """Three first-person views of the House with furniture in the episode's colours (Appendix C's example views)."""
-    from emml.envs.engine import install_signal_handlers
     from emml.report.house_views import house_views
 
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     path = house_views(_out(out) / "house-views.png", seed=seed)
     typer.echo(f"wrote {path}")
 
@@ -801,12 +785,10 @@ def video(
     seed: int = 0,
 ):
     """A captioned GIF per greedy episode: the sentence, each action, the outcome."""
-    from emml.envs.engine import install_signal_handlers
     from emml.report.visualize import episode_gif, record_episode
 
     ((_, model, cfg),) = _models(checkpoint)
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     out = _out(out)
     tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
     for task in tasks:
@@ -823,7 +805,6 @@ def demo(
 ):
     """The main job: a short Dual-Attention training (aux on) on Doom Easy instruction following (SGN), evaluated,
     logged to MLflow, with a report (accuracies, training curve, diagnostics) in reports/."""
-    from emml.envs.engine import install_signal_handlers
     from emml.profiles import profile_config
 
     # SGN only: within the demo's minutes the agent leaves chance on instructions (both tasks need more frames)
@@ -836,7 +817,7 @@ def demo(
     except ValueError as e:
         _fail(str(e))
     _use_tcmalloc()
-    install_signal_handlers()
+    _own_engines(defer=False)
     from emml.report.demo import write_demo_report
     from emml.rl.trainer import train as run
 
@@ -1121,12 +1102,10 @@ def report(
 @app.command("reports")
 def reports(out: Path = typer.Option(None, help="Output folder (default: reports/).")):
     """Every table, curve and figure for the profiles that have results, and reports/index.md linking them."""
-    from emml.envs.engine import install_signal_handlers
     from emml.report.index import write_reports
 
     _check_store()  # the curves read MLflow
-    install_signal_handlers()
-    _defer_to_learners()
+    _own_engines()
     typer.echo(f"wrote {write_reports(_out(out) if out else None, log=typer.echo)}")
 
 

@@ -221,4 +221,4 @@ def test_commands_that_train_nothing_yield_the_cpu_to_trainings(command):
     group = typer.main.get_command(app)
     for name in command:
         group = group.commands[name]
-    assert "_defer_to_learners()" in inspect.getsource(group.callback)
+    assert "_own_engines()" in inspect.getsource(group.callback)  # defer=True: the default
