@@ -255,6 +255,18 @@ def experiment_file(name: str) -> Path:
     return file
 
 
+def table_ref(path: Path) -> str:
+    """A table file as a user types it, the inverse of `experiment_file`: ``experiments/<name>`` for
+    reproduce/experiments/<name>.toml, else relative to the project root when under it."""
+    path = path.resolve()
+    if path.parent == EXPERIMENTS_DIR:
+        return EXPERIMENT_PREFIX + path.stem
+    try:
+        return str(path.relative_to(REPRODUCE_DIR.parent))
+    except ValueError:
+        return str(path)
+
+
 OWN_TABLES: dict[str, Path] = {}
 """Tables of one's own loaded from a .toml path in this process (`load_table('./my_table.toml')`): name (the file's
 stem) -> file, so that loading them again by name (the launcher, reports) finds them."""

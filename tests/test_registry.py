@@ -6,7 +6,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from emml.registry import REPRODUCE_DIR, list_tables, load_table
+from emml.registry import REPRODUCE_DIR, list_tables, load_table, table_names, table_ref
 from emml.report.tables import paper_numbers
 from emml.runs import run_name
 
@@ -178,6 +178,15 @@ def test_an_experiment_loads_by_the_name_a_campaign_step_gives_it():
         ValueError, match="table='experiments/nope' is unknown; the experiments are .*'experiments/eqa_gate'"
     ):
         load_table("experiments/nope")
+
+
+@pytest.mark.parametrize("name", table_names())
+def test_a_table_file_is_shown_as_the_name_that_loads_it(name, tmp_path):
+    """Report captions print `emml run <table_ref>`: it must load the same table (experiments/<x> or the file)."""
+    ref = table_ref(load_table(name).path)
+    assert ref == name if name.startswith("experiments/") else ref == f"reproduce/{name}.toml"
+    outside = tmp_path / "mine.toml"
+    assert table_ref(outside) == str(outside.resolve())  # not under the project: as given
 
 
 @pytest.mark.parametrize("name, cells", [("table2", 56), ("table3", 28), ("table4", 16), ("table5", 28)])

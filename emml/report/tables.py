@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from emml.env_kinds import ENV_KINDS, env_label
-from emml.registry import EXPERIMENT_PREFIX, EXPERIMENTS_DIR, REPRODUCE_DIR, Table, list_tables, load_table
+from emml.registry import REPRODUCE_DIR, Table, list_tables, load_table, table_ref
 from emml.results import read_results
 from emml.tracking import project_path, project_root
 
@@ -170,7 +170,7 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
         parts = [f"Ours vs the paper's Table {table.name.removeprefix('table')} ({table.paper_label}): {table.title}."]
     else:  # an experiment beyond the paper's tables, or a table of one's own: run and reported by its file
         parts = [f"{table.title} ({table.paper_label})."]
-    ref = table.name if paper else _shown_path(table.path)
+    ref = table.name if paper else table_ref(table.path)
     if constant:
         parts.append(f"Setting: {', '.join(constant)}.")
     if table.placeholder:
@@ -211,17 +211,6 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
         )
     parts.append(f"Made by `emml run {ref} --profile {profile}` and `emml report {ref} --profile {profile}`.")
     return " ".join(parts)
-
-
-def _shown_path(path: Path) -> str:
-    """A table file as a user types it: ``experiments/<name>`` for reproduce/experiments/<name>.toml, else relative to
-    the project root when under it."""
-    if path.resolve().parent == EXPERIMENTS_DIR.resolve():
-        return EXPERIMENT_PREFIX + path.stem
-    try:
-        return str(path.resolve().relative_to(project_root().resolve()))
-    except ValueError:
-        return str(path)
 
 
 def shown_runs(
