@@ -22,6 +22,9 @@ Per question of each EQA split the run is scored on, ``episodes`` greedy episode
   (emml/models/type_gate.py); ``gate_summary``: its value on the question's content words, the mean over colour and
   over object channels, and the mean over episodes on the correct answer's channel (the channel that must win
   Eq. 5). None for a model without a GA2 gate.
+
+``splits`` holds, per split, the mean over its questions of accuracy, steps and attention on the referent (each
+question once), the last rows of the text table.
 """
 
 from __future__ import annotations
@@ -218,7 +221,24 @@ def diagnose_eqa(
                 result["questions"].append(row)
     if result["questions"] and result["questions"][0]["attended"] is None:
         result["attention_note"] = "no spatial attention x_spat in this model: attention columns n/a"
+    result["splits"] = split_means(result["questions"])
     return result
+
+
+def split_means(rows: list[dict]) -> dict[str, dict]:
+    """Per split, the unweighted mean over its questions of accuracy, steps and attention on the referent (None
+    without spatial attention): each question counts once, however often a split's sampler draws it."""
+    means = {}
+    for split in dict.fromkeys(r["split"] for r in rows):
+        mine = [r for r in rows if r["split"] == split]
+        on_ref = [r["attention_on_referent"] for r in mine]
+        means[split] = {
+            "questions": len(mine),
+            "accuracy": float(np.mean([r["accuracy"] for r in mine])),
+            "steps": float(np.mean([r["steps"] for r in mine])),
+            "attention_on_referent": None if None in on_ref else float(np.mean(on_ref)),
+        }
+    return means
 
 
 def _top(counts: dict[str, int] | None, k: int) -> str:
@@ -250,6 +270,11 @@ def eqa_table(result: dict) -> str:
             f"{r['split']:<5}  {r['question']:<{width}}  {r['accuracy']:4.2f}  {r['steps']:5.1f}  "
             f"{_top(r['answers'], 3):<32}  {_top(r['attended'], 2):<42}  {_num(r['attention_on_referent']):>6}  "
             f"{_num(g and g['answer_channel']):>14}"
+        )
+    for split, m in result["splits"].items():
+        lines.append(
+            f"{split:<5}  {'mean over its ' + str(m['questions']) + ' questions':<{width}}  {m['accuracy']:4.2f}  "
+            f"{m['steps']:5.1f}  {'':<32}  {'':<42}  {_num(m['attention_on_referent']):>6}"
         )
     if rows[0]["ga1_at_referent"] is not None:
         lines += [

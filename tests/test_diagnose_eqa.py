@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from emml.config import DoomConfig
-from emml.diagnose_eqa import NO_ANSWER, diagnose_eqa, eqa_table
+from emml.diagnose_eqa import NO_ANSWER, diagnose_eqa, eqa_table, split_means
 from emml.envs.vector import make_env
 from emml.evaluate import play
 from emml.models import build_model
@@ -70,6 +70,24 @@ def test_each_question_row_is_computed_from_its_episodes(no_leftovers):
     text = eqa_table(result)
     assert all(q in text for q in QUESTIONS) and "GA2 gate (Eq. 4)" in text and "at the referent" in text
     assert "Detectors at the referent" in text and "lead" in text
+    # one question per split here: each split's mean row is that question's
+    for r in result["questions"]:
+        m = result["splits"][r["split"]]
+        assert m["questions"] == 1 and m["accuracy"] == r["accuracy"] and m["steps"] == r["steps"]
+        assert m["attention_on_referent"] == r["attention_on_referent"]
+    assert "train  mean over its 1 questions" in text and "test   mean over its 1 questions" in text
+
+
+def test_a_split_mean_counts_each_question_once():
+    rows = [
+        {"split": "train", "accuracy": 1.0, "steps": 1.0, "attention_on_referent": 0.5},
+        {"split": "train", "accuracy": 0.0, "steps": 3.0, "attention_on_referent": 0.0},
+        {"split": "test", "accuracy": 0.25, "steps": 2.0, "attention_on_referent": None},
+    ]
+    means = split_means(rows)
+    assert list(means) == ["train", "test"]  # the order the rows give
+    assert means["train"] == {"questions": 2, "accuracy": 0.5, "steps": 2.0, "attention_on_referent": 0.25}
+    assert means["test"] == {"questions": 1, "accuracy": 0.25, "steps": 2.0, "attention_on_referent": None}
 
 
 class _Oracle(ScriptedModel):
@@ -112,6 +130,7 @@ def test_an_oracle_gets_every_row_right(no_leftovers):
         # Eq. 5's inputs at the referent: every colour, the referent's own label the highest
         assert list(r["detectors_at_referent"]) == list(load_dataset("doom").word_groups["colors"])
         assert r["answer_lead"] > 0  # its own colour covers every cell, a neighbour's at most some
+    assert all(m["accuracy"] == 1.0 and m["attention_on_referent"] == 1.0 for m in result["splits"].values())
 
 
 def test_under_the_type_gate_the_row_shows_the_gate_that_replaced_x_sent(no_leftovers):
@@ -131,5 +150,6 @@ def test_a_model_without_gate_or_attention_is_reported_not_an_error(no_leftovers
     assert "no GA2 gate" in result["gate_note"] and "no spatial attention" in result["attention_note"]
     assert all(r["gate"] is None and r["attended"] is None for r in result["questions"])
     assert "no GA2 gate" in eqa_table(result)
+    assert all(m["attention_on_referent"] is None for m in result["splits"].values())  # n/a, not 0
     sgn_only = dataclasses.replace(cfg, tasks="sgn", instructions=None)
     assert diagnose_eqa(_model(cfg), sgn_only, episodes=1)["questions"] == []
