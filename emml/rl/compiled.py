@@ -50,7 +50,14 @@ def wants_compile(value: str, device: torch.device | str) -> bool:
 
 
 def compile_model(model: EmmlModel) -> EmmlModel:
-    """Compile ``model``'s conv stack and fusion unit in place; returns the model."""
+    """Compile ``model``'s conv stack and fusion unit in place; returns the model.
+
+    Dynamo's cache first starts afresh (`torch.compiler.reset`): it is kept per function, not per model, and holds
+    8 variants of one (`recompile_limit`); each run adds its own (acting on one thread, the update on two, the
+    evaluations; each ablation's fusion switches). A campaign trains run after run in one process, and from its
+    second run on the fusion hit that limit and ran uncompiled, said only in a warning (session 20). Compiled
+    modules of earlier models stay correct after a reset: they compile again when next called."""
+    torch.compiler.reset()
     for module in (model.image_encoder, model.fusion):
         module.compile()
     return model
