@@ -658,13 +658,19 @@ def diagnose(
         lines += [
             summary_line(result) + f" ({result['frames']} frames)",
             "detector AP per word: " + ", ".join(f"{w} {v:.2f}" for w, v in ap),
-            f"step-0 move distribution (forward left right answer) by target slot: {slots or 'n/a (Hard)'}",
+            "step-0 move distribution (forward left right answer) by target slot: "
+            + (slots or _no_step0(step0_episodes)),
         ]
     if "eqa" in result:
         lines += ([""] if lines else []) + [eqa_table(result["eqa"])]
     if "sgn_outcomes" in result:
         lines += ([""] if lines else []) + [sgn_table(result["sgn_outcomes"])]
     _echo(result, as_json, "\n".join(lines))
+
+
+def _no_step0(step0_episodes: int) -> str:
+    """Why the step-0 figures are missing: none asked for, or a difficulty whose spawn is not fixed (Hard)."""
+    return "n/a (--step0-episodes 0)" if not step0_episodes else "n/a (the spawn is not fixed: Hard)"
 
 
 @app.command("probe-eqa")

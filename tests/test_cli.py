@@ -68,6 +68,10 @@ def test_diagnose_a_checkpoint(tracking, no_leftovers):
     text = runner.invoke(app, ["diagnose", str(path), *both])
     assert text.exit_code == 0 and "detector AP per word" in text.output and "slot" in text.output
     assert "EQA per question" in text.output and "what color is the torch" in text.output
+    no_step0 = runner.invoke(
+        app, ["diagnose", str(path), "--episodes", "1", "--step0-episodes", "0", "--eqa-episodes", "0"]
+    )
+    assert no_step0.exit_code == 0 and "by target slot: n/a (--step0-episodes 0)" in no_step0.output  # not 'Hard'
     eqa = ["diagnose", str(path), "--episodes", "0", "--step0-episodes", "0", "--eqa-episodes", "1"]
     gated = runner.invoke(app, [*eqa, "--control", "type_gate", "--json"])
     assert gated.exit_code == 0, gated.output
