@@ -95,6 +95,20 @@ class RunStatus:
     """Estimated seconds to finish it on this machine; None when no run of its profile was measured here."""
 
 
+def select_steps(campaign: Campaign, names: list[str]) -> Campaign:
+    """The campaign cut to the steps named (in the campaign's order, not the names'); no names: all of it. An
+    unknown name fails naming the campaign's steps. E.g. a lent GPU node trains the steps a CPU is not at."""
+    known = [s.name for s in campaign.steps]
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ValueError(
+            f"step={unknown[0]!r} is not a step of campaign {campaign.name!r}; allowed: {', '.join(known)}"
+        )
+    if not names:
+        return campaign
+    return Campaign(campaign.name, campaign.path, campaign.title, tuple(s for s in campaign.steps if s.name in names))
+
+
 def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
     return sorted(p.stem for p in directory.glob("*.toml"))
 

@@ -966,6 +966,9 @@ def campaign(
     device: str = typer.Option("cpu", help="cpu | cuda"),
     run_root: str = typer.Option(None, help="Run dirs (default: the checkout's runs/)."),
     results_root: str = typer.Option(None, help="Results CSVs (default: the checkout's results/)."),
+    steps: list[str] = typer.Option(
+        [], "--step", help="Only this step (by name, as --status shows it; repeatable); the campaign's order stays."
+    ),
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Train a campaign's unfinished runs in its order (resuming interrupted ones), or show its status."""
@@ -973,11 +976,11 @@ def campaign(
     import sys
     from dataclasses import asdict
 
-    from emml.campaign import load_campaign, pin_worktree, run_campaign, status
+    from emml.campaign import load_campaign, pin_worktree, run_campaign, select_steps, status
     from emml.tracking import project_path, project_root, tracking_uri
 
     try:
-        plan = load_campaign(name)
+        plan = select_steps(load_campaign(name), steps)
     except ValueError as e:
         _fail(str(e))
     if show_status:
@@ -994,7 +997,8 @@ def campaign(
             "--results-root": str(project_path(results_root or "results")),
         }
         args = [sys.executable, "-m", "emml.cli", "campaign", name, "--no-pin", "--jobs", str(jobs), "--device", device]
-        args += [x for kv in roots.items() for x in kv] + (["--json"] if as_json else [])
+        args += [x for kv in roots.items() for x in kv] + [x for n in steps for x in ("--step", n)]
+        args += ["--json"] if as_json else []
         env = {**os.environ, "PYTHONPATH": str(tree), "MLFLOW_TRACKING_URI": tracking_uri()}
         typer.echo(f"{name}: training from {tree} (commit {tree.name})")
         os.chdir(tree)  # `python -m` puts the working directory first on sys.path: the tree's emml, not this one's
@@ -1006,7 +1010,8 @@ def campaign(
         _fail(str(e))
     failed = {k: v for r in reports for k, v in r.failed.items()}
     if reports and reports[-1].stopped:
-        _echo([asdict(r) for r in reports], as_json, _stopped_line(reports[-1], f"emml campaign {name}"))
+        again = shlex.join(["emml", "campaign", name, *(x for n in steps for x in ("--step", n))])
+        _echo([asdict(r) for r in reports], as_json, _stopped_line(reports[-1], again))
         raise typer.Exit(130)
     _echo(
         [asdict(r) for r in reports],

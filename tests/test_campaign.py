@@ -228,3 +228,48 @@ def test_cli_status_says_how_many_runs_at_a_time_and_refuses_a_device_by_name(tr
     assert result.exit_code == 0 and "with 8 runs at a time on cuda" in result.output, result.output
     result = runner.invoke(app, ["campaign", "reference", "--status", "--device", "tpu", *roots])
     assert result.exit_code == 2 and "device='tpu' is not allowed" in result.output, result.output
+
+
+def test_steps_can_be_chosen_by_name_in_the_campaigns_order(tracking, campaigns):
+    from emml.campaign import select_steps
+
+    plan = load_campaign("mine", campaigns)
+    assert select_steps(plan, []) is plan
+    assert [s.name for s in select_steps(plan, ["second", "first"]).steps] == ["first", "second"]
+    second = select_steps(plan, ["second"])
+    roots = (tracking["run_root"], tracking["results_root"])
+    assert [r.run_name for r in status(second, *roots)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-s0-smoke"]
+    run_campaign(second, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
+    assert [c[0] for c in calls(tracking)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-s0-smoke"]  # not "first"'s
+    with pytest.raises(ValueError, match=r"step='thrid' is not a step of campaign 'mine'; allowed: first, second"):
+        select_steps(plan, ["first", "thrid"])
+
+
+def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking, tmp_path, monkeypatch):
+    import os
+
+    from typer.testing import CliRunner
+
+    import emml.campaign
+    from emml.cli import app
+
+    runner = CliRunner()
+    roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
+    result = runner.invoke(app, ["campaign", "reference", "--status", "--step", "table2-noaux-s0", *roots])
+    assert result.exit_code == 0, result.output
+    assert "table2-noaux-s0 (table2 [quick]): 0/7 done" in result.output and "table2-aux-s0" not in result.output
+    result = runner.invoke(app, ["campaign", "reference", "--status", "--step", "nope", *roots])
+    assert result.exit_code == 2 and "step='nope' is not a step of campaign 'reference'" in result.output
+    monkeypatch.chdir(os.getcwd())
+    monkeypatch.setattr(emml.campaign, "pin_worktree", lambda root, log: tmp_path)
+    seen = {}
+
+    def execve(path, args, env):
+        seen.update(args=args)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(os, "execve", execve)
+    result = runner.invoke(app, ["campaign", "reference", "--step", "table3-noaux-s0", "--step", "table2-noaux-s0"])
+    assert result.exit_code == 0, result.output
+    args = seen["args"]
+    assert [args[i + 1] for i, a in enumerate(args) if a == "--step"] == ["table3-noaux-s0", "table2-noaux-s0"]
