@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from emml.runs import CHECKPOINT, config_of, path_of, variant_dir
+from emml.runs import CHECKPOINT, RESULTS, config_of, path_of, variant_dir
 from emml.tracking import project_path, project_root
 
 READING_ORDER = ("quick", "paper")
@@ -73,6 +73,13 @@ def best_checkpoint(
         if path.exists():
             return path, row["run_name"]
     return None
+
+
+def finished_no_aux(checkpoint: Path, run_root: str | Path) -> Path | None:
+    """The checkpoint of the No-Aux run beside ``checkpoint``'s run when that run has finished (its results.json is
+    there), else None: an interrupted run's checkpoint is not a result, and the figures show results only."""
+    other = variant_dir(config_of(checkpoint.parent), run_root, aux=False)
+    return other / CHECKPOINT if (other / CHECKPOINT).exists() and (other / RESULTS).exists() else None
 
 
 def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tuple[int, ...] = (0, 1)) -> list[Path]:
@@ -152,8 +159,7 @@ def write_reports(
             if best is not None and best[1] not in drawn:
                 ckpt, name = best
                 drawn.add(name)
-                no_aux = variant_dir(config_of(ckpt.parent), run_root, aux=False) / CHECKPOINT
-                figs = figures(ckpt, out, no_aux if no_aux.exists() else None)
+                figs = figures(ckpt, out, finished_no_aux(ckpt, run_root))
                 plt.close("all")
                 lines.append(
                     f"  - figures of the best Dual-Attention run `{name}`: "

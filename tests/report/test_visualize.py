@@ -159,3 +159,21 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
     run = "dual_attention-easy-aux-s0-demo"
     for link in (f"channels-{run}.png", f"attention-sgn-{run}-s0.png", f"attention-eqa-{run}-s1.png"):
         assert f"({link})" in text and (tmp_path / "reports" / link).exists()
+
+
+def test_the_channel_figure_compares_only_with_a_finished_no_aux_run(checkpoints, tmp_path):
+    import shutil
+
+    from emml.report.index import finished_no_aux
+    from emml.runs import RESULTS
+
+    runs = tmp_path / "runs"
+    for aux, ckpt in checkpoints.items():
+        shutil.copytree(ckpt.parent, runs / "vis" / ckpt.parent.name)
+    aux_ckpt = runs / "vis" / checkpoints[True].parent.name / CHECKPOINT
+    no_aux_dir = runs / "vis" / checkpoints[False].parent.name
+    assert finished_no_aux(aux_ckpt, runs) == no_aux_dir / CHECKPOINT
+    (no_aux_dir / RESULTS).unlink()  # interrupted: a checkpoint, no results
+    assert finished_no_aux(aux_ckpt, runs) is None
+    shutil.rmtree(no_aux_dir)
+    assert finished_no_aux(aux_ckpt, runs) is None
