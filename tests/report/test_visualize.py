@@ -168,7 +168,7 @@ def test_the_channel_figure_compares_only_with_a_finished_no_aux_run(checkpoints
     from emml.runs import RESULTS
 
     runs = tmp_path / "runs"
-    for aux, ckpt in checkpoints.items():
+    for ckpt in checkpoints.values():
         shutil.copytree(ckpt.parent, runs / "vis" / ckpt.parent.name)
     aux_ckpt = runs / "vis" / checkpoints[True].parent.name / CHECKPOINT
     no_aux_dir = runs / "vis" / checkpoints[False].parent.name
