@@ -24,7 +24,7 @@ import os
 import statistics
 import subprocess
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import tomllib
@@ -106,7 +106,7 @@ def select_steps(campaign: Campaign, names: list[str]) -> Campaign:
         )
     if not names:
         return campaign
-    return Campaign(campaign.name, campaign.path, campaign.title, tuple(s for s in campaign.steps if s.name in names))
+    return replace(campaign, steps=tuple(s for s in campaign.steps if s.name in names))
 
 
 def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:

@@ -979,6 +979,7 @@ def campaign(
     from emml.campaign import load_campaign, pin_worktree, run_campaign, select_steps, status
     from emml.tracking import project_path, project_root, tracking_uri
 
+    step_args = [x for n in steps for x in ("--step", n)]
     try:
         plan = select_steps(load_campaign(name), steps)
     except ValueError as e:
@@ -997,7 +998,7 @@ def campaign(
             "--results-root": str(project_path(results_root or "results")),
         }
         args = [sys.executable, "-m", "emml.cli", "campaign", name, "--no-pin", "--jobs", str(jobs), "--device", device]
-        args += [x for kv in roots.items() for x in kv] + [x for n in steps for x in ("--step", n)]
+        args += [x for kv in roots.items() for x in kv] + step_args
         args += ["--json"] if as_json else []
         env = {**os.environ, "PYTHONPATH": str(tree), "MLFLOW_TRACKING_URI": tracking_uri()}
         typer.echo(f"{name}: training from {tree} (commit {tree.name})")
@@ -1010,7 +1011,7 @@ def campaign(
         _fail(str(e))
     failed = {k: v for r in reports for k, v in r.failed.items()}
     if reports and reports[-1].stopped:
-        again = shlex.join(["emml", "campaign", name, *(x for n in steps for x in ("--step", n))])
+        again = shlex.join(["emml", "campaign", name, *step_args])
         _echo([asdict(r) for r in reports], as_json, _stopped_line(reports[-1], again))
         raise typer.Exit(130)
     _echo(

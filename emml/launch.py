@@ -75,7 +75,7 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
 
     from emml.profiles import profile_seeds
     from emml.results import read_results
-    from emml.runs import CHECKPOINT, RESULTS, results_csv, run_dir
+    from emml.runs import CHECKPOINT, finished_run, results_csv, run_dir
 
     table = load_table(name)
     fields = _roots(run_root, results_root)
@@ -95,7 +95,7 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
             recorded_in[csv] = set(results["run_name"])
         recorded = recorded_in[csv]
         rname, rdir = run_name(cfg), run_dir(cfg)
-        done = (rdir / CHECKPOINT).exists() and (rdir / RESULTS).exists() and _finished(rdir / CHECKPOINT)
+        done = finished_run(rdir)
         if rname in recorded:
             state = "finished" if done else "partial" if (rdir / CHECKPOINT).exists() else "reference"
         elif (rdir / CHECKPOINT).exists():
@@ -145,15 +145,6 @@ def with_overrides(spec: RunSpec, overrides: dict, profile: str) -> RunSpec:
     if out.run_name(profile) != spec.run_name(profile):
         raise ValueError(f"overrides {overrides} change the run's name: declare them as a row of the table instead")
     return out
-
-
-def _finished(path: Path) -> bool:
-    from emml.checkpoint import load_checkpoint
-
-    try:
-        return bool(load_checkpoint(path, require=()).get("finished"))
-    except Exception:  # a checkpoint we cannot read is not finished; the trainer will say why
-        return False
 
 
 def _roots(run_root: str | None, results_root: str | None) -> dict:

@@ -125,6 +125,20 @@ def path_of(run_root: str | Path, table: str, name: str) -> Path:
     return project_path(run_root) / table / name
 
 
+def finished_run(directory: Path) -> bool:
+    """Whether ``directory`` holds a finished run: its checkpoint says so (``finished``) and its results.json is
+    there. What the launcher skips, and what a report may show beside a result."""
+    checkpoint = Path(directory) / CHECKPOINT
+    if not (checkpoint.exists() and (Path(directory) / RESULTS).exists()):
+        return False
+    from emml.checkpoint import load_checkpoint  # torch: loaded when a checkpoint is read, not for reports
+
+    try:
+        return bool(load_checkpoint(checkpoint, require=()).get("finished"))
+    except Exception:  # a checkpoint we cannot read is not finished; the trainer will say why
+        return False
+
+
 def config_of(directory: Path) -> TrainConfig | None:
     """The config the run in ``directory`` trained with: its results.json's, else its checkpoint's; None when it has
     neither."""

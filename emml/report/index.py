@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from emml.runs import CHECKPOINT, RESULTS, config_of, path_of, variant_dir
+from emml.runs import CHECKPOINT, config_of, finished_run, path_of, variant_dir
 from emml.tracking import project_path, project_root
 
 READING_ORDER = ("quick", "paper")
@@ -76,10 +76,10 @@ def best_checkpoint(
 
 
 def finished_no_aux(checkpoint: Path, run_root: str | Path) -> Path | None:
-    """The checkpoint of the No-Aux run beside ``checkpoint``'s run when that run has finished (its results.json is
-    there), else None: an interrupted run's checkpoint is not a result, and the figures show results only."""
+    """The checkpoint of the No-Aux run beside ``checkpoint``'s run when that run has finished (emml.runs.finished_run),
+    else None: an interrupted run's checkpoint is not a result, and the figures show results only."""
     other = variant_dir(config_of(checkpoint.parent), run_root, aux=False)
-    return other / CHECKPOINT if (other / CHECKPOINT).exists() and (other / RESULTS).exists() else None
+    return other / CHECKPOINT if finished_run(other) else None
 
 
 def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tuple[int, ...] = (0, 1)) -> list[Path]:
