@@ -658,6 +658,7 @@ def diagnose(
         lines += [
             summary_line(result) + f" ({result['frames']} frames)",
             "detector AP per word: " + ", ".join(f"{w} {v:.2f}" for w, v in ap),
+            _saturation_line(result),
             "step-0 move distribution (forward left right answer) by target slot: "
             + (slots or _no_step0(step0_episodes)),
         ]
@@ -666,6 +667,19 @@ def diagnose(
     if "sgn_outcomes" in result:
         lines += ([""] if lines else []) + [sgn_table(result["sgn_outcomes"])]
     _echo(result, as_json, "\n".join(lines))
+
+
+def _saturation_line(result: dict) -> str:
+    """x_I's saturation (emml.diagnose.x_image_saturation): how many channels are pinned, and which."""
+    channels = result["x_image_channels"]
+    pinned = [w for w, c in channels.items() if c["pinned"]]
+    return (
+        f"x_I saturation: {len(pinned)}/{len(channels)} channels pinned on every cell"
+        + (f" ({', '.join(pinned)})" if pinned else "")
+        + f"; spatial std of x_I {result['x_image_spatial_std']:.3f} (per channel: "
+        + ", ".join(f"{w} {c['spatial_std']:.3f}" for w, c in channels.items())
+        + ")"
+    )
 
 
 def _no_step0(step0_episodes: int) -> str:

@@ -10,6 +10,11 @@ for any checkpoint (`emml diagnose CHECKPOINT`).
   referent stands: the largest total-variation distance between the mean step-0 move distributions of two target
   slots. An actor that ignores x_S scores ~0 (the noise floor of `step0_episodes` episodes); one that turns toward
   the target scores up to 1.
+* ``x_image_saturated`` — the fraction of conv3 channels whose x_I is pinned on every cell of every frame, so that
+  no gradient passes (issue 48: without the aux task the conv collapsed to a constant code): under the sigmoid of
+  Appendix A, |z| > `SATURATED_LOGIT` everywhere; under the ReLU of §3.1, z <= 0 everywhere (a dead channel);
+  ``x_image_spatial_std`` — the spatial std of x_I per frame, the mean over frames and channels (0: x_I says nothing
+  of where anything is, and Eq. 2's map is uniform). Each channel's under ``x_image_channels``.
 
 Frames come from the model's own sampled actions (a seeded generator), so that the views are the ones it meets
 in training; the referent's cells come from the env's privileged label buffer.
@@ -39,6 +44,49 @@ def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
     hits = labels[order]
     precision_at = np.cumsum(hits) / np.arange(1, hits.size + 1)
     return float(precision_at[hits].sum() / positives)
+
+
+SATURATED_LOGIT = 6.0
+"""|z| above which sigmoid(z) counts as pinned: sigmoid'(6) = 0.0025, a gradient ~1/100 of its value at 0."""
+SATURATION_WARNING = 0.5
+"""The trainer warns in its log when at least this fraction of the channels is pinned (`x_image_saturated`)."""
+
+
+def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid") -> dict:
+    """How far x_I is from a constant code, on conv3 logits z of real frames (F, V, h, w), under the model's
+    ``x_image`` ('sigmoid' or 'relu', `ModelConfig.x_image`): the fraction of channels pinned on every cell of every
+    frame (sigmoid: |z| > SATURATED_LOGIT; relu: z <= 0), the mean spatial std of x_I, and each channel's figures
+    (index → {"pinned", "spatial_std", "mean"})."""
+    z = np.asarray(logits, dtype=np.float64)
+    if z.ndim != 4 or z.shape[0] == 0:
+        raise ValueError(f"x_image_saturation: logits must be (frames, V, h, w) with frames >= 1, got {z.shape}")
+    if x_image == "sigmoid":
+        pinned, x = (np.abs(z) > SATURATED_LOGIT).all(axis=(0, 2, 3)), 1.0 / (1.0 + np.exp(-z))
+    elif x_image == "relu":
+        pinned, x = (z <= 0).all(axis=(0, 2, 3)), np.maximum(z, 0.0)
+    else:
+        raise ValueError(f"x_image={x_image!r} is unknown; allowed: sigmoid, relu")
+    spatial_std = x.reshape(*x.shape[:2], -1).std(-1).mean(0)  # (V,): per frame over cells, then over frames
+    channels = {
+        int(c): {"pinned": bool(pinned[c]), "spatial_std": float(spatial_std[c]), "mean": float(x[:, c].mean())}
+        for c in range(z.shape[1])
+    }
+    return {
+        "x_image_saturated": float(pinned.mean()),
+        "x_image_spatial_std": float(spatial_std.mean()),
+        "x_image_channels": channels,
+    }
+
+
+def saturation_warning(result: dict) -> str | None:
+    """The training log's warning when x_I has collapsed (`SATURATION_WARNING`), else None."""
+    frac = result.get("x_image_saturated")
+    if frac is None or frac < SATURATION_WARNING:
+        return None
+    return (
+        f"WARNING: {frac:.0%} of the conv3 channels are pinned on every cell (x_I a constant code, no gradient "
+        f"through it; spatial std {result['x_image_spatial_std']:.3f}): see docs/fidelity.md, 'No Aux'"
+    )
 
 
 def _single(obs: dict, device) -> dict[str, torch.Tensor]:
@@ -84,7 +132,7 @@ def diagnose(
     chosen = {(task, split): sents for task, split, sents in eval_settings(env_cfg)}.get(("sgn", "train"))
     cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=chosen)
     gen = torch.Generator().manual_seed(seed)
-    probs, labels, attn, target = [], [], [], []
+    logits, labels, attn, target = [], [], [], []
     with playing(model, cfg) as (env,):  # eval mode; on the way out the engine ended and the mode restored
         for i in range(episodes):
             obs, _ = env.reset(seed=seed + i)
@@ -93,7 +141,7 @@ def diagnose(
             while not done and len(labels) < max_frames:
                 out, state = model(_single(obs, device), state, start)
                 start = torch.zeros_like(start)
-                probs.append(torch.sigmoid(out.aux_logits[0, 0]).cpu().numpy())
+                logits.append(out.aux_logits[0, 0].float().cpu().numpy())
                 labels.append(obs["aux"])
                 target.append(obs["target"])
                 if out.attention is not None:
@@ -115,7 +163,8 @@ def diagnose(
         result["attention_mass_on_target"] = float((a * t).sum(1).mean())
     else:
         result["attention_on_target"] = result["attention_mass_on_target"] = None
-    p, y = np.stack(probs), np.stack(labels)
+    z, y = np.stack(logits), np.stack(labels)
+    p = 1.0 / (1.0 + np.exp(-z))  # the detectors are sigmoid(conv3) whatever x_I reads (the aux task's predictions)
     per_word = {}
     for w in np.flatnonzero(aux_mask):
         ap = average_precision(p[:, w], y[:, w])
@@ -124,10 +173,20 @@ def diagnose(
     result["detector_ap"] = float(np.mean(list(per_word.values()))) if per_word else None
     result["detector_ap_words"] = per_word
     result.update(step0 or {"actor_sensitivity": None, "step0_moves": {}})
+    saturation = x_image_saturation(z, model.cfg.x_image)
+    saturation["x_image_channels"] = {words[c]: v for c, v in saturation["x_image_channels"].items()}
+    result.update(saturation)
     return result
 
 
-SCALARS = ("attention_on_target", "attention_mass_on_target", "detector_ap", "actor_sensitivity")
+SCALARS = (
+    "attention_on_target",
+    "attention_mass_on_target",
+    "detector_ap",
+    "actor_sensitivity",
+    "x_image_saturated",
+    "x_image_spatial_std",
+)
 """The figures logged to MLflow (as diag/<name>) and printed at each evaluation."""
 
 

@@ -4,11 +4,16 @@ A subclass writes only `forward`; the recurrent state is one zero per env and no
 is nothing for `acting_state` to cache or for `replay_state` to strip (`EmmlModel.acting_state`).
 """
 
+from types import SimpleNamespace
+
 import torch
 
 
 class ScriptedModel(torch.nn.Module):
     """A stateless stand-in for `EmmlModel`: subclasses script `forward(obs, state, episode_start)`."""
+
+    cfg = SimpleNamespace(x_image="sigmoid", control="none")
+    """The `ModelConfig` fields the diagnostics read: x_I = sigmoid(conv3), no control."""
 
     def initial_state(self, n: int, device=None) -> dict:
         return {"h": torch.zeros(n, 1, device=device)}

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from emml.config import DoomConfig
-from emml.diagnose import average_precision, diagnose, summary_line
+from emml.diagnose import average_precision, diagnose, saturation_warning, summary_line, x_image_saturation
 from emml.models import build_model
 from emml.tasks.language import Vocabulary, load_dataset
 from tests.conftest import SMOKE
@@ -85,3 +85,40 @@ def test_actor_sensitivity_separates_a_reacting_actor(reacts, low, high, no_left
     assert low <= result["actor_sensitivity"] <= high
     assert result["attention_on_target"] is None
     assert len(result["step0_moves"]) >= 3
+
+
+def test_saturation_flags_pinned_and_dead_channels():
+    """Channel 0 pinned high, 1 pinned low, 2 live: sigmoid counts the first two; ReLU counts only the dead one."""
+    z = np.zeros((4, 3, 2, 5))
+    z[:, 0], z[:, 1] = 9.0, -9.0
+    z[:, 2] = np.random.default_rng(0).normal(0, 2, size=(4, 2, 5))
+    sig = x_image_saturation(z, "sigmoid")
+    assert sig["x_image_saturated"] == pytest.approx(2 / 3)
+    assert [c["pinned"] for c in sig["x_image_channels"].values()] == [True, True, False]
+    assert sig["x_image_channels"][0]["spatial_std"] < 1e-3 < sig["x_image_channels"][2]["spatial_std"]
+    relu = x_image_saturation(z, "relu")
+    assert [c["pinned"] for c in relu["x_image_channels"].values()] == [False, True, False]
+    z[0, 0, 0, 0] = 1.0  # one live cell in one frame: no longer pinned
+    assert not x_image_saturation(z, "sigmoid")["x_image_channels"][0]["pinned"]
+    with pytest.raises(ValueError, match="x_image='tanh'"):
+        x_image_saturation(z, "tanh")
+
+
+def test_a_saturated_conv_is_flagged_on_real_frames(no_leftovers):
+    """A Dual-Attention conv3 shifted as the No Aux runs' was (a uniform signed weight shift over the non-negative
+    relu(conv2)): every channel pinned, x_I constant, the trainer's warning on; the fresh conv: none pinned."""
+    cfg = _env_cfg()
+    model = build_model("dual_attention", len(cfg.vocabulary), cfg.height, cfg.width, cfg.max_steps)
+    fresh = diagnose(model, cfg, episodes=1, step0_episodes=0, max_frames=20)
+    assert fresh["x_image_saturated"] == 0.0 and fresh["x_image_spatial_std"] > 0
+    assert saturation_warning(fresh) is None
+    with torch.no_grad():
+        conv3 = model.image_encoder.conv3
+        sign = torch.where(torch.arange(conv3.out_channels) % 2 == 0, 1.0, -1.0).view(-1, 1, 1, 1)
+        conv3.weight.add_(sign * 0.05)
+        conv3.bias.copy_(sign.view(-1) * 6.0)
+    collapsed = diagnose(model, cfg, episodes=1, step0_episodes=0, max_frames=20)
+    assert collapsed["x_image_saturated"] == 1.0
+    assert collapsed["x_image_spatial_std"] < 1e-3
+    assert "pinned" in saturation_warning(collapsed)
+    assert "x_image_saturated 1.00" in summary_line(collapsed)

@@ -21,7 +21,7 @@ from tqdm import tqdm
 from emml import alloc
 from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.config import TrainConfig
-from emml.diagnose import SCALARS, diagnose, summary_line
+from emml.diagnose import SCALARS, diagnose, saturation_warning, summary_line
 from emml.envs.engine import stop_after
 from emml.envs.labels import channel_mask
 from emml.evaluate import evaluate
@@ -207,6 +207,9 @@ class Trainer:
             if not self.quiet:
                 tqdm.write(f"frames {frames:,} eval " + ", ".join(f"{k} {v:.2f}" for k, v in acc.items()))
                 tqdm.write(summary_line(diag))
+            warning = saturation_warning(diag)  # a collapsed conv (issue 48) is said even in a quiet run
+            if warning:
+                tqdm.write(f"{self.name} frames {frames:,}: {warning}")
         metrics["perf/eval_s"] = time.perf_counter() - t_start  # what an evaluation costs (emml campaign's estimate)
         self.tracker.log_metrics(metrics, step=frames)
         return acc
