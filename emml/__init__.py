@@ -3,11 +3,11 @@ arXiv:1902.01385). Importing the package registers the Gymnasium environments `e
 
 import gymnasium as gym
 
-from emml.env_kinds import GYM_ENVS
+from emml.config.env_kinds import GYM_ENVS
 
 __version__ = "0.1.0"
 
-for _env in GYM_ENVS.values():  # declared with the env kinds (emml/env_kinds.py)
+for _env in GYM_ENVS.values():  # declared with the env kinds (emml/config/env_kinds.py)
     if _env.gym_id not in gym.registry:
         gym.register(id=_env.gym_id, entry_point=_env.entry_point, disable_env_checker=True)
 del _env

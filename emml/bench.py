@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from emml.config import DoomConfig
-from emml.env_kinds import GYM_ENVS
+from emml.config.env_kinds import GYM_ENVS
+from emml.config.schema import DoomConfig
 from emml.envs.doom import DoomEnv
 from emml.envs.vector import make_env, make_vector_env
 
@@ -141,8 +141,8 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     with ``stack`` N > 1, of N runs stacked in one model (emml/rl/packed.py), all their frames counted."""
     import torch
 
+    from emml.config.geometry import conv_output_size
     from emml.envs.labels import channel_mask, default_aux_words
-    from emml.geometry import conv_output_size
     from emml.models import build_model
     from emml.rl.compiled import compile_model, wants_compile
     from emml.rl.packed import StackedModels, packed_ppo_update

@@ -115,8 +115,8 @@ def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
 
 def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
+    from emml.config.profiles import load_profiles
     from emml.launch import ONLY_FIELDS, select_runs
-    from emml.profiles import load_profiles
     from emml.registry import table_names
 
     path = directory / f"{name}.toml"
@@ -163,7 +163,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
 def _settings(path: Path, where: str, raw: dict) -> dict:
     """A step's `set`, checked before any compute: only how a run is measured (TrainConfig.RUNTIME less OWN_KEYS),
     each value of its field's type and range."""
-    from emml.config import TrainConfig, apply_overrides
+    from emml.config.schema import TrainConfig, apply_overrides
 
     settings = raw.get("set", {})
     allowed = [name for name in TrainConfig.RUNTIME if name not in OWN_KEYS]
@@ -187,7 +187,7 @@ def _check_keys(path: Path, where: str, data, allowed: tuple[str, ...]) -> None:
 def _declared(table: str, profile: str) -> dict:
     """Run name → (RunSpec, None) for the table's runs under the profile: what a selection is checked against,
     without reading any run dir."""
-    from emml.profiles import profile_seeds
+    from emml.config.profiles import profile_seeds
     from emml.registry import load_table
 
     return {spec.run_name(profile): (spec, None) for spec in load_table(table).runs(profile_seeds(profile))}
@@ -280,8 +280,8 @@ class _Speed:
         self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
 
     def measured(self, cfg) -> tuple[float | None, float | None]:
+        from emml.config.paths import project_path
         from emml.runs import METRICS
-        from emml.tracking import project_path
 
         key = (cfg.profile, cfg.model)
         if key not in self._cache:

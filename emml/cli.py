@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from emml.env_kinds import DOOM_ID, ENV_KINDS, GYM_ENVS, kinds_of
+from emml.config.env_kinds import DOOM_ID, ENV_KINDS, GYM_ENVS, kinds_of
 from emml.runs import run_name
 
 app = typer.Typer(
@@ -50,7 +50,7 @@ def _check_project_files(
             add_plugins(plugins)
         except PluginError as e:
             _fail(str(e))
-    from emml.profiles import ProfileError, load_profiles
+    from emml.config.profiles import ProfileError, load_profiles
 
     try:
         load_profiles()
@@ -86,7 +86,7 @@ def _check_store() -> None:
 
 def _out(path: Path) -> Path:
     """An output folder, made; relative paths resolve under the checkout like runs/ and results/ (README)."""
-    from emml.tracking import project_path
+    from emml.config.paths import project_path
 
     path = project_path(path)
     path.mkdir(parents=True, exist_ok=True)
@@ -130,7 +130,7 @@ _DIFFICULTY_HELP = " | ".join(ENV_KINDS) + " (house: the House domain, Appendix 
 
 
 def _gym_id(env_name: str) -> str:
-    """The gym id of an ``--env`` name (emml/env_kinds.py), or fail naming the allowed names."""
+    """The gym id of an ``--env`` name (emml/config/env_kinds.py), or fail naming the allowed names."""
     ids = {e.name: e.gym_id for e in GYM_ENVS.values()}
     if env_name not in ids:
         _fail(f"--env={env_name!r} is not allowed; choose one of {', '.join(map(repr, ids))}")
@@ -140,7 +140,7 @@ def _gym_id(env_name: str) -> str:
 def _env_config(gym_id: str, difficulty: str, **fields):
     """(difficulty, validated config) of the env ``gym_id``: an env that plays one kind (the House) plays it
     whatever ``difficulty`` says; a bad value fails with the field's name."""
-    from emml.config import ENV_CONFIGS
+    from emml.config.schema import ENV_CONFIGS
 
     kinds = kinds_of(gym_id)
     if len(kinds) == 1:
@@ -236,7 +236,7 @@ def bench_train_cmd(
     """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
     with --runs N, the aggregate of N packed runs against the raw simulator limit of the machine's cores."""
     from emml.bench import PARTS, bench_train
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.rl.hardware import check_runnable
 
     try:
@@ -285,7 +285,7 @@ def bench_train_cmd(
 def _child_bench_args(profile: str, updates: int, sets: list[str], variants: list[dict] = ({},)) -> list[str]:
     """`bench train` options for child processes, after validating the config of every variant here: bad input
     fails before any child starts."""
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.rl.hardware import check_runnable
 
     for extra in variants:
@@ -424,7 +424,7 @@ def train(
 ):
     """Train one run (resumes it if interrupted; a finished run is not retrained); with --pack-seeds, several
     seeds of it in one process, each written as its own run."""
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.rl.hardware import check_runnable
 
     overrides = _parse_sets(sets)
@@ -501,7 +501,7 @@ def train(
 
 _CONTROLS = (
     "detectors (x_I := aux labels), target_mask (x_S := the referent's cells), type_gate (Eq. 4's gate from the "
-    "dataset's word types), none (emml/config.py, ModelConfig.control)"
+    "dataset's word types), none (emml/config/schema.py, ModelConfig.control)"
 )
 
 
@@ -541,7 +541,7 @@ def rescore_runs(
     """Re-score finished runs with the final-evaluation protocol (issue 33): results.json's metrics and the
     results-table row rewritten, training provenance kept, scored_sha / eval_episodes / eval_seed recorded."""
     from emml.checkpoint import load_checkpoint
-    from emml.config import TrainConfig
+    from emml.config.schema import TrainConfig
     from emml.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
     from emml.runlock import RunLocked
 
@@ -825,7 +825,7 @@ def demo(
 ):
     """The main job: a short Dual-Attention training (aux on) on Doom Easy instruction following (SGN), evaluated,
     logged to MLflow, with a report (accuracies, training curve, diagnostics) in reports/."""
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
 
     # SGN only: within the demo's minutes the agent leaves chance on instructions (both tasks need more frames)
     over = {"env.tasks": "sgn"}
@@ -852,8 +852,8 @@ def list_experiments(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Every table in reproduce/ with its runs and how many are finished under the profile."""
+    from emml.config.profiles import load_profiles
     from emml.launch import run_states
-    from emml.profiles import load_profiles
     from emml.registry import list_tables, load_table
 
     if profile not in load_profiles():
@@ -991,7 +991,8 @@ def campaign(
     from dataclasses import asdict
 
     from emml.campaign import load_campaign, pin_worktree, run_campaign, select_steps, status
-    from emml.tracking import project_path, project_root, tracking_uri
+    from emml.config.paths import project_path, project_root
+    from emml.tracking import tracking_uri
 
     step_args = [x for n in steps for x in ("--step", n)]
     try:
@@ -1041,7 +1042,7 @@ def campaign(
 def _runs_at_once(jobs: int, device: str) -> int:
     """`jobs`, or when 0 what a launch on `device` would take (emml.launch.default_jobs); a device that is not one,
     or (for the default) that this machine lacks, fails by name."""
-    from emml.config import check_device_name
+    from emml.config.schema import check_device_name
     from emml.launch import default_jobs
     from emml.rl.hardware import check_device
 
@@ -1099,7 +1100,7 @@ def report(
 ):
     """Ours beside the paper: reports/TABLE-PROFILE.md/.tex (mean (each seed) | paper, the runs' deviations from the
     paper, an rliable aggregate) and -curves.png/.pdf (smoke: under scratch/reports)."""
-    from emml.profiles import load_profiles
+    from emml.config.profiles import load_profiles
     from emml.report.tables import report_table
 
     if profile not in load_profiles():
@@ -1142,9 +1143,9 @@ def backfill_config(
     """Copy each finished run's config from its checkpoint into its results.json (runs finished before the trainer
     wrote it there), so reports read the deviations from the paper without loading checkpoints. A run still
     training is skipped."""
+    from emml.config.paths import project_path
     from emml.report.saved_config import backfill_config as backfill
     from emml.report.saved_config import run_dirs
-    from emml.tracking import project_path
 
     found = run_dirs([project_path(p) for p in paths])
     if not found:
@@ -1162,8 +1163,9 @@ def import_runs_cmd(
     table's experiment with the trainer's tags, its config as params and its whole curve, so that `make ui` shows
     the committed runs. Once: a run already in the store (trained or imported here) is skipped, and so is an
     unfinished one (its trainer logs it)."""
+    from emml.config.paths import project_path
     from emml.import_runs import import_runs
-    from emml.tracking import project_path, tracking_uri
+    from emml.tracking import tracking_uri
 
     roots = [project_path(p) for p in paths] if paths else [project_path("runs")]
     missing = [str(p) for p in roots if paths and not p.exists()]

@@ -28,8 +28,8 @@ from itertools import combinations
 import numpy as np
 import torch
 
-from emml.config import DoomConfig
-from emml.env_kinds import ENV_KINDS
+from emml.config.env_kinds import ENV_KINDS
+from emml.config.schema import DoomConfig
 from emml.envs.doom import DoomEnv
 from emml.evaluate import eval_settings, obs_to_torch, playing
 

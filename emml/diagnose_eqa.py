@@ -36,7 +36,7 @@ from collections import Counter
 import numpy as np
 import torch
 
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.envs.doom import MOVES
 from emml.evaluate import eval_settings, play, playing
 from emml.tasks.language import Dataset, Vocabulary, load_dataset

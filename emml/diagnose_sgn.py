@@ -28,7 +28,7 @@ from collections import Counter
 import numpy as np
 import torch
 
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.diagnose_eqa import actor_words
 from emml.envs.vector import make_env
 from emml.evaluate import eval_settings, play, playing

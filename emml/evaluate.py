@@ -13,7 +13,7 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.envs.vector import make_env
 
 SETTINGS = (("sgn", "train"), ("sgn", "test"), ("eqa", "train"), ("eqa", "test"))

@@ -12,12 +12,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
-from emml.env_kinds import ENV_KINDS
+from emml.config.env_kinds import ENV_KINDS
 
 PAPER_FRAMES = {k.name: k.paper_frames for k in ENV_KINDS.values()}
-"""§5.1: 10M frames in Easy, 50M in Hard; App. C: 50M in the House (emml/env_kinds.py)."""
+"""§5.1: 10M frames in Easy, 50M in Hard; App. C: 50M in the House (emml/config/env_kinds.py)."""
 PAPER_MAX_STEPS = {k.name: k.paper_max_steps for k in ENV_KINDS.values()}
-"""§5.1: episodes of at most 210 steps; App. C: 420 in the House (emml/env_kinds.py)."""
+"""§5.1: episodes of at most 210 steps; App. C: 420 in the House (emml/config/env_kinds.py)."""
 
 
 def count(n) -> str:
@@ -290,7 +290,7 @@ def resolve(saved: dict) -> dict:
     fields it predates at today's defaults and the model's effective options under 'model.*' (its registry entry
     and overrides, emml.models.model_config). 'score_episodes': the final evaluation's episodes
     (`final_eval_episodes`, or `eval_episodes` for a run saved before that field existed)."""
-    from emml.config import TrainConfig, env_config_class
+    from emml.config.schema import TrainConfig, env_config_class
     from emml.models import model_config
 
     env = saved.get("env", {})

@@ -54,7 +54,7 @@ class ImportResult:
 
 def relative(path: Path) -> str:
     """``path`` relative to the project root when under it, else absolute."""
-    from emml.tracking import project_root
+    from emml.config.paths import project_root
 
     path = Path(path).resolve()
     try:

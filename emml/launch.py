@@ -15,9 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from emml.config.paths import project_path
 from emml.registry import RunSpec, load_table
 from emml.runs import run_name
-from emml.tracking import project_path
 
 BACKENDS = ("local", "slurm")
 STATES = ("finished", "unrecorded", "reference", "partial", "missing")
@@ -73,7 +73,7 @@ class LaunchReport:
 def run_states(name: str, profile: str, run_root: str | None = None, results_root: str | None = None) -> dict:
     """Run name → (RunSpec, state) for every run of table `name` under `profile` (see STATES)."""
 
-    from emml.profiles import profile_seeds
+    from emml.config.profiles import profile_seeds
     from emml.results import read_results
     from emml.runs import CHECKPOINT, finished_run, results_csv, run_dir
 
@@ -197,7 +197,7 @@ def run_table(
     submitit's local executors, for tests); returns after submission unless `wait`. `train_fn` replaces the
     trainer (tests; must be picklable).
     """
-    from emml.profiles import load_profiles
+    from emml.config.profiles import load_profiles
     from emml.tasks.language import check_choice
     from emml.tracking import parent_run, set_run_status
 

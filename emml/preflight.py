@@ -15,7 +15,7 @@ import urllib.request
 from pathlib import Path
 from urllib.parse import urlparse
 
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.tracking import _sqlite_path, tracking_uri
 
 STORE_TIMEOUT_S = 5.0

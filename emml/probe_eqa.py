@@ -3,7 +3,7 @@
 A test question such as 'what color is the torch' is answered 'torch': the GA2 gate x_sent (Eq. 4) it gets from
 the text encoder is the gate of the training sentences that end in the same word. This probe asks, offline and
 without reinforcement learning, whether an encoder of x_sent trained on the training questions alone gives the test
-questions the right gate, and which readout of the GRU does (`emml.config.SENTENCE_READOUTS`).
+questions the right gate, and which readout of the GRU does (`emml.config.schema.SENTENCE_READOUTS`).
 
 * Frozen: the checkpoint's conv image encoder, x_I = sigmoid(conv3) (relu under ``x_image='relu'``), computed once
   per frame, and its Dual-Attention unit (Eq. 1-5, parameter-free).
@@ -42,7 +42,7 @@ from contextlib import contextmanager
 import torch
 from torch import nn
 
-from emml.config import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
+from emml.config.schema import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
 from emml.diagnose_eqa import gate_missing
 from emml.envs.vector import make_env
 from emml.evaluate import eval_settings

@@ -15,15 +15,14 @@ from pathlib import Path
 
 import tomllib
 
-from emml.config import TrainConfig, apply_overrides
-from emml.env_kinds import ENV_KINDS
+from emml.config.env_kinds import ENV_KINDS
+from emml.config.paths import REPRODUCE_DIR
+from emml.config.schema import TrainConfig, apply_overrides
 from emml.runs import run_name
 
-REPRODUCE_DIR = Path(__file__).resolve().parent.parent / "reproduce"
-"""reproduce/: profiles.toml, table*.toml and paper/table*.csv."""
 STATUSES = ("active", "placeholder")
 DIFFICULTIES = tuple(ENV_KINDS)
-"""Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C): emml/env_kinds.py."""
+"""Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C): emml/config/env_kinds.py."""
 METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
 """Results columns a cell may read (written by the trainer's greedy evaluation)."""
 TRANSFER_METRICS = ("sgn_transfer",)
@@ -79,7 +78,7 @@ class RunSpec:
 
     def to_config(self, profile: str, **fields) -> TrainConfig:
         """The run's TrainConfig under `profile` (extra `fields`, e.g. run_root, go to TrainConfig)."""
-        from emml.profiles import profile_config
+        from emml.config.profiles import profile_config
 
         return profile_config(
             profile,

@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 
 from emml.checkpoint import load_checkpoint
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
 from emml.runlock import hold_run
 from emml.runs import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, run_name, save_results

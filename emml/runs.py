@@ -28,9 +28,9 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
-from emml.config import TrainConfig, apply_overrides
+from emml.config.paths import project_path, project_root
+from emml.config.schema import TrainConfig, apply_overrides
 from emml.diskspace import no_space_names
-from emml.tracking import project_path, project_root
 
 CHECKPOINT = "checkpoint.pt"
 """The run's state (`save_checkpoint`): written every `checkpoint_every` updates, at a stop, and at the end."""
@@ -83,7 +83,7 @@ def _flat(d: dict, prefix: str = "") -> dict:
 def _baseline(cfg: TrainConfig) -> dict:
     """The flat identity of the run its profile would give (same model, difficulty, aux, seed): what `swept`
     compares with. A profile that is not in reproduce/profiles.toml compares with TrainConfig's defaults."""
-    from emml.profiles import load_profiles, profile_config
+    from emml.config.profiles import load_profiles, profile_config
 
     if cfg.profile in load_profiles():
         base = profile_config(cfg.profile, cfg.env.difficulty, model=cfg.model, aux=cfg.aux, seed=cfg.seed)
@@ -215,7 +215,7 @@ def read_checkpoint(path: Path) -> dict:
 
 def load_model(path, device: str = "cpu", control: str | None = None):
     """(model, TrainConfig) rebuilt from a checkpoint with its own config and vocabulary; ``control`` (one of
-    `emml.config.CONTROLS`) replaces the run's diagnostic control, for evaluation (same weights)."""
+    `emml.config.schema.CONTROLS`) replaces the run's diagnostic control, for evaluation (same weights)."""
     from emml.models import build_model  # torch: loaded when a model is, not for reports
 
     ckpt = read_checkpoint(path)
@@ -323,7 +323,7 @@ ROW_ONLY = ("tasks", "shaping", "precision")
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
     """Upsert the run's row (keyed by run name) in its results CSV (emml.results): results.json's keys but the
     metrics and config, then `ROW_ONLY`, then the metrics."""
-    from emml.profiles import refuse_committed
+    from emml.config.profiles import refuse_committed
     from emml.results import upsert_result
 
     refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results

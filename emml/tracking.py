@@ -33,6 +33,7 @@ from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+from emml.config.paths import project_root
 from emml.diskspace import NoSpaceError, no_space_names
 
 T = TypeVar("T")
@@ -46,20 +47,6 @@ IMPORTED_RUN_ID = "emml.imported_run_id"
 """Tag of a run imported from a finished run dir (:func:`import_run`): the MLflow run id the run dir recorded."""
 RESUMED_FROM = "emml.resumed_from_run_id"
 """Tag of a run that resumed a run dir from another store (:meth:`Tracker.start`): the run id the run dir recorded."""
-
-
-def project_root() -> Path:
-    """Directory holding ``pyproject.toml`` above this file (fallback: the cwd)."""
-    for parent in Path(__file__).resolve().parents:
-        if (parent / "pyproject.toml").is_file():
-            return parent
-    return Path.cwd()
-
-
-def project_path(path: str | Path) -> Path:
-    """``path`` as given when absolute, else under the project root (run and results roots are set this way)."""
-    path = Path(path)
-    return path if path.is_absolute() else project_root() / path
 
 
 def tracking_uri() -> str:

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.tasks.language import Vocabulary
 
 DETECTORS = ("labels",)

@@ -5,7 +5,7 @@ import os
 
 from emml import alloc, bench
 from emml.bench import bench_train
-from emml.profiles import profile_config
+from emml.config.profiles import profile_config
 
 
 def assert_ratio(r: dict, ratio: str, num: str, den: str) -> None:
@@ -69,7 +69,7 @@ def test_bench_workers_compares_envs_per_worker_end_to_end(no_leftovers):
 
 
 def test_bench_env_measures_the_doom_room_and_the_house(no_leftovers):
-    from emml.config import DoomConfig, HouseConfig
+    from emml.config.schema import DoomConfig, HouseConfig
 
     for cfg, name in ((DoomConfig(height=60, width=108), "doom"), (HouseConfig(height=60, width=108), "house")):
         result = bench.bench_env(cfg, steps=100, vector_steps=100)

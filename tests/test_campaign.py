@@ -181,7 +181,7 @@ def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_
 
     import emml.campaign
     from emml.cli import app
-    from emml.tracking import project_path
+    from emml.config.paths import project_path
 
     monkeypatch.chdir(os.getcwd())  # restored after the test: the command changes directory before it execs
     tree = tmp_path / "tree"

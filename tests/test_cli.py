@@ -49,7 +49,7 @@ def test_bad_input_is_named_before_compute(no_leftovers):
 
 
 def test_diagnose_a_checkpoint(tracking, no_leftovers):
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.rl.trainer import train
     from emml.runs import CHECKPOINT
 
@@ -117,7 +117,7 @@ def test_a_bad_checkpoint_gets_one_line_naming_it(tmp_path, no_leftovers):
 def test_train_over_a_bad_or_foreign_checkpoint_fails_by_name_and_keeps_it(tracking, no_leftovers):
     import torch
 
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.runs import CHECKPOINT, run_dir
 
     sets = ["--set", f"run_root={tracking['run_root']}", "--set", f"results_root={tracking['results_root']}"]
@@ -161,7 +161,7 @@ def test_train_on_a_full_disk_fails_in_one_line_and_its_mlflow_run_ends_failed(t
     import mlflow
 
     from emml import checkpoint
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.runs import CHECKPOINT, run_dir
 
     def fills_the_disk(payload, fh):

@@ -9,7 +9,7 @@ import torch
 from hypothesis import given
 from hypothesis import strategies as st
 
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.diagnose import average_precision, diagnose, saturation_warning, summary_line, x_image_saturation
 from emml.models import build_model
 from emml.tasks.language import Vocabulary, load_dataset

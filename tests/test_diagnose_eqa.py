@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import torch
 
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.diagnose_eqa import NO_ANSWER, diagnose_eqa, eqa_table, split_means
 from emml.envs.vector import make_env
 from emml.evaluate import play

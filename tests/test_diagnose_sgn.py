@@ -10,7 +10,7 @@ import torch
 from typer.testing import CliRunner
 
 from emml.cli import app
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.diagnose_sgn import (
     ENDS,
     NONE,
@@ -139,7 +139,7 @@ def test_turning_on_the_spot_times_out(no_leftovers):
 
 
 def test_a_checkpoints_outcomes_match_its_evaluation(tracking, no_leftovers):
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.rl.trainer import train
     from emml.runs import CHECKPOINT, EVAL_SEED, evaluate_checkpoint
 

@@ -3,7 +3,7 @@
 import pytest
 
 from emml import fidelity
-from emml.profiles import profile_config
+from emml.config.profiles import profile_config
 
 
 def test_every_declared_field_is_a_field_of_the_resolved_config():

@@ -105,7 +105,7 @@ def models_json(*plugin: str) -> dict[str, dict]:
 def test_every_list_of_models_derives_from_the_registry(sandbox):
     from torch import nn
 
-    from emml.config import TrainConfig
+    from emml.config.schema import TrainConfig
     from emml.models import (
         ARCHITECTURES,
         MODELS,

@@ -158,7 +158,7 @@ def test_run_refuses_before_its_parent_run(tracking, tmp_path, monkeypatch, no_l
     """`emml run` and the launcher: the store, the folders and the CSV are checked before the parent MLflow run."""
     from emml.launch import run_table
 
-    monkeypatch.setattr("emml.tracking.project_root", lambda: tmp_path)  # `emml run` writes under runs/, results/
+    monkeypatch.setattr("emml.config.paths.project_root", lambda: tmp_path)  # `emml run` writes under runs/, results/
     monkeypatch.setenv("MLFLOW_TRACKING_URI", "sqlite:////proc/mlflow.db")
     _refused(runner.invoke(app, ["run", "table3", "--profile", "smoke"]), "MLflow store sqlite:////proc/mlflow.db")
     assert list(tmp_path.iterdir()) == []

@@ -13,8 +13,8 @@ from typer.testing import CliRunner
 import emml.probe_eqa as probe
 from emml.checkpoint import save_checkpoint
 from emml.cli import app
+from emml.config.profiles import profile_config
 from emml.models import build_model
-from emml.profiles import profile_config
 from emml.tasks.language import load_dataset, resolve_vocabulary
 from tests.conftest import engine_pids, shm_files
 

@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from emml.checkpoint import load_checkpoint, save_checkpoint
 from emml.cli import app
-from emml.profiles import profile_config
+from emml.config.profiles import profile_config
 from emml.rescore import NoProvenance, NotFinished, rescore
 from emml.results import read_results
 from emml.rl.trainer import train

@@ -87,7 +87,7 @@ def test_a_full_disk_leaves_the_results_csv_as_it_was(tmp_path, monkeypatch):
 
 
 def test_the_committed_results_read_back_with_real_shas():
-    from emml.tracking import project_root
+    from emml.config.paths import project_root
 
     for path in sorted((project_root() / "results").glob("*/*.csv")):
         shas = read_results(path)["git_sha"]

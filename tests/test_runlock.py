@@ -73,7 +73,7 @@ def test_train_on_a_locked_run_exits_2_naming_the_holder_and_writes_nothing(trac
     from typer.testing import CliRunner
 
     from emml.cli import app
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.runs import run_dir
 
     cfg = profile_config("smoke", "easy", model="ga", seed=3, table="locks", run_root=tracking["run_root"])

@@ -7,10 +7,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from emml.config import TrainConfig
-from emml.profiles import profile_config
+from emml.config.paths import project_root
+from emml.config.profiles import profile_config
+from emml.config.schema import TrainConfig
 from emml.runs import CHECKPOINT, config_of, path_of, run_dir, run_name, swept, variant_dir
-from emml.tracking import project_root
 
 
 def test_every_committed_run_dir_keeps_its_name():

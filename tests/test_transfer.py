@@ -165,7 +165,7 @@ def test_a_broken_table4_names_the_key(tmp_path, old, new, key, message):
 def _small_train(cfg, **kwargs):
     """The trainer on a smaller smoke run: 64 frames, one episode per evaluated instruction (12-step episodes:
     `_short_episodes`)."""
-    from emml.config import apply_overrides
+    from emml.config.schema import apply_overrides
     from emml.rl.trainer import train
 
     small = apply_overrides(cfg, {"frames": 64, "diagnose_episodes": 0, "eval_episodes": 1})
@@ -175,12 +175,12 @@ def _small_train(cfg, **kwargs):
 def _short_episodes(monkeypatch, tmp_path) -> None:
     """The smoke profile with 12-step episodes: an episode's length is part of a run's identity (its name), so
     the training runs and the report that looks them up must both see it."""
-    import emml.profiles
+    import emml.config.profiles
 
-    text = emml.profiles.PROFILES_FILE.read_text()
+    text = emml.config.profiles.PROFILES_FILE.read_text()
     path = tmp_path / "profiles.toml"
     path.write_text(text.replace("[smoke]\n", '[smoke]\n"env.max_steps" = 12\n', 1))
-    monkeypatch.setenv(emml.profiles.PROFILES_ENV, str(path))  # the launcher's run processes too
+    monkeypatch.setenv(emml.config.profiles.PROFILES_ENV, str(path))  # the launcher's run processes too
 
 
 def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no_leftovers):
@@ -226,7 +226,7 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no
 
 
 def test_eval_settings_leave_out_splits_with_unknown_words():
-    from emml.config import DoomConfig
+    from emml.config.schema import DoomConfig
     from emml.evaluate import eval_settings
 
     assert eval_settings(DoomConfig(tasks="sgn", vocabulary="train_instructions")) == [("sgn", "train", None)]
@@ -236,7 +236,7 @@ def test_eval_settings_leave_out_splits_with_unknown_words():
 
 
 def test_reset_plays_the_chosen_sentence_and_names_a_bad_one(no_leftovers):
-    from emml.config import DoomConfig
+    from emml.config.schema import DoomConfig
     from emml.envs.doom import DoomEnv
 
     env = DoomEnv(DoomConfig(tasks="sgn", split="test", height=60, width=108))

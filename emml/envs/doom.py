@@ -20,12 +20,12 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from emml.config import DoomConfig, config_from_dict
+from emml.config.geometry import conv_output_size
+from emml.config.schema import DoomConfig, config_from_dict
 from emml.envs import engine as eng
 from emml.envs.labels import LabelGrid, channel_mask, default_aux_words
 from emml.envs.objects import ACTORS, iwad_path
 from emml.envs.wad import ROOM, map_name, wad_path
-from emml.geometry import conv_output_size
 from emml.tasks.episodes import Episode, sample_episode
 from emml.tasks.language import load_dataset, normalize, resolve_vocabulary
 

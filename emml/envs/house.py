@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emml.config import HouseConfig, config_from_dict
+from emml.config.schema import HouseConfig, config_from_dict
 from emml.envs.doom import ANSWER, FORWARD, LEFT, MOVES, RIGHT, DoomEnv
 from emml.envs.furniture import CLASS_TO_ACTOR, FURNITURE, spawn_class
 from emml.envs.house_wad import HOUSE, MAP, wad_path

@@ -2,7 +2,7 @@
 
 Cell (i, j) of a word's channel is on when any pixel of a visible object that the word describes (its class,
 colour or size word) falls in that cell: the conv3 cell whose receptive field is centred nearest to the pixel
-(emml/geometry.py), so that a label sits where the cell predicting it looks. The engine's label buffer gives
+(emml/config/geometry.py), so that a label sits where the cell predicting it looks. The engine's label buffer gives
 per-pixel object values; values are not stable across frames, so each frame's `state.labels` maps them to
 actors. Words without labels — superlatives (§3.2), and in the transfer experiment every word outside the
 training instructions — are left out by the channel mask; function words are supervised with all-zero labels.
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from emml.config.geometry import pixel_cells
 from emml.envs.objects import CLASS_TO_ACTOR
-from emml.geometry import pixel_cells
 from emml.tasks.language import Dataset, Vocabulary
 
 
@@ -49,7 +49,7 @@ class LabelGrid:
         if observed_hw is None:  # an even partition of the frame
             self.row_cell = (np.arange(rh) * gh // rh).astype(np.int64)  # pixel row → grid row
             self.col_cell = (np.arange(rw) * gw // rw).astype(np.int64)
-        else:  # the cell whose receptive field is centred nearest (emml/geometry.py)
+        else:  # the cell whose receptive field is centred nearest (emml/config/geometry.py)
             self.row_cell = np.array(pixel_cells(rh, observed_hw[0], gh), dtype=np.int64)
             self.col_cell = np.array(pixel_cells(rw, observed_hw[1], gw), dtype=np.int64)
 

@@ -22,7 +22,7 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 from gymnasium.vector.async_vector_env import AsyncState
 from gymnasium.vector.utils import iterate
 
-from emml.config import DoomConfig, env_config_class
+from emml.config.schema import DoomConfig, env_config_class
 from emml.envs.engine import (
     EngineError,
     RestartBudget,
@@ -78,7 +78,7 @@ class RestartingEnv(gym.Wrapper):
 
 
 def make_env(config: DoomConfig | dict) -> gym.Env:
-    """The env a config describes: the config class of its difficulty's env kind (emml/env_kinds.py), and the env
+    """The env a config describes: the config class of its difficulty's env kind (emml/config/env_kinds.py), and the env
     class that config's gym id is registered with (a HouseEnv for 'house', HouseConfig; else a DoomEnv)."""
     values = asdict(config) if not isinstance(config, dict) else config
     cls = env_config_class(values.get("difficulty", "easy"))
@@ -86,7 +86,7 @@ def make_env(config: DoomConfig | dict) -> gym.Env:
 
 
 def env_class(gym_id: str) -> type[gym.Env]:
-    """The class ``gym_id`` is registered with (`import emml` registers the ids of emml/env_kinds.py), imported
+    """The class ``gym_id`` is registered with (`import emml` registers the ids of emml/config/env_kinds.py), imported
     only now: a worker imports the one env it plays."""
     return load_env_creator(gym.spec(gym_id).entry_point)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
-from emml.config import ModelConfig
+from emml.config.schema import ModelConfig
 from emml.models.encoders import conv_output_size
 from emml.models.fusion import Fusion, FusionOutput
 from emml.models.policy import EmmlModel, ModelOutput

@@ -15,8 +15,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from emml.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv geometry
-from emml.geometry import MIN_INPUT_SIZE, conv_output_size  # noqa: F401  (re-exported)
+from emml.config.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv geometry
+from emml.config.geometry import MIN_INPUT_SIZE, conv_output_size  # noqa: F401  (re-exported)
 from emml.models.gru import gru_scan
 
 BLOCKS_FROM = (64, 25_000)

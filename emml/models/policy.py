@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from emml.config import LABEL_CONTROLS, ModelConfig
+from emml.config.schema import LABEL_CONTROLS, ModelConfig
 from emml.models.encoders import ImageEncoder, TextEncoder, conv_output_size
 from emml.models.fusion import FusionOutput
 from emml.models.gru import gru_cell, gru_sequence

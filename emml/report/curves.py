@@ -88,7 +88,7 @@ def plot_table(
     (their run_id), curves from MLflow, else from the run dir's metrics.csv (under ``run_root``, default: the
     profile's); a run with neither is skipped with a note. When no run has a curve here, existing figures are kept
     rather than replaced by empty ones. Returns (paths, notes)."""
-    from emml.profiles import profile_config, profile_seeds
+    from emml.config.profiles import profile_config, profile_seeds
     from emml.registry import load_table
     from emml.report import deviations
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, reports_dir, table_results

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.diagnose import SCALARS
 from emml.report.curves import plot_run
 from emml.runs import run_name

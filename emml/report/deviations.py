@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml import fidelity
-from emml.env_kinds import env_label
+from emml.config.env_kinds import env_label
 
 SAVED, NO_CONFIG, REFERENCE, DECLARED = "saved", "no saved config", "reference", "declared"
 """Where a run's config came from: its results.json; the registry because its results.json has no config yet

@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from emml.agents.house_oracle import HouseOracle  # noqa: E402
-from emml.config import HouseConfig  # noqa: E402
+from emml.config.schema import HouseConfig  # noqa: E402
 from emml.envs.doom import ANSWER  # noqa: E402
 from emml.envs.house import HouseEnv  # noqa: E402
 from emml.report.savefig import save  # noqa: E402

@@ -6,8 +6,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
+from emml.config.paths import project_path, project_root
 from emml.runs import CHECKPOINT, config_of, finished_run, path_of, variant_dir
-from emml.tracking import project_path, project_root
 
 READING_ORDER = ("quick", "paper")
 """The profiles a reader should read first, in this order; any other (demo…) follows."""
@@ -15,10 +15,10 @@ READING_ORDER = ("quick", "paper")
 
 def profiles_with_results(results_root: str | Path = "results") -> dict[str, list[str]]:
     """Profile → the tables that have a results CSV for it (demo rows are the demo's own), quick first, then
-    paper, then the others; never a profile whose numbers are not results (smoke: `emml.profiles.is_scratch`), even
-    if a CSV of it lies here. The experiments beyond the paper's tables (reproduce/experiments/<name>.toml, e.g.
+    paper, then the others; never a profile whose numbers are not results (smoke: `emml.config.profiles.is_scratch`),
+    even if a CSV of it lies here. The experiments beyond the paper's tables (reproduce/experiments/<name>.toml, e.g.
     issue 34's eqa_readout) with results are listed after the paper's tables, by name, loadable by it."""
-    from emml.profiles import is_scratch, load_profiles
+    from emml.config.profiles import is_scratch, load_profiles
     from emml.registry import EXPERIMENTS_DIR, list_experiments, list_tables, load_table, own_table
 
     known = load_profiles()

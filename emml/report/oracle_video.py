@@ -9,7 +9,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from emml.agents.oracle import Oracle
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.envs.doom import DoomEnv
 
 CAPTION_HEIGHT = 22

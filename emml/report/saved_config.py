@@ -38,8 +38,8 @@ def backfill_config(run_dir: Path) -> str:
     run whose results.json is missing gets it rebuilt from its row of the results CSV when the row's run_id is the
     checkpoint's (the row is the payload, flattened)."""
     from emml.checkpoint import load_checkpoint
+    from emml.config.paths import project_path
     from emml.results import read_results
-    from emml.tracking import project_path
 
     run_dir = Path(run_dir)
     path = run_dir / RESULTS

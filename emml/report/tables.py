@@ -17,16 +17,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from emml.env_kinds import ENV_KINDS, env_label
+from emml.config.env_kinds import ENV_KINDS, env_label
+from emml.config.paths import project_path, project_root
 from emml.registry import REPRODUCE_DIR, Table, list_tables, load_table, table_ref
 from emml.results import read_results
-from emml.tracking import project_path, project_root
 
 MISSING = "—"
 EXTRA_MARK = "†"
 """Marks a row of ours that the paper's table does not have (Table 4's other test instructions)."""
 DIFFICULTY_LABELS = {k.name: k.label for k in ENV_KINDS.values()}
-"""How a difficulty column is headed (emml/env_kinds.py)."""
+"""How a difficulty column is headed (emml/config/env_kinds.py)."""
 AUX_LABELS = {False: "No Aux", True: "Aux"}
 METRIC_LABELS = {
     "sgn_test": "SGN test",
@@ -87,7 +87,7 @@ def paper_numbers(name: str, directory: Path = REPRODUCE_DIR / "paper") -> pd.Da
 
 def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.DataFrame) -> list[Cell]:
     """Every cell of the table (the paper's cells for a placeholder table, with no runs of ours)."""
-    from emml.profiles import profile_seeds
+    from emml.config.profiles import profile_seeds
 
     lookup = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper.itertuples()}
     by_name = results.set_index("run_name") if not results.empty else pd.DataFrame()
@@ -163,7 +163,7 @@ def _label(level: str, value) -> str:
 
 def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame, constant: list[str]) -> str:
     """What the table shows, under which profile, frames and seeds, and how it was made."""
-    from emml.profiles import profile_seeds
+    from emml.config.profiles import profile_seeds
 
     paper = table.name in list_tables()  # one of reproduce/table*.toml (as emml/report/deviations.py decides)
     if paper:
@@ -218,7 +218,7 @@ def shown_runs(
 ) -> list:
     """The runs behind the table's cells with their configs (emml/report/deviations.py); every declared run when none
     has finished (its deviations as declared); [] for a placeholder."""
-    from emml.profiles import profile_config, profile_seeds
+    from emml.config.profiles import profile_config, profile_seeds
     from emml.report.deviations import shown_run
 
     if table.placeholder:
@@ -233,7 +233,7 @@ def shown_runs(
 
 
 def _run_names(table: Table, profile: str) -> set[str]:
-    from emml.profiles import profile_seeds
+    from emml.config.profiles import profile_seeds
 
     return {spec.run_name(profile) for spec in table.runs(profile_seeds(profile))}
 
@@ -258,7 +258,7 @@ def _tex_escape(text: str) -> str:
 def results_path(name: str, profile: str, results_root: str | Path | None = None) -> Path:
     """results/<name>/<profile>.csv under ``results_root`` (default: the profile's, `results` but for smoke)."""
     if results_root is None:
-        from emml.profiles import profile_config
+        from emml.config.profiles import profile_config
 
         results_root = profile_config(profile).results_root
     return project_path(results_root) / name / f"{profile}.csv"
@@ -267,7 +267,7 @@ def results_path(name: str, profile: str, results_root: str | Path | None = None
 def reports_dir(profile: str, out: str | Path | None = None) -> Path:
     """Where a profile's reports go: ``out``, else the committed reports/, or scratch/reports for a profile whose
     numbers are not results (smoke); a smoke report is refused under the committed reports/."""
-    from emml.profiles import SCRATCH, is_scratch, refuse_committed
+    from emml.config.profiles import SCRATCH, is_scratch, refuse_committed
 
     if out is None:
         out = project_root() / (f"{SCRATCH}/reports" if is_scratch(profile) else "reports")
@@ -282,7 +282,7 @@ def _tex_caption(text: str) -> str:
 def table_results(table: Table, profile: str, results_root: str | Path | None = None) -> pd.DataFrame:
     """The results rows of the table's runs under ``profile``: its own CSV, and the CSVs of the tables some of its
     rows borrow runs from (`from_table`: Table 3's "DA Multi-Task" is Table 2's Dual-Attention)."""
-    from emml.profiles import profile_seeds
+    from emml.config.profiles import profile_seeds
 
     owners = dict.fromkeys([table.name, *(spec.table for spec in table.runs(profile_seeds(profile)))])
     frames = [read_results(results_path(owner, profile, results_root)) for owner in owners]

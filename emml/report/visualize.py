@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from emml.config import DoomConfig  # noqa: E402
+from emml.config.schema import DoomConfig  # noqa: E402
 from emml.envs.doom import MOVES  # noqa: E402
 from emml.evaluate import obs_to_torch, playing  # noqa: E402
 from emml.report.savefig import save  # noqa: E402

@@ -16,7 +16,7 @@ import shutil
 
 import torch
 
-from emml.config import COMPILE
+from emml.config.schema import COMPILE
 from emml.models.policy import EmmlModel
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import torch
 
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.models import model_config
 from emml.rl.compiled import check_compile
 from emml.rl.precision import check_precision

@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 from contextlib import ExitStack
 
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.rl.packed import StackedModels, load_optimizer_state, optimizer_state, packed_ppo_update
 from emml.rl.ppo import make_optimizer
 from emml.rl.trainer import Trainer, train_loop

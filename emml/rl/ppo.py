@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable, Mapping
 import torch
 import torch.nn.functional as F
 
-from emml.config import (
+from emml.config.schema import (
     AUX_BALANCES,
     PPOConfig,  # defined beside TrainConfig (configs are leaves); still importable from here
     check_choice,

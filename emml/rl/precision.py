@@ -16,7 +16,7 @@ import contextlib
 import torch
 from torch import nn
 
-from emml.config import PRECISIONS
+from emml.config.schema import PRECISIONS
 
 NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16", "bf16")
 """CPU flags (/proc/cpuinfo) that mean native bf16 arithmetic: x86 AVX-512 BF16, AMX, Arm BF16."""

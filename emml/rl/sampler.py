@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.envs.doom import ANSWER
 from emml.envs.engine import RestartBudget, WorkerDied
 from emml.envs.vector import make_vector_env

@@ -20,7 +20,7 @@ from tqdm import tqdm
 
 from emml import alloc
 from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.diagnose import SCALARS, diagnose, saturation_warning, summary_line
 from emml.envs.engine import stop_after
 from emml.envs.labels import channel_mask

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import tomllib
 
-from emml.config import VOCABULARY_SOURCES, check_choice  # the config's allowed values (also imported from here)
+from emml.config.schema import VOCABULARY_SOURCES, check_choice  # the config's allowed values (also imported from here)
 
 SPLITS = ("train", "test")
 KINDS = ("sgn", "eqa")

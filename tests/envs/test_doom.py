@@ -7,10 +7,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import emml  # noqa: F401  (registers the env ids)
-from emml.config import DoomConfig
+from emml.config.geometry import pixel_cells, receptive_field
+from emml.config.schema import DoomConfig
 from emml.envs.doom import ANSWER, EASY_SLOTS, EASY_START, FORWARD, DoomEnv
 from emml.envs.engine import EngineError, live_engines
-from emml.geometry import pixel_cells, receptive_field
 from tests.conftest import SMOKE
 
 

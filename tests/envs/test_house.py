@@ -9,7 +9,7 @@ from gymnasium.utils.env_checker import check_env
 
 import emml  # noqa: F401  (registers the env ids)
 from emml.agents.house_oracle import HouseOracle
-from emml.config import HouseConfig
+from emml.config.schema import HouseConfig
 from emml.envs.furniture import spawn_class
 from emml.envs.house import ANSWER, FORWARD, HouseEnv
 from emml.envs.house_wad import HOUSE

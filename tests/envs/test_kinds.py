@@ -1,12 +1,13 @@
-"""Env kinds (emml/env_kinds.py): one declaration per kind, and every list derives from it; HouseEnv overrides the
+"""Env kinds (emml/config/env_kinds.py): one declaration per kind, and every list derives from it; HouseEnv overrides
+the
 scene, the distance and the reach test of DoomEnv, not its episode loop."""
 
 import gymnasium as gym
 
 import emml  # noqa: F401  (registers the env ids)
 from emml import fidelity
-from emml.config import ENV_CONFIGS, ENV_DIFFICULTIES, DoomConfig, HouseConfig, env_config_class
-from emml.env_kinds import ENV_KINDS, GYM_ENVS, env_label, kinds_of
+from emml.config.env_kinds import ENV_KINDS, GYM_ENVS, env_label, kinds_of
+from emml.config.schema import ENV_CONFIGS, ENV_DIFFICULTIES, DoomConfig, HouseConfig, env_config_class
 from emml.envs.doom import DoomEnv
 from emml.envs.house import HouseEnv
 from emml.envs.vector import env_class, make_env

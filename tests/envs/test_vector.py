@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from emml.config import DoomConfig
+from emml.config.schema import DoomConfig
 from emml.envs.doom import DoomEnv
 from emml.envs.vector import make_vector_env
 from tests.conftest import SMOKE, engine_pids
@@ -49,7 +49,7 @@ SCRIPT = textwrap.dedent(
     # a foreground program, as Ctrl-C meets it: a suite started in the background (`nohup ... &`) runs with SIGINT
     # ignored (POSIX), which Python and exec pass on to this child and its workers, and Ctrl-C would be ignored
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    from emml.config import DoomConfig
+    from emml.config.schema import DoomConfig
     from emml.envs.engine import install_signal_handlers
     from emml.envs.vector import make_vector_env
     install_signal_handlers()

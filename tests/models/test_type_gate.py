@@ -4,7 +4,7 @@ only; instructions keep the model's x_sent."""
 import pytest
 import torch
 
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.models import build_model
 from emml.models.type_gate import TypeGate
 from emml.tasks.language import Vocabulary, load_dataset

@@ -82,7 +82,7 @@ def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(track
     import json
 
     import emml.report.curves as curves
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
     from emml.registry import load_table
 
     footers = []

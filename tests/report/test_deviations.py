@@ -5,7 +5,7 @@ from emml.report.deviations import ShownRun, summarise, who
 
 def run(name, row, difficulty="easy", aux=True, cfg=None):
     from emml import fidelity
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
 
     config = fidelity.resolve((cfg or profile_config("quick", difficulty, model="ga", aux=aux)).to_dict())
     return ShownRun(name, {"row": row, "difficulty": difficulty, "aux": aux}, config, "saved")
@@ -22,7 +22,7 @@ def test_groups_are_named_by_what_they_share_or_by_name():
 
 
 def test_identical_lines_are_said_once():
-    from emml.profiles import profile_config
+    from emml.config.profiles import profile_config
 
     runs = [run("a", "GA"), run("b", "GA", "hard"), run("c", "GA", cfg=profile_config("paper", model="ga", aux=True))]
     d = summarise(runs)

@@ -3,7 +3,7 @@
 import numpy as np
 from PIL import Image
 
-from emml.config import HouseConfig
+from emml.config.schema import HouseConfig
 from emml.envs.house import HouseEnv
 from emml.report.house_views import QUESTIONS, answer_view, house_views
 

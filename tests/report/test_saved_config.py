@@ -6,7 +6,7 @@ import json
 import pandas as pd
 import torch
 
-from emml.profiles import profile_config
+from emml.config.profiles import profile_config
 from emml.report.saved_config import backfill_config, run_dirs
 from emml.runs import run_name, saved_config
 

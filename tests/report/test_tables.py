@@ -7,7 +7,7 @@ import re
 import pandas as pd
 import pytest
 
-from emml.profiles import profile_seeds
+from emml.config.profiles import profile_seeds
 from emml.registry import load_table
 from emml.report.tables import MISSING, report_table, reports_dir
 from emml.runs import run_name
@@ -105,7 +105,7 @@ def test_one_seed_of_three_says_so_and_one_of_one_shows_the_value(tmp_path, monk
     fake_results("table3", tmp_path / "results", drop=tuple(f"da_no_sa-easy-aux-s{s}-quick" for s in (1, 2)))
     md = (report("table3", tmp_path), (tmp_path / "reports" / "table3-quick.md").read_text())[1]
     assert "0.10 (n=1/3)" in md
-    monkeypatch.setattr("emml.profiles.profile_seeds", lambda profile: [0])
+    monkeypatch.setattr("emml.config.profiles.profile_seeds", lambda profile: [0])
     rep = report("table3", tmp_path)
     assert all(c["n"] == 1 for c in rep["cells"])
     line = next(x for x in (tmp_path / "reports" / "table3-quick.md").read_text().splitlines() if "| w/o GA1" in x)
@@ -208,7 +208,7 @@ def test_a_report_written_twice_is_the_same_bytes(tmp_path):
 
 
 def test_smoke_reports_are_not_written_under_the_committed_reports(tmp_path):
-    from emml.tracking import project_root
+    from emml.config.paths import project_root
 
     assert reports_dir("smoke") == project_root() / "scratch" / "reports"
     assert reports_dir("quick") == project_root() / "reports"

@@ -7,7 +7,7 @@ import copy
 import pytest
 import torch
 
-from emml.config import TrainConfig
+from emml.config.schema import TrainConfig
 from emml.models import build_model
 from emml.rl import compiled as compiled_module
 from emml.rl.compiled import compile_model, wants_compile

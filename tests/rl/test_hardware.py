@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from emml.config import TrainConfig
+from emml.config.profiles import profile_config
+from emml.config.schema import TrainConfig
 from emml.launch import run_table
-from emml.profiles import profile_config
 from emml.rl.hardware import check_runnable
 from emml.rl.trainer import Trainer
 
@@ -53,11 +53,12 @@ def test_the_launcher_refuses_before_any_run(no_cuda, tracking):
 
 
 def test_the_config_imports_no_torch_and_no_layer_above_it():
-    """The layers contract (pyproject.toml, `make lint`) reads the source; this runs it: `import emml.config`, and
+    """The layers contract (pyproject.toml, `make lint`) reads the source; this runs it: `import emml.config.schema`,
+    and
     validating a config with model options (the model registry is asked where training starts, not here)."""
     above = ("torch", "emml.rl", "emml.models", "emml.envs", "emml.tasks", "emml.runs")
     code = (
-        "import sys; from emml.config import TrainConfig, ModelConfig, apply_overrides; "
+        "import sys; from emml.config.schema import TrainConfig, ModelConfig, apply_overrides; "
         "apply_overrides(TrainConfig(model='pacman'), {'model_options.pacman_frames': 3}).validate(); "
         "ModelConfig(name='pacman').validate(); "
         f"print([m for m in sys.modules if m.startswith({above})])"

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from emml.profiles import profile_config
+from emml.config.profiles import profile_config
 from emml.rl.packed_trainer import train_packed
 from emml.rl.trainer import env_seeds, train
 from emml.runs import CHECKPOINT, METRICS

@@ -10,8 +10,8 @@ import torch
 from typer.testing import CliRunner
 
 from emml.cli import app
+from emml.config.profiles import profile_config
 from emml.models import build_model
-from emml.profiles import profile_config
 from emml.results import read_results
 from emml.rl import precision
 from emml.rl.hardware import check_runnable

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from emml.config import DoomConfig, TrainConfig
+from emml.config.schema import DoomConfig, TrainConfig
 from emml.envs.doom import DoomEnv
 from emml.envs.engine import EngineError
 from emml.rl.rollout import RolloutBuffer

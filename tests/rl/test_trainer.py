@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from emml.checkpoint import load_checkpoint, save_checkpoint
-from emml.config import TrainConfig
+from emml.config.profiles import profile_config
+from emml.config.schema import TrainConfig
 from emml.models import MODELS
-from emml.profiles import profile_config
 from emml.results import read_results
 from emml.rl.trainer import train
 from emml.runs import (
@@ -247,7 +247,7 @@ def test_a_house_run_trains_evaluates_diagnoses_and_reloads(tracking, no_leftove
     """Table 5's runs go through the same trainer: the House's env in the workers, the evaluation and the
     diagnostics (its spawn is fixed, so the actor's sensitivity is defined as in Easy), and a checkpoint that reloads
     with its HouseConfig."""
-    from emml.config import HouseConfig
+    from emml.config.schema import HouseConfig
     from emml.runs import load_model
 
     cfg = smoke(tracking, frames=128, eval_episodes=2, seed=2, **{"env.difficulty": "house", "eval_every": 128})
@@ -480,8 +480,8 @@ def test_workers_hosting_several_envs_train_exactly_alike(tracking, no_leftovers
 
 
 def test_smoke_numbers_are_not_recorded_under_the_committed_results(tmp_path):
+    from emml.config.paths import project_path
     from emml.runs import record_result
-    from emml.tracking import project_path
 
     cfg = profile_config("smoke", "easy", {"results_root": "results", "table": "test"})
     with pytest.raises(ValueError, match="the 'smoke' profile's numbers are not results"):

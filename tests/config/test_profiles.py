@@ -3,9 +3,9 @@
 import pytest
 from typer.testing import CliRunner
 
-import emml.profiles
+import emml.config.profiles
 from emml.cli import app
-from emml.profiles import PROFILES_FILE, ProfileError, load_profiles, profile_config
+from emml.config.profiles import PROFILES_FILE, ProfileError, load_profiles, profile_config
 from emml.runs import run_name
 
 
@@ -36,7 +36,7 @@ def test_a_broken_profiles_file_is_named_with_the_profile_and_field(tmp_path, mo
     with pytest.raises(ProfileError) as e:
         load_profiles(path)
     assert str(e.value).startswith(str(path)) and message in str(e.value)
-    monkeypatch.setattr(emml.profiles, "PROFILES_FILE", path)
+    monkeypatch.setattr(emml.config.profiles, "PROFILES_FILE", path)
     for command in (["list"], ["train", "--profile", "smoke"], ["tasks", "show"]):
         result = CliRunner().invoke(app, command)
         assert result.exit_code == 2 and result.output.startswith(f"error: {path}"), result.output
@@ -68,7 +68,7 @@ def test_a_wrong_set_override_is_named_as_such(option, message, tmp_path):
 
 
 def test_the_house_gets_its_own_env_config_from_a_profile_a_set_and_a_saved_run():
-    from emml.config import HouseConfig, TrainConfig, apply_overrides
+    from emml.config.schema import HouseConfig, TrainConfig, apply_overrides
 
     profiles = load_profiles()
     cfg = profile_config("quick", "house")  # Appendix C: 50M frames at the paper profile, as in Hard
@@ -87,7 +87,7 @@ def test_the_house_gets_its_own_env_config_from_a_profile_a_set_and_a_saved_run(
 
 
 def test_a_model_option_is_set_from_the_command_line_and_recorded():
-    from emml.config import TrainConfig, apply_overrides
+    from emml.config.schema import TrainConfig, apply_overrides
 
     cfg = apply_overrides(TrainConfig(), {"model_options.state_temperature": 0.25}).validate()
     assert cfg.model_options == {"state_temperature": 0.25}
@@ -109,7 +109,7 @@ def test_a_model_option_is_set_from_the_command_line_and_recorded():
 
 
 def test_a_bf16_run_is_named_apart_from_its_fp32_run():
-    from emml.config import TrainConfig, apply_overrides
+    from emml.config.schema import TrainConfig, apply_overrides
 
     assert run_name(apply_overrides(TrainConfig(), {"precision": "bf16"})) == "dual_attention-easy-noaux-bf16-s0-paper"
 
@@ -119,4 +119,4 @@ def test_the_callers_fields_win_over_the_profile_and_smoke_writes_under_scratch(
     assert (smoke.run_root, smoke.results_root) == ("scratch/runs", "scratch/results")  # gitignored: not results
     mine = profile_config("smoke", run_root=str(tmp_path), results_root=str(tmp_path / "r"))
     assert (mine.run_root, mine.results_root) == (str(tmp_path), str(tmp_path / "r"))
-    assert emml.profiles.is_scratch("smoke") and not emml.profiles.is_scratch("quick")
+    assert emml.config.profiles.is_scratch("smoke") and not emml.config.profiles.is_scratch("quick")

@@ -2,8 +2,8 @@
 the reason, collected in docs/fidelity.md). `validate()` fails before any compute with the field's name and the
 allowed values.
 
-Configs are leaves: this module imports no other layer of `emml` but the leaves `emml.geometry` and
-`emml.env_kinds`. What needs more than the values is checked where training starts, not here
+Configs are leaves: this module imports no other layer of `emml` but the leaves `emml.config.geometry` and
+`emml.config.env_kinds`. What needs more than the values is checked where training starts, not here
 (`emml.rl.hardware.check_runnable`): the model registry (plugins loaded) names the model and the ablations its
 fusion declares; the machine runs `compile` (a C++ compiler), `precision` (native bf16) and `device` (CUDA)."""
 
@@ -14,7 +14,7 @@ import re
 from dataclasses import asdict, dataclass, field, fields
 from typing import ClassVar
 
-from emml.env_kinds import DOOM_ID, ENV_KINDS, HOUSE_ID, kinds_of
+from emml.config.env_kinds import DOOM_ID, ENV_KINDS, HOUSE_ID, kinds_of
 
 PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 """A table or profile name: it becomes a folder or file name, so no path separator, no leading dot."""
@@ -101,7 +101,7 @@ class DoomConfig:
     env's cv2.INTER_AREA, and alike at the 0.94 scale of 320×180 → 300×168), 'area' or 'nearest'."""
     label_grid: str = "receptive_field"
     """How label pixels meet the conv3 grid (paper silent): 'receptive_field', the cell whose receptive field is
-    centred nearest (emml/geometry.py), or 'even', an even partition of the frame (off by up to one cell at
+    centred nearest (emml/config/geometry.py), or 'even', an even partition of the frame (off by up to one cell at
     the right and bottom edges, since conv3 has no padding)."""
     max_words: int = 10
     """Token sequence length (padded with 0)."""
@@ -118,7 +118,8 @@ class DoomConfig:
     """Which tasks/<name>.toml."""
 
     GYM_ID: ClassVar[str] = DOOM_ID
-    """The environment this class configures (not a field); it plays the kinds of emml/env_kinds.py with this id."""
+    """The environment this class configures (not a field); it plays the kinds of emml/config/env_kinds.py with this
+    id."""
     DIFFICULTIES: ClassVar[tuple[str, ...]] = kinds_of(DOOM_ID)
     """The allowed `difficulty` values (not a field): Easy and Hard (§4)."""
 
@@ -135,7 +136,7 @@ class DoomConfig:
                 f"vocabulary={self.vocabulary!r} must be a list of words, or one of "
                 + ", ".join(map(repr, VOCABULARY_SOURCES))
             )
-        from emml.geometry import conv_output_size
+        from emml.config.geometry import conv_output_size
 
         conv_output_size(self.height, self.width)  # raises naming height/width when too small
         check_at_least(self, ("max_steps", "frame_skip", "max_words"), 1)
@@ -187,7 +188,7 @@ class HouseConfig(DoomConfig):
 ENV_CONFIGS: dict[str, type[DoomConfig]] = {c.GYM_ID: c for c in (DoomConfig, HouseConfig)}
 """The config class of each environment, by gym id."""
 ENV_DIFFICULTIES = tuple(ENV_KINDS)
-"""Where a run trains: Doom Easy, Doom Hard (§4), or the House (Appendix C): the kinds of emml/env_kinds.py."""
+"""Where a run trains: Doom Easy, Doom Hard (§4), or the House (Appendix C): the kinds of emml/config/env_kinds.py."""
 
 
 def env_config_class(difficulty: str) -> type[DoomConfig]:

@@ -9,10 +9,11 @@ from pathlib import Path
 
 import tomllib
 
-from emml.config import TrainConfig, apply_overrides, match_env_class
-from emml.env_kinds import ENV_KINDS
+from emml.config.env_kinds import ENV_KINDS
+from emml.config.paths import REPRODUCE_DIR
+from emml.config.schema import TrainConfig, apply_overrides, match_env_class
 
-PROFILES_FILE = Path(__file__).resolve().parent.parent / "reproduce" / "profiles.toml"
+PROFILES_FILE = REPRODUCE_DIR / "profiles.toml"
 PROFILES_ENV = "EMML_PROFILES"
 """Environment variable naming another profiles file (a researcher's own profiles; the tests' shorter smoke): the
 processes a command starts (one per run) read the same file."""
@@ -111,7 +112,7 @@ def is_scratch(profile: str) -> bool:
 def refuse_committed(profile: str, path: str | Path, what: str) -> None:
     """ValueError when ``path`` (a results CSV or report being written) lies in the checkout's committed results/
     or reports/ and ``profile`` is a scratch profile: 512-frame smoke numbers are not results."""
-    from emml.tracking import project_path
+    from emml.config.paths import project_path
 
     if profile not in load_profiles() or not is_scratch(profile):
         return
