@@ -12,7 +12,7 @@ measures, e.g. issue 34's x_sent readout).
 skips finished runs and resumes interrupted ones; `--status` shows each run as done / running / interrupted / to do
 with its frames and an estimate of the time left, measured from this machine's own runs of the same profile.
 
-A run is "running" while a live process holds its lock (emml/runlock.py). A campaign is long: `emml campaign`
+A run is "running" while a live process holds its lock (emml/runs/runlock.py). A campaign is long: `emml campaign`
 runs it from a git worktree of the current commit (`pin_worktree`), so that editing the checkout cannot reach a
 running training and every row it writes keeps that commit's sha; the runs, results and MLflow store stay the
 checkout's.
@@ -30,7 +30,7 @@ from pathlib import Path
 import tomllib
 
 from emml.registry import REPRODUCE_DIR, RunSpec
-from emml.runs import run_name
+from emml.runs.rundir import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
 STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "note")
@@ -211,8 +211,8 @@ def step_runs(
 def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:
     """Every run of the campaign in order (a run two steps share is listed once, at its first step)."""
     from emml.launch import run_states
-    from emml.runlock import holder
-    from emml.runs import METRICS, run_dir
+    from emml.runs.rundir import METRICS, run_dir
+    from emml.runs.runlock import holder
 
     out, seen, read = [], set(), {}
     speed = _Speed()
@@ -281,7 +281,7 @@ class _Speed:
 
     def measured(self, cfg) -> tuple[float | None, float | None]:
         from emml.config.paths import project_path
-        from emml.runs import METRICS
+        from emml.runs.rundir import METRICS
 
         key = (cfg.profile, cfg.model)
         if key not in self._cache:

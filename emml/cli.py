@@ -9,7 +9,7 @@ from pathlib import Path
 import typer
 
 from emml.config.env_kinds import DOOM_ID, ENV_KINDS, GYM_ENVS, kinds_of
-from emml.runs import run_name
+from emml.runs.rundir import run_name
 
 app = typer.Typer(
     add_completion=False,
@@ -65,7 +65,7 @@ def _check_project_files(
 
 def _check_checkpoint(path: Path) -> None:
     """Fail with one line naming the path unless it holds an emml checkpoint (before any engine starts)."""
-    from emml.checkpoint import CheckpointError, load_checkpoint
+    from emml.runs.checkpoint import CheckpointError, load_checkpoint
 
     try:
         load_checkpoint(path)
@@ -75,8 +75,8 @@ def _check_checkpoint(path: Path) -> None:
 
 def _check_store() -> None:
     """Fail with one line naming the MLflow store unless it answers and takes writes within seconds
-    (emml/preflight.py): MLflow itself retries an unreachable store for ~100 s, then prints a traceback."""
-    from emml.preflight import check_store
+    (emml/runs/preflight.py): MLflow itself retries an unreachable store for ~100 s, then prints a traceback."""
+    from emml.runs.preflight import check_store
 
     try:
         check_store()
@@ -444,7 +444,7 @@ def train(
             from emml.rl.packed_trainer import check_packable
 
             check_packable(cfgs)
-        from emml.preflight import check_train
+        from emml.runs.preflight import check_train
 
         check_train(*cfgs)  # the store, the run and results folders, the results CSV: before any engine or run
     except ValueError as e:
@@ -457,11 +457,11 @@ def train(
             err=True,
         )
     _own_engines(defer=False)
-    from emml.checkpoint import CheckpointError
-    from emml.diskspace import NoSpaceError
     from emml.rl.trainer import train as run
-    from emml.runlock import RunLocked
-    from emml.runs import ConfigMismatch
+    from emml.runs.checkpoint import CheckpointError
+    from emml.runs.diskspace import NoSpaceError
+    from emml.runs.rundir import ConfigMismatch
+    from emml.runs.runlock import RunLocked
 
     if pack_seeds:
         from emml.rl.packed_trainer import train_packed
@@ -514,7 +514,7 @@ def eval_checkpoint(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Greedy accuracy of a checkpoint on SGN/EQA train/test (reproducible under --seed)."""
-    from emml.runs import evaluate_checkpoint
+    from emml.runs.rundir import evaluate_checkpoint
 
     _check_checkpoint(checkpoint)
     _own_engines()
@@ -540,10 +540,10 @@ def rescore_runs(
 ):
     """Re-score finished runs with the final-evaluation protocol (issue 33): results.json's metrics and the
     results-table row rewritten, training provenance kept, scored_sha / eval_episodes / eval_seed recorded."""
-    from emml.checkpoint import load_checkpoint
     from emml.config.schema import TrainConfig
     from emml.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
-    from emml.runlock import RunLocked
+    from emml.runs.checkpoint import load_checkpoint
+    from emml.runs.runlock import RunLocked
 
     for run in runs:  # every run checked before any is played
         rdir = run if run.is_dir() else run.parent
@@ -731,7 +731,7 @@ def probe_eqa_cmd(
 
 def _models(*paths: Path) -> list[tuple[str, object, object]]:
     """(label, model, config) per checkpoint, each checked first; the label says aux or no aux and the run."""
-    from emml.runs import load_model
+    from emml.runs.rundir import load_model
 
     out = []
     for path in paths:
@@ -831,7 +831,7 @@ def demo(
     over = {"env.tasks": "sgn"}
     try:
         cfg = profile_config(profile, "easy", over, model="dual_attention", aux=True, seed=0, table="demo").validate()
-        from emml.preflight import check_train
+        from emml.runs.preflight import check_train
 
         check_train(cfg)  # before any engine or MLflow run
     except ValueError as e:
@@ -992,7 +992,7 @@ def campaign(
 
     from emml.campaign import load_campaign, pin_worktree, run_campaign, select_steps, status
     from emml.config.paths import project_path, project_root
-    from emml.tracking import tracking_uri
+    from emml.runs.tracking import tracking_uri
 
     step_args = [x for n in steps for x in ("--step", n)]
     try:
@@ -1164,8 +1164,8 @@ def import_runs_cmd(
     the committed runs. Once: a run already in the store (trained or imported here) is skipped, and so is an
     unfinished one (its trainer logs it)."""
     from emml.config.paths import project_path
-    from emml.import_runs import import_runs
-    from emml.tracking import tracking_uri
+    from emml.runs.import_runs import import_runs
+    from emml.runs.tracking import tracking_uri
 
     roots = [project_path(p) for p in paths] if paths else [project_path("runs")]
     missing = [str(p) for p in roots if paths and not p.exists()]

@@ -207,11 +207,11 @@ def diagnose_checkpoint(
     eqa_episodes: int = 0,
     control: str | None = None,
 ) -> dict:
-    """Rebuild a checkpoint's model (its own config and vocabulary, ``control`` as in `emml.runs.load_model`)
+    """Rebuild a checkpoint's model (its own config and vocabulary, ``control`` as in `emml.runs.rundir.load_model`)
     and diagnose it: the SGN figures above (none when ``episodes`` is 0) and, with ``eqa_episodes``, the EQA
     per-question ones under "eqa" (emml/diagnose_eqa.py)."""
     from emml.diagnose_eqa import diagnose_eqa
-    from emml.runs import load_model
+    from emml.runs.rundir import load_model
 
     model, cfg = load_model(path, control=control)
     result = diagnose(model, cfg.env, episodes, step0_episodes, seed) if episodes else {}

@@ -236,8 +236,8 @@ def diagnose_sgn(
 
 def diagnose_sgn_checkpoint(path, episodes: int, seed: int | None = None, splits=("train", "test"), control=None):
     """`diagnose_sgn` on a checkpoint's model (its own config and vocabulary, ``control`` as in
-    `emml.runs.load_model`), from episode seed `emml.runs.EVAL_SEED` unless told."""
-    from emml.runs import EVAL_SEED, load_model
+    `emml.runs.rundir.load_model`), from episode seed `emml.runs.rundir.EVAL_SEED` unless told."""
+    from emml.runs.rundir import EVAL_SEED, load_model
 
     model, cfg = load_model(path, control=control)
     return diagnose_sgn(model, cfg.env, episodes, EVAL_SEED if seed is None else seed, tuple(splits))

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from emml.config.paths import project_path
 from emml.registry import RunSpec, load_table
-from emml.runs import run_name
+from emml.runs.rundir import run_name
 
 BACKENDS = ("local", "slurm")
 STATES = ("finished", "unrecorded", "reference", "partial", "missing")
@@ -74,8 +74,8 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
     """Run name → (RunSpec, state) for every run of table `name` under `profile` (see STATES)."""
 
     from emml.config.profiles import profile_seeds
-    from emml.results import read_results
-    from emml.runs import CHECKPOINT, finished_run, results_csv, run_dir
+    from emml.runs.results import read_results
+    from emml.runs.rundir import CHECKPOINT, finished_run, results_csv, run_dir
 
     table = load_table(name)
     fields = _roots(run_root, results_root)
@@ -198,8 +198,8 @@ def run_table(
     trainer (tests; must be picklable).
     """
     from emml.config.profiles import load_profiles
+    from emml.runs.tracking import parent_run, set_run_status
     from emml.tasks.language import check_choice
-    from emml.tracking import parent_run, set_run_status
 
     check_choice("backend", backend, BACKENDS)
     check_choice("profile", profile, tuple(load_profiles()))
@@ -219,8 +219,8 @@ def run_table(
     todo = [spec for spec, state in states.values() if state != "finished"]
     report.skipped = [rname for rname, (_, state) in states.items() if state == "finished"]
     if todo:  # each run's config, the store, the run and results folders, the results CSV: before the parent run
-        from emml.preflight import check_train
         from emml.rl.hardware import check_runnable
+        from emml.runs.preflight import check_train
 
         roots = _roots(run_root, results_root)
         check_train(*(check_runnable(spec.to_config(profile, **roots, device=device).validate()) for spec in todo))

@@ -48,7 +48,7 @@ from emml.envs.vector import make_env
 from emml.evaluate import eval_settings
 from emml.models.encoders import TextEncoder
 from emml.models.policy import word_mask
-from emml.runs import load_model
+from emml.runs.rundir import load_model
 from emml.tasks.language import load_dataset, resolve_vocabulary
 
 SEED = 30_000
@@ -332,7 +332,7 @@ def probe_eqa(model, cfg, options: ProbeOptions = ProbeOptions()) -> dict:
 
 
 def probe_checkpoint(path, options: ProbeOptions = ProbeOptions()) -> dict:
-    """`probe_eqa` on a checkpoint (`emml.runs.load_model`), the options checked before it is loaded; the result
+    """`probe_eqa` on a checkpoint (`emml.runs.rundir.load_model`), the options checked before it is loaded; the result
     names the checkpoint."""
     options = options.validate()
     model, cfg = load_model(path)

@@ -4,7 +4,7 @@ A table file reads like the paper's table (Chaplot et al. 2019, arXiv:1902.01385
 model, optionally with config overrides), `[columns]` its columns (difficulties × aux × metrics). Each
 (row, difficulty, aux) is a *setting*; a setting is trained once per seed of the profile (reproduce/profiles.toml).
 A row with `metric_overrides` trains one setting per metric (Table 3's "DA Single-Task": SGN cells from SGN-only
-runs, EQA cells from EQA-only runs). Run names derive from the config (`emml.runs.run_name`), and two runs of a
+runs, EQA cells from EQA-only runs). Run names derive from the config (`emml.runs.rundir.run_name`), and two runs of a
 table may not share one. A malformed file fails with the file, the key and what is wrong.
 """
 
@@ -18,7 +18,7 @@ import tomllib
 from emml.config.env_kinds import ENV_KINDS
 from emml.config.paths import REPRODUCE_DIR
 from emml.config.schema import TrainConfig, apply_overrides
-from emml.runs import run_name
+from emml.runs.rundir import run_name
 
 STATUSES = ("active", "placeholder")
 DIFFICULTIES = tuple(ENV_KINDS)

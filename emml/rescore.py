@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from emml.checkpoint import load_checkpoint
 from emml.config.schema import TrainConfig
-from emml.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
-from emml.runlock import hold_run
-from emml.runs import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, run_name, save_results
+from emml.runs.checkpoint import load_checkpoint
+from emml.runs.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
+from emml.runs.rundir import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, run_name, save_results
+from emml.runs.runlock import hold_run
 
 
 class NotFinished(ValueError):
@@ -60,12 +60,12 @@ def rescore(
     (0: its config's `final_eval_episodes`; a checkpoint from before the field reads its default) from episode seed
     ``seed``. Writes results.json atomically, then (``record``) upserts the row of its results table (the
     checkpoint's `results_root`, or ``results_root``). Nothing is written unless every score was measured."""
-    from emml.runs import evaluate_checkpoint
+    from emml.runs.rundir import evaluate_checkpoint
 
     rdir = Path(run) if Path(run).is_dir() else Path(run).parent
     if not (rdir / CHECKPOINT).is_file():
         raise FileNotFoundError(f"{run}: no run directory with a {CHECKPOINT}")
-    with hold_run(rdir):  # no training of this run meanwhile (emml/runlock.py)
+    with hold_run(rdir):  # no training of this run meanwhile (emml/runs/runlock.py)
         ckpt = load_checkpoint(rdir / CHECKPOINT)
         cfg = TrainConfig.from_dict(ckpt["config"])
         if results_root is not None:

@@ -149,7 +149,7 @@ def transfer_checkpoint(
 ) -> dict[str, float]:
     """Table 4 on one checkpoint: append detectors for ``words`` and score each SGN test instruction holding a new
     word (or the given ``instructions``) over ``episodes`` greedy episodes, without fine-tuning."""
-    from emml.runs import load_model
+    from emml.runs.rundir import load_model
     from emml.tasks.language import load_dataset
 
     model, cfg = load_model(path, device)
@@ -176,7 +176,7 @@ def record_transfer(cfg, words, instructions, detector: str = "labels", seed: in
     there are not recomputed."""
     import json
 
-    from emml.runs import CHECKPOINT, RESULTS, record_result, run_dir, save_results
+    from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir, save_results
 
     rdir = run_dir(cfg)
     payload = json.loads((rdir / RESULTS).read_text())

@@ -9,7 +9,7 @@ import pytest
 
 from emml.campaign import load_campaign, pin_worktree, run_campaign, status, step_runs
 from emml.registry import load_table
-from emml.runlock import hold_run
+from emml.runs.runlock import hold_run
 from tests.test_launch import calls, fake_train
 
 CAMPAIGN = """

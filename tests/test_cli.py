@@ -51,7 +51,7 @@ def test_bad_input_is_named_before_compute(no_leftovers):
 def test_diagnose_a_checkpoint(tracking, no_leftovers):
     from emml.config.profiles import profile_config
     from emml.rl.trainer import train
-    from emml.runs import CHECKPOINT
+    from emml.runs.rundir import CHECKPOINT
 
     over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test"}
     short = {"frames": 64, "eval_episodes": 1, "diagnose_episodes": 0, "env.max_steps": 12}
@@ -118,7 +118,7 @@ def test_train_over_a_bad_or_foreign_checkpoint_fails_by_name_and_keeps_it(track
     import torch
 
     from emml.config.profiles import profile_config
-    from emml.runs import CHECKPOINT, run_dir
+    from emml.runs.rundir import CHECKPOINT, run_dir
 
     sets = ["--set", f"run_root={tracking['run_root']}", "--set", f"results_root={tracking['results_root']}"]
     args = ["train", "--profile", "smoke", "--aux", "--table", "test", *sets]
@@ -160,9 +160,9 @@ def test_train_on_a_full_disk_fails_in_one_line_and_its_mlflow_run_ends_failed(t
 
     import mlflow
 
-    from emml import checkpoint
     from emml.config.profiles import profile_config
-    from emml.runs import CHECKPOINT, run_dir
+    from emml.runs import checkpoint
+    from emml.runs.rundir import CHECKPOINT, run_dir
 
     def fills_the_disk(payload, fh):
         fh.write(b"half a checkpoint")

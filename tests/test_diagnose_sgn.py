@@ -141,7 +141,7 @@ def test_turning_on_the_spot_times_out(no_leftovers):
 def test_a_checkpoints_outcomes_match_its_evaluation(tracking, no_leftovers):
     from emml.config.profiles import profile_config
     from emml.rl.trainer import train
-    from emml.runs import CHECKPOINT, EVAL_SEED, evaluate_checkpoint
+    from emml.runs.rundir import CHECKPOINT, EVAL_SEED, evaluate_checkpoint
 
     over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test"}
     short = {"frames": 64, "eval_episodes": 1, "diagnose_episodes": 0, "env.max_steps": 12}

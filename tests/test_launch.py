@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from emml.checkpoint import save_checkpoint
 from emml.launch import run_states, run_table
-from emml.runs import CHECKPOINT, RESULTS, record_result, run_dir, run_name
-from emml.tracking import Tracker, find_runs
+from emml.runs.checkpoint import save_checkpoint
+from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir, run_name
+from emml.runs.tracking import Tracker, find_runs
 
 PROFILE = "smoke"  # one seed: table3 has 16 runs
 

@@ -11,10 +11,10 @@ import torch
 from typer.testing import CliRunner
 
 import emml.probe_eqa as probe
-from emml.checkpoint import save_checkpoint
 from emml.cli import app
 from emml.config.profiles import profile_config
 from emml.models import build_model
+from emml.runs.checkpoint import save_checkpoint
 from emml.tasks.language import load_dataset, resolve_vocabulary
 from tests.conftest import engine_pids, shm_files
 

@@ -8,7 +8,7 @@ import pytest
 
 from emml.registry import REPRODUCE_DIR, list_tables, load_table, table_names, table_ref
 from emml.report.tables import paper_numbers
-from emml.runs import run_name
+from emml.runs.rundir import run_name
 
 SEEDS = [0, 1, 2]
 
@@ -149,7 +149,7 @@ def test_invalid_toml_syntax_names_file(tmp_path):
 
 def test_rows_colliding_on_run_name_are_rejected(tmp_path):
     """Rows that differ only in how their runs run (threads) are one run; another learning rate is another run
-    (its name says it: emml/runs.py)."""
+    (its name says it: emml/runs/rundir.py)."""
     extra = '\n[[rows]]\nlabel = "DA {}"\nmodel = "dual_attention"\noverrides = {{ {} }}\n'
     with pytest.raises(ValueError, match="same run name"):
         load_table("tableX", _write(tmp_path, GOOD + extra.format("threads", '"threads" = 1')))

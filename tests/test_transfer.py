@@ -190,7 +190,7 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no
     from emml import transfer
     from emml.launch import run_table
     from emml.report.tables import EXTRA_MARK, report_table
-    from emml.results import read_results
+    from emml.runs.results import read_results
 
     roots = {"run_root": tracking["run_root"], "results_root": tracking["results_root"]}
     report = run_table("table4", "smoke", jobs=1, train_fn=_small_train, log=lambda m: None, **roots)

@@ -554,7 +554,7 @@ class TrainConfig:
         "run_root",
         "results_root",
     )
-    """How a run runs, not what it is: every other field is its identity (`identity`, emml/runs.py), which names
+    """How a run runs, not what it is: every other field is its identity (`identity`, emml/runs/rundir.py), which names
     its run dir and must match for a rerun to resume it."""
 
     def __post_init__(self):
@@ -653,7 +653,7 @@ class TrainConfig:
         return "-".join([*parts, f"s{self.seed}", self.profile])
 
     def identity(self) -> dict:
-        """`to_dict` less the `RUNTIME` fields: what the run is (emml/runs.py names and resumes runs by it)."""
+        """`to_dict` less the `RUNTIME` fields: what the run is (emml/runs/rundir.py names and resumes runs by it)."""
         return {k: v for k, v in self.to_dict().items() if k not in self.RUNTIME}
 
     def to_dict(self) -> dict:

@@ -216,7 +216,7 @@ class EmmlModel(nn.Module):
         channels (N, k, h, w) in [0, 1], appended after the V conv3 channels; None under the paper's training."""
         self.type_gate: nn.Module | None = None
         """Control 'type_gate': the module that builds Eq. 4's gate from the dataset's word types
-        (emml/models/type_gate.py; `emml.runs.load_model` attaches it, as it needs the run's words)."""
+        (emml/models/type_gate.py; `emml.runs.rundir.load_model` attaches it, as it needs the run's words)."""
 
     def read_words(self, words: tuple[str, ...], content: frozenset[str]) -> EmmlModel:
         """What the model needs of the run's vocabulary (`words`, in channel order) beyond its size: under
@@ -252,7 +252,7 @@ class EmmlModel(nn.Module):
         if self.type_gate is None:
             raise RuntimeError(
                 "control='type_gate' needs the run's words: load the checkpoint with "
-                "emml.runs.load_model(path, control='type_gate') (emml eval CKPT --control type_gate)"
+                "emml.runs.rundir.load_model(path, control='type_gate') (emml eval CKPT --control type_gate)"
             )
         return self.type_gate(tokens, x_sent)
 

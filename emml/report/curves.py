@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from emml.report.savefig import save  # noqa: E402
-from emml.tracking import metric_history  # noqa: E402
+from emml.runs.tracking import metric_history  # noqa: E402
 
 SERIES = (
     ("train/success_sgn", "SGN, training episodes", "C0", "-"),
@@ -92,8 +92,8 @@ def plot_table(
     from emml.registry import load_table
     from emml.report import deviations
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, reports_dir, table_results
-    from emml.runs import METRICS, path_of
-    from emml.tracking import read_mirror
+    from emml.runs.rundir import METRICS, path_of
+    from emml.runs.tracking import read_mirror
 
     table = load_table(name)
     run_root = run_root if run_root is not None else profile_config(profile).run_root

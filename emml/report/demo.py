@@ -8,8 +8,8 @@ from pathlib import Path
 from emml.config.schema import TrainConfig
 from emml.diagnose import SCALARS
 from emml.report.curves import plot_run
-from emml.runs import run_name
-from emml.tracking import metric_history, tracking_uri
+from emml.runs.rundir import run_name
+from emml.runs.tracking import metric_history, tracking_uri
 
 
 def _diagnostics_table(run_id: str) -> list[str]:

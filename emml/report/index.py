@@ -7,7 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
-from emml.runs import CHECKPOINT, config_of, finished_run, path_of, variant_dir
+from emml.runs.rundir import CHECKPOINT, config_of, finished_run, path_of, variant_dir
 
 READING_ORDER = ("quick", "paper")
 """The profiles a reader should read first, in this order; any other (demo…) follows."""
@@ -60,7 +60,7 @@ def best_checkpoint(
 ) -> tuple[Path, str] | None:
     """The (checkpoint, run name) of the run of ``model`` with the highest mean training accuracy that has its run
     dir here; None if there is none (results committed without their run dirs)."""
-    from emml.results import read_results
+    from emml.runs.results import read_results
 
     df = read_results(project_path(results_root) / table / f"{profile}.csv")
     if df.empty:
@@ -76,7 +76,8 @@ def best_checkpoint(
 
 
 def finished_no_aux(checkpoint: Path, run_root: str | Path) -> Path | None:
-    """The checkpoint of the No-Aux run beside ``checkpoint``'s run when that run has finished (emml.runs.finished_run),
+    """The checkpoint of the No-Aux run beside ``checkpoint``'s run when that run has finished
+    (emml.runs.rundir.finished_run),
     else None: an interrupted run's checkpoint is not a result, and the figures show results only."""
     other = variant_dir(config_of(checkpoint.parent), run_root, aux=False)
     return other / CHECKPOINT if finished_run(other) else None
@@ -85,7 +86,7 @@ def finished_no_aux(checkpoint: Path, run_root: str | Path) -> Path | None:
 def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tuple[int, ...] = (0, 1)) -> list[Path]:
     """The channel figure (beside ``compare``, the No-Aux run, when given) and SGN/EQA attention figures."""
     from emml.report.visualize import attention_figure, channels_figure, record_episode
-    from emml.runs import load_model
+    from emml.runs.rundir import load_model
 
     model, cfg = load_model(checkpoint)
     name = checkpoint.parent.name

@@ -7,8 +7,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from emml.runs import CHECKPOINT, RESULTS, ROW_ONLY
-from emml.runs import write_json as _write
+from emml.runs.rundir import CHECKPOINT, RESULTS, ROW_ONLY
+from emml.runs.rundir import write_json as _write
 
 
 def _is_metric(column: str) -> bool:
@@ -37,9 +37,9 @@ def backfill_config(run_dir: Path) -> str:
     Only a finished checkpoint is read (a run still training writes its own results.json at the end). A finished
     run whose results.json is missing gets it rebuilt from its row of the results CSV when the row's run_id is the
     checkpoint's (the row is the payload, flattened)."""
-    from emml.checkpoint import load_checkpoint
     from emml.config.paths import project_path
-    from emml.results import read_results
+    from emml.runs.checkpoint import load_checkpoint
+    from emml.runs.results import read_results
 
     run_dir = Path(run_dir)
     path = run_dir / RESULTS

@@ -20,7 +20,7 @@ import pandas as pd
 from emml.config.env_kinds import ENV_KINDS, env_label
 from emml.config.paths import project_path, project_root
 from emml.registry import REPRODUCE_DIR, Table, list_tables, load_table, table_ref
-from emml.results import read_results
+from emml.runs.results import read_results
 
 MISSING = "—"
 EXTRA_MARK = "†"

@@ -1,11 +1,10 @@
-"""Reinforcement-learning core: rollout storage with GAE, PPO losses, checkpoints.
+"""Reinforcement-learning core: rollout storage with GAE, PPO losses (checkpoints: emml/runs/checkpoint.py).
 
 The paper trains the navigation policy with PPO (Schulman et al. 2017) and the
 answer head with a supervised cross-entropy loss, plus an optional spatial
 auxiliary loss (binary cross-entropy on the conv3 feature maps).
 """
 
-from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.rl.ppo import (
     PPOConfig,
     answer_loss,
@@ -29,14 +28,10 @@ __all__ = [
     "compute_gae",
     "entropy",
     "explained_variance",
-    "load_checkpoint",
     "make_optimizer",
     "move_logprob",
     "policy_loss",
     "ppo_losses",
     "ppo_update",
-    "rng_state",
-    "save_checkpoint",
-    "set_rng_state",
     "value_loss",
 ]

@@ -18,9 +18,9 @@ from emml.config.schema import TrainConfig
 from emml.rl.packed import StackedModels, load_optimizer_state, optimizer_state, packed_ppo_update
 from emml.rl.ppo import make_optimizer
 from emml.rl.trainer import Trainer, train_loop
-from emml.runlock import hold_run
-from emml.runs import RunResult
-from emml.tracking import Tracker
+from emml.runs.rundir import RunResult
+from emml.runs.runlock import hold_run
+from emml.runs.tracking import Tracker
 
 SEED_ONLY = "seed"
 """The one config field in which packed runs may differ."""

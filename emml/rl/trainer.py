@@ -19,7 +19,6 @@ import torch
 from tqdm import tqdm
 
 from emml import alloc
-from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.config.schema import TrainConfig
 from emml.diagnose import SCALARS, diagnose, saturation_warning, summary_line
 from emml.envs.engine import stop_after
@@ -33,8 +32,8 @@ from emml.rl.ppo import make_optimizer, model_forward, ppo_update
 from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
-from emml.runlock import hold_run
-from emml.runs import (
+from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml.runs.rundir import (
     CHECKPOINT,
     EVAL_SEED,
     METRICS,
@@ -49,8 +48,9 @@ from emml.runs import (
     run_tags,
     save_results,
 )
+from emml.runs.runlock import hold_run
+from emml.runs.tracking import Tracker, read_mirror
 from emml.tasks.language import load_dataset, resolve_vocabulary
-from emml.tracking import Tracker, read_mirror
 
 log = logging.getLogger(__name__)
 

@@ -4,7 +4,7 @@ a results CSV in tmp_path pointing at them (never results)."""
 import pandas as pd
 
 from emml.report.curves import _mean_band, plot_table
-from emml.tracking import Tracker
+from emml.runs.tracking import Tracker
 
 
 def test_mean_band_averages_seeds_on_a_common_grid():

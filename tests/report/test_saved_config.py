@@ -8,7 +8,7 @@ import torch
 
 from emml.config.profiles import profile_config
 from emml.report.saved_config import backfill_config, run_dirs
-from emml.runs import run_name, saved_config
+from emml.runs.rundir import run_name, saved_config
 
 
 def fixture_run(root, finished=True, results=True, **fields):

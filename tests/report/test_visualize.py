@@ -11,7 +11,7 @@ from emml.config.profiles import profile_config
 from emml.evaluate import obs_to_torch
 from emml.report.visualize import CHANNEL_WORDS, attention_figure, channels_figure, episode_gif, record_episode
 from emml.rl.trainer import train
-from emml.runs import CHECKPOINT, load_model
+from emml.runs.rundir import CHECKPOINT, load_model
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +125,7 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
     import shutil
 
     from emml.report.index import write_reports
-    from emml.runs import record_result
+    from emml.runs.rundir import record_result
 
     # the two smoke runs recorded as table2 rows of the demo profile (the index never lists smoke), their run dirs
     # where table2 keeps them
@@ -165,7 +165,7 @@ def test_the_channel_figure_compares_only_with_a_finished_no_aux_run(checkpoints
     import shutil
 
     from emml.report.index import finished_no_aux
-    from emml.runs import RESULTS
+    from emml.runs.rundir import RESULTS
 
     runs = tmp_path / "runs"
     for ckpt in checkpoints.values():

@@ -56,7 +56,7 @@ def test_the_config_imports_no_torch_and_no_layer_above_it():
     """The layers contract (pyproject.toml, `make lint`) reads the source; this runs it: `import emml.config.schema`,
     and
     validating a config with model options (the model registry is asked where training starts, not here)."""
-    above = ("torch", "emml.rl", "emml.models", "emml.envs", "emml.tasks", "emml.runs")
+    above = ("torch", "emml.rl", "emml.models", "emml.envs", "emml.tasks", "emml.runs.rundir")
     code = (
         "import sys; from emml.config.schema import TrainConfig, ModelConfig, apply_overrides; "
         "apply_overrides(TrainConfig(model='pacman'), {'model_options.pacman_frames': 3}).validate(); "

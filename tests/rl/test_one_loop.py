@@ -13,7 +13,7 @@ import torch
 from emml.config.profiles import profile_config
 from emml.rl.packed_trainer import train_packed
 from emml.rl.trainer import env_seeds, train
-from emml.runs import CHECKPOINT, METRICS
+from emml.runs.rundir import CHECKPOINT, METRICS
 
 REFERENCE = json.loads((Path(__file__).parent / "data" / "smoke_parameters.json").read_text())
 

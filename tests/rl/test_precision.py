@@ -12,12 +12,12 @@ from typer.testing import CliRunner
 from emml.cli import app
 from emml.config.profiles import profile_config
 from emml.models import build_model
-from emml.results import read_results
 from emml.rl import precision
 from emml.rl.hardware import check_runnable
 from emml.rl.trainer import Trainer
-from emml.runs import METRICS, results_csv, run_name
-from emml.tracking import read_mirror
+from emml.runs.results import read_results
+from emml.runs.rundir import METRICS, results_csv, run_name
+from emml.runs.tracking import read_mirror
 from tests.conftest import SMOKE
 
 

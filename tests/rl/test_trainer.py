@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from emml.checkpoint import load_checkpoint, save_checkpoint
 from emml.config.profiles import profile_config
 from emml.config.schema import TrainConfig
 from emml.models import MODELS
-from emml.results import read_results
 from emml.rl.trainer import train
-from emml.runs import (
+from emml.runs.checkpoint import load_checkpoint, save_checkpoint
+from emml.runs.results import read_results
+from emml.runs.rundir import (
     CHECKPOINT,
     METRICS,
     RESULTS,
@@ -28,7 +28,7 @@ from emml.runs import (
     run_dir,
     run_name,
 )
-from emml.tracking import metric_history, read_mirror
+from emml.runs.tracking import metric_history, read_mirror
 
 
 def smoke(tracking, **over) -> TrainConfig:
@@ -248,7 +248,7 @@ def test_a_house_run_trains_evaluates_diagnoses_and_reloads(tracking, no_leftove
     diagnostics (its spawn is fixed, so the actor's sensitivity is defined as in Easy), and a checkpoint that reloads
     with its HouseConfig."""
     from emml.config.schema import HouseConfig
-    from emml.runs import load_model
+    from emml.runs.rundir import load_model
 
     cfg = smoke(tracking, frames=128, eval_episodes=2, seed=2, **{"env.difficulty": "house", "eval_every": 128})
     cfg.diagnose_episodes = 1
@@ -481,7 +481,7 @@ def test_workers_hosting_several_envs_train_exactly_alike(tracking, no_leftovers
 
 def test_smoke_numbers_are_not_recorded_under_the_committed_results(tmp_path):
     from emml.config.paths import project_path
-    from emml.runs import record_result
+    from emml.runs.rundir import record_result
 
     cfg = profile_config("smoke", "easy", {"results_root": "results", "table": "test"})
     with pytest.raises(ValueError, match="the 'smoke' profile's numbers are not results"):
@@ -556,7 +556,7 @@ def test_a_stopped_run_keeps_its_last_whole_update(tracking, monkeypatch, where,
 def test_eq1_over_the_content_words_trains_resumes_and_reloads_with_the_runs_words(tracking, no_leftovers):
     """`model_options.eq1_words = 'content'` (issue 34): the trainer sets Eq. 1's mask from the run's words, the
     checkpoint carries it, a resumed run and `load_model` read it back."""
-    from emml.runs import load_model
+    from emml.runs.rundir import load_model
     from emml.tasks.language import load_dataset
 
     over = {"model_options.eq1_words": "content", "eval_episodes": 1, "final_eval_episodes": 1}

@@ -1,4 +1,4 @@
-"""emml.import_runs (`emml import-runs`): finished run dirs into a throwaway sqlite store, once."""
+"""emml.runs.import_runs (`emml import-runs`): finished run dirs into a throwaway sqlite store, once."""
 
 import json
 import warnings
@@ -6,8 +6,8 @@ import warnings
 import pytest
 from typer.testing import CliRunner
 
-from emml import tracking
-from emml.import_runs import IMPORTED_FROM, as_trained, import_run_dir, import_runs, read_points, run_dirs
+from emml.runs import tracking
+from emml.runs.import_runs import IMPORTED_FROM, as_trained, import_run_dir, import_runs, read_points, run_dirs
 
 CONFIG = {
     "model": "dual_attention",

@@ -1,7 +1,7 @@
 """Committed run dirs made browsable in the MLflow store (`emml import-runs`, run by `make ui`): each finished run dir
 (runs/<table>/<run>/ with results.json and metrics.csv) becomes one FINISHED run of the experiment named by its
 table, with the tags the trainer sets, its saved config as params, its whole curve and its final score
-(emml/tracking.py, `import_run`).
+(emml/runs/tracking.py, `import_run`).
 
 Once and idempotently: a run dir whose run is already in the store (trained here, imported or resumed here before:
 `stored_run`, keyed by the MLflow run id the run dir recorded) is skipped, so a second import changes nothing.
@@ -17,10 +17,10 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from emml.runs import CHECKPOINT, METRICS, RESULTS, RUN_FILES, RunDirError, read_results
+from emml.runs.rundir import CHECKPOINT, METRICS, RESULTS, RUN_FILES, RunDirError, read_results
 
 MARKERS = RUN_FILES
-"""Files any of which makes a folder a run dir (emml/runs.py)."""
+"""Files any of which makes a folder a run dir (emml/runs/rundir.py)."""
 HEADER = "step,key,value"
 IMPORTED_FROM = "emml.imported_from"
 """Tag of an imported run: its run dir, relative to the project root when under it."""
@@ -75,7 +75,7 @@ def run_dirs(paths: Iterable[Path]) -> list[Path]:
 
 
 def read_points(path: Path) -> list[tuple[int, str, float]]:
-    """A run's metrics.csv (step,key,value; emml.tracking.Tracker.mirror_to) as (step, key, value), strictly: a
+    """A run's metrics.csv (step,key,value; emml.runs.tracking.Tracker.mirror_to) as (step, key, value), strictly: a
     wrong header or a line that is not step,key,value is a RunDirError naming the file and line."""
     lines = Path(path).read_text().splitlines()
     if not lines or lines[0] != HEADER:
@@ -136,8 +136,8 @@ def final_points(results: dict, path: Path) -> list[tuple[int, str, float]]:
 def import_run_dir(run_dir: Path, uri: str | None = None) -> ImportResult:
     """Import one run dir into the store at ``uri`` (default: tracking_uri()) unless it is unfinished, being
     trained, or already in the store. RunDirError names a file that cannot be read."""
-    from emml.runlock import holder
-    from emml.tracking import import_run, stored_run
+    from emml.runs.runlock import holder
+    from emml.runs.tracking import import_run, stored_run
 
     run_dir = Path(run_dir)
     name = relative(run_dir)

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from emml.diskspace import no_space_names
+from emml.runs.diskspace import no_space_names
 
 
 def save_checkpoint(path: str | os.PathLike, payload: dict[str, Any]) -> Path:

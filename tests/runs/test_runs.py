@@ -1,4 +1,4 @@
-"""A run's one owner (emml/runs.py): names, identity, paths, and reports that read runs without torch."""
+"""A run's one owner (emml/runs/rundir.py): names, identity, paths, and reports that read runs without torch."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from pathlib import Path
 from emml.config.paths import project_root
 from emml.config.profiles import profile_config
 from emml.config.schema import TrainConfig
-from emml.runs import CHECKPOINT, config_of, path_of, run_dir, run_name, swept, variant_dir
+from emml.runs.rundir import CHECKPOINT, config_of, path_of, run_dir, run_name, swept, variant_dir
 
 
 def test_every_committed_run_dir_keeps_its_name():
@@ -44,7 +44,7 @@ def test_the_no_aux_run_beside_an_aux_run_is_found_from_its_config(tmp_path):
 
 
 def test_the_report_tables_and_the_run_owner_import_no_torch():
-    code = "import sys, emml.runs, emml.report.tables, emml.report.index; print('torch' in sys.modules)"
+    code = "import sys, emml.runs.rundir, emml.report.tables, emml.report.index; print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(project_root()))
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"

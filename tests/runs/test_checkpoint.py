@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from emml import checkpoint
-from emml.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml.runs import checkpoint
+from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -33,7 +33,7 @@ def test_hard_crash_before_replace_keeps_original(tmp_path):
     script = textwrap.dedent(
         f"""
         import os, torch
-        from emml.checkpoint import save_checkpoint
+        from emml.runs.checkpoint import save_checkpoint
         os.replace = lambda *a, **k: os._exit(9)  # die like SIGKILL right before the rename
         save_checkpoint({str(path)!r}, {{"step": 2, "big": torch.zeros(1000)}})
         """
@@ -76,7 +76,7 @@ def test_rng_state_roundtrip(tmp_path):
 def test_a_full_disk_is_one_line_naming_the_path_and_keeps_the_last_checkpoint(tmp_path, monkeypatch):
     import errno
 
-    from emml.diskspace import NoSpaceError
+    from emml.runs.diskspace import NoSpaceError
 
     path = tmp_path / "ckpt.pt"
     save_checkpoint(path, {"step": 1})

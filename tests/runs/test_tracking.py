@@ -1,8 +1,8 @@
-"""emml.tracking against a throwaway sqlite store (one module: mlflow import + migration are slow)."""
+"""emml.runs.tracking against a throwaway sqlite store (one module: mlflow import + migration are slow)."""
 
 import pytest
 
-from emml import tracking
+from emml.runs import tracking
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +88,7 @@ def test_retry_on_database_locked(monkeypatch):
 
 
 def test_a_run_exports_its_whole_curve_to_a_mirror_file(tmp_path):
-    from emml.tracking import Tracker, read_mirror
+    from emml.runs.tracking import Tracker, read_mirror
 
     t = Tracker(f"sqlite:///{tmp_path}/m.db")
     run_id = t.start("exp", "r")
@@ -141,8 +141,8 @@ def test_a_full_disk_leaves_the_mirror_without_a_half_line(tmp_path, monkeypatch
     import builtins
     import errno
 
-    from emml.diskspace import NoSpaceError
-    from emml.tracking import Tracker, read_mirror
+    from emml.runs.diskspace import NoSpaceError
+    from emml.runs.tracking import Tracker, read_mirror
 
     class Filling:
         """A file whose first write lands in part, the next fails: the disk filled in the middle of a batch."""

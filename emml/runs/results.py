@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from emml.diskspace import no_space_names
+from emml.runs.diskspace import no_space_names
 
 # identity and provenance columns (read as written); every other column is a metric (float)
 TEXT = (

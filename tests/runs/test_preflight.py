@@ -1,4 +1,4 @@
-"""Pre-flight (emml/preflight.py) by fault injection: a broken store, an unwritable folder, a broken results CSV or a
+"""Pre-flight (emml/runs/preflight.py) by fault injection: a broken store, an unwritable folder, a broken results CSV or a
 bad field is refused in one line naming it, with exit code 2, in seconds, before any engine, model or MLflow run —
 nothing is written."""
 
@@ -15,7 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from emml.cli import app
-from emml.preflight import PreflightError, check_store, check_writable
+from emml.runs.preflight import PreflightError, check_store, check_writable
 
 runner = CliRunner()
 

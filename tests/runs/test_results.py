@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from emml.results import read_results, upsert_result
+from emml.runs.results import read_results, upsert_result
 
 
 def _row(name: str, sha: str, **extra) -> dict:
@@ -70,7 +70,7 @@ def test_a_full_disk_leaves_the_results_csv_as_it_was(tmp_path, monkeypatch):
 
     import pandas as pd
 
-    from emml.diskspace import NoSpaceError
+    from emml.runs.diskspace import NoSpaceError
 
     path = tmp_path / "smoke.csv"
     upsert_result(path, _row("a", "abc1234"))

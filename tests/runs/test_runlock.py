@@ -13,12 +13,12 @@ import time
 
 import pytest
 
-from emml.runlock import LOCK, RunLocked, hold_run, holder
+from emml.runs.runlock import LOCK, RunLocked, hold_run, holder
 
 HOLD = textwrap.dedent(
     """
     import sys, time
-    from emml.runlock import hold_run
+    from emml.runs.runlock import hold_run
     with hold_run(sys.argv[1]):
         print("held", flush=True)
         time.sleep(60)
@@ -59,7 +59,7 @@ def test_the_lock_is_reentrant_in_one_process_and_released_at_the_outermost_exit
             [
                 sys.executable,
                 "-c",
-                "import sys; from emml.runlock import holder; print(holder(sys.argv[1])['pid'])",
+                "import sys; from emml.runs.runlock import holder; print(holder(sys.argv[1])['pid'])",
                 str(run),
             ],
             capture_output=True,
@@ -74,7 +74,7 @@ def test_train_on_a_locked_run_exits_2_naming_the_holder_and_writes_nothing(trac
 
     from emml.cli import app
     from emml.config.profiles import profile_config
-    from emml.runs import run_dir
+    from emml.runs.rundir import run_dir
 
     cfg = profile_config("smoke", "easy", model="ga", seed=3, table="locks", run_root=tracking["run_root"])
     proc = _holding_process(run_dir(cfg))

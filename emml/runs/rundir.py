@@ -3,10 +3,10 @@
 A run lives in ``<run_root>/<table>/<run name>/``:
 
 - ``checkpoint.pt``: model, optimizer, RNG states, counters, vocabulary, config, MLflow run id (`save_checkpoint`);
-- ``metrics.csv``: every metric point, step,key,value (emml.tracking.Tracker.mirror_to);
+- ``metrics.csv``: every metric point, step,key,value (emml.runs.tracking.Tracker.mirror_to);
 - ``results.json``: the final score with its provenance and config (`save_results`), its row in
   ``<results_root>/<table>/<profile>.csv`` (`record_result`);
-- ``run.lock``: held while a process trains or re-scores it (emml/runlock.py).
+- ``run.lock``: held while a process trains or re-scores it (emml/runs/runlock.py).
 
 Identity. What a run *is* is `TrainConfig.identity()`: every field but those of how it runs (`TrainConfig.RUNTIME`:
 device, threads, workers, roots, cadences, the frame target). Its name is `TrainConfig.spelled_name()` (the fields a
@@ -30,12 +30,12 @@ from pathlib import Path
 
 from emml.config.paths import project_path, project_root
 from emml.config.schema import TrainConfig, apply_overrides
-from emml.diskspace import no_space_names
+from emml.runs.diskspace import no_space_names
 
 CHECKPOINT = "checkpoint.pt"
 """The run's state (`save_checkpoint`): written every `checkpoint_every` updates, at a stop, and at the end."""
 METRICS = "metrics.csv"
-"""Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.tracking.Tracker.mirror_to)."""
+"""Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.runs.tracking.Tracker.mirror_to)."""
 RESULTS = "results.json"
 """The final score, its provenance and the config the run trained with (`save_results`)."""
 EVAL_SEED = 10_000
@@ -131,7 +131,7 @@ def finished_run(directory: Path) -> bool:
     checkpoint = Path(directory) / CHECKPOINT
     if not (checkpoint.exists() and (Path(directory) / RESULTS).exists()):
         return False
-    from emml.checkpoint import load_checkpoint  # torch: loaded when a checkpoint is read, not for reports
+    from emml.runs.checkpoint import load_checkpoint  # torch: loaded when a checkpoint is read, not for reports
 
     try:
         return bool(load_checkpoint(checkpoint, require=()).get("finished"))
@@ -208,7 +208,7 @@ def check_resumable(saved: dict, cfg: TrainConfig, path: Path) -> None:
 # --- checkpoint and model ------------------------------------------------------------------------------------------
 def read_checkpoint(path: Path) -> dict:
     """A checkpoint's payload (`save_checkpoint`), on the CPU."""
-    from emml.checkpoint import load_checkpoint  # torch: loaded when a checkpoint is read, not for reports
+    from emml.runs.checkpoint import load_checkpoint  # torch: loaded when a checkpoint is read, not for reports
 
     return load_checkpoint(path)
 
@@ -321,10 +321,10 @@ ROW_ONLY = ("tasks", "shaping", "precision")
 
 
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
-    """Upsert the run's row (keyed by run name) in its results CSV (emml.results): results.json's keys but the
+    """Upsert the run's row (keyed by run name) in its results CSV (emml.runs.results): results.json's keys but the
     metrics and config, then `ROW_ONLY`, then the metrics."""
     from emml.config.profiles import refuse_committed
-    from emml.results import upsert_result
+    from emml.runs.results import upsert_result
 
     refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results
     row = {k: v for k, v in payload.items() if k not in ("metrics", "config")}

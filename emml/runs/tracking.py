@@ -18,7 +18,7 @@ Conventions (see docs / shared notes on MLflow 3.x):
 * :func:`metric_history` returns full curves (``search_runs`` only keeps the
   latest value per metric).
 * A finished run dir from another store becomes a run here with :func:`import_run` (``emml import-runs``,
-  emml/import_runs.py); :func:`stored_run` finds a run dir's run here (trained, imported or resumed), so that
+  emml/runs/import_runs.py); :func:`stored_run` finds a run dir's run here (trained, imported or resumed), so that
   nothing is imported twice and a resumed run dir continues that run.
 """
 
@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from emml.config.paths import project_root
-from emml.diskspace import NoSpaceError, no_space_names
+from emml.runs.diskspace import NoSpaceError, no_space_names
 
 T = TypeVar("T")
 
@@ -375,7 +375,7 @@ def import_run(
     points: Iterable[tuple[int, str, float]],
     uri: str | None = None,
 ) -> str:
-    """Log a finished run recorded elsewhere (a run dir's results.json and metrics.csv, emml/import_runs.py) as a
+    """Log a finished run recorded elsewhere (a run dir's results.json and metrics.csv, emml/runs/import_runs.py) as a
     new FINISHED run of ``experiment``: ``tags``, ``params`` (flattened as :meth:`Tracker.start` logs a config) and
     every metric point (step, key, value). The tag ``IMPORTED_RUN_ID`` = ``run_id``, which marks the import done
     (:func:`stored_run`), is set last, and a failure on the way deletes the half-made run: an import cut short is

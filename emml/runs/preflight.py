@@ -16,7 +16,7 @@ from pathlib import Path
 from urllib.parse import urlparse
 
 from emml.config.schema import TrainConfig
-from emml.tracking import _sqlite_path, tracking_uri
+from emml.runs.tracking import _sqlite_path, tracking_uri
 
 STORE_TIMEOUT_S = 5.0
 """The longest a store check waits (a lock held by another writer, a server that does not answer)."""
@@ -33,8 +33,8 @@ class PreflightError(ValueError):
 def check_train(*cfgs: TrainConfig, timeout: float = STORE_TIMEOUT_S) -> None:
     """Everything ``cfgs`` (validated) write to, before the first of them starts (`emml train`, `emml run`): the
     store once, then each run's directory, and each results folder and the results CSV its runs will upsert."""
-    from emml.results import read_results
-    from emml.runs import results_csv, run_dir
+    from emml.runs.results import read_results
+    from emml.runs.rundir import results_csv, run_dir
 
     check_store(timeout=timeout)
     for cfg in cfgs:
