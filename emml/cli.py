@@ -514,7 +514,7 @@ def eval_checkpoint(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Greedy accuracy of a checkpoint on SGN/EQA train/test (reproducible under --seed)."""
-    from emml.runs.rundir import evaluate_checkpoint
+    from emml.eval.evaluate import evaluate_checkpoint
 
     _check_checkpoint(checkpoint)
     _own_engines()
@@ -541,7 +541,7 @@ def rescore_runs(
     """Re-score finished runs with the final-evaluation protocol (issue 33): results.json's metrics and the
     results-table row rewritten, training provenance kept, scored_sha / eval_episodes / eval_seed recorded."""
     from emml.config.schema import TrainConfig
-    from emml.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
+    from emml.eval.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
     from emml.runs.checkpoint import load_checkpoint
     from emml.runs.runlock import RunLocked
 
@@ -593,8 +593,8 @@ def transfer(
 ):
     """Table 4 on one checkpoint (§5.4): append detectors for new words, score every SGN test instruction that
     holds one, without fine-tuning; rows as in reproduce/table4.toml."""
+    from emml.eval.transfer import transfer_checkpoint
     from emml.registry import load_table
-    from emml.transfer import transfer_checkpoint
 
     _check_checkpoint(checkpoint)
     _own_engines()
@@ -633,12 +633,12 @@ def diagnose(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Why a model does (not) follow instructions: attention on the target, per-word detector AP, and how much
-    the first move depends on where the target stands (emml/diagnose.py); per EQA question its accuracy, answers,
-    where the attention sits and the GA2 gate per channel (emml/diagnose_eqa.py); per SGN instruction its success
-    and how its episodes end: target, wrong object (which), time-out (emml/diagnose_sgn.py)."""
-    from emml.diagnose import diagnose_checkpoint, summary_line
-    from emml.diagnose_eqa import eqa_table
-    from emml.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
+    the first move depends on where the target stands (emml/eval/diagnose.py); per EQA question its accuracy, answers,
+    where the attention sits and the GA2 gate per channel (emml/eval/diagnose_eqa.py); per SGN instruction its success
+    and how its episodes end: target, wrong object (which), time-out (emml/eval/diagnose_sgn.py)."""
+    from emml.eval.diagnose import diagnose_checkpoint, summary_line
+    from emml.eval.diagnose_eqa import eqa_table
+    from emml.eval.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
     from emml.tasks.language import check_choice
 
     _check_checkpoint(checkpoint)
@@ -670,7 +670,7 @@ def diagnose(
 
 
 def _saturation_line(result: dict) -> str:
-    """x_I's saturation (emml.diagnose.x_image_saturation): how many channels are pinned, and which."""
+    """x_I's saturation (emml.eval.diagnose.x_image_saturation): how many channels are pinned, and which."""
     channels = result["x_image_channels"]
     pinned = [w for w, c in channels.items() if c["pinned"]]
     return (
@@ -708,8 +708,8 @@ def probe_eqa_cmd(
     """Would another question encoder answer the EQA test questions (issue 34)? On the first frames of EQA
     episodes, conv and Dual-Attention frozen, x_sent's encoder (GRU + Linear; the embedding copied from the
     checkpoint, frozen) retrained on the training questions' answers per readout and seed; answer accuracy on the
-    train and test questions beside the checkpoint's own encoder (emml/probe_eqa.py)."""
-    from emml.probe_eqa import ProbeOptions, probe_checkpoint, probe_table
+    train and test questions beside the checkpoint's own encoder (emml/eval/probe_eqa.py)."""
+    from emml.eval.probe_eqa import ProbeOptions, probe_checkpoint, probe_table
 
     chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
     try:

@@ -87,7 +87,7 @@ def run_states(name: str, profile: str, run_root: str | None = None, results_roo
         if csv not in recorded_in:
             results = read_results(csv)
             if table.transfer is not None:  # a transfer run is recorded once its scores are in the row
-                from emml.transfer import metric_column
+                from emml.eval.transfer import metric_column
 
                 columns = [metric_column(x) for x in spec.instructions]
                 complete = set(columns) <= set(results.columns)
@@ -161,7 +161,7 @@ def _train_one(spec: RunSpec, profile: str, fields: dict, parent_run_id: str | N
     cfg = spec.to_config(profile, **fields).validate()
     train_fn(cfg, quiet=True, parent_run_id=parent_run_id)
     if spec.transfer is not None:  # Table 4: append the detectors and score the test instructions (§5.4)
-        from emml.transfer import record_transfer
+        from emml.eval.transfer import record_transfer
 
         record_transfer(cfg, spec.transfer.words, spec.instructions, spec.transfer.detector)
     return run_name(cfg)

@@ -39,7 +39,7 @@ TRANSFER_ROW_KEYS = ("label", "instructions", "extra")
 @dataclass(frozen=True)
 class Transfer:
     """A transfer table's one training setting (per difficulty, aux and seed) and what is appended after it
-    (§5.4): every row reads its instructions' scores from those runs (emml/transfer.py)."""
+    (§5.4): every row reads its instructions' scores from those runs (emml/eval/transfer.py)."""
 
     model: str
     """Model registry name of the trained policy (Dual-Attention)."""
@@ -48,7 +48,7 @@ class Transfer:
     words: tuple[str, ...]
     """The new words, in the order their detector channels are appended."""
     detector: str
-    """Detector kind (emml.transfer.DETECTORS)."""
+    """Detector kind (emml.eval.transfer.DETECTORS)."""
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,7 @@ class RunSpec:
     metrics: tuple[str, ...] = ()
     """The results columns this run fills in its row."""
     transfer: Transfer | None = None
-    """Transfer tables: what to append and score after training (emml/transfer.py); None otherwise."""
+    """Transfer tables: what to append and score after training (emml/eval/transfer.py); None otherwise."""
     instructions: tuple[str, ...] = ()
     """Transfer tables: the instructions scored after training (every row's)."""
 
@@ -210,7 +210,7 @@ class Table:
         `sgn_transfer:<instruction>` column per instruction of the row."""
         if self.transfer is None:
             return [metric]
-        from emml.transfer import metric_column
+        from emml.eval.transfer import metric_column
 
         return [metric_column(x) for r in self.rows if r.label == row for x in r.instructions]
 
@@ -452,7 +452,7 @@ def _from_table(path: Path, key: str, name, model: str, overrides: dict, per_met
 
 def _parse_transfer(path: Path, data: dict) -> tuple[Transfer, str]:
     """The [transfer] section, and the dataset its training runs use."""
-    from emml.transfer import DETECTORS
+    from emml.eval.transfer import DETECTORS
 
     raw = _section(path, "transfer", data["transfer"], TRANSFER_KEYS)
     model = _model_name(path, "transfer.model", _typed(path, "transfer.model", raw["model"], str, "a string"))

@@ -57,7 +57,7 @@ class EnvKind:
     'frames_hard' (the 50M budget, scaled)."""
     fixed_spawn: bool
     """The agent starts at one pose every episode (Easy, §4; the House, Appendix C): first frames are comparable
-    across episodes (emml/diagnose.py)."""
+    across episodes (emml/eval/diagnose.py)."""
     source: str
     """Where the paper gives its training protocol, as fidelity captions cite it."""
 

@@ -479,7 +479,7 @@ class TrainConfig:
     episodes run to the time limit and were most of a smoke bench's time."""
     diagnose_episodes: int = 20
     """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP; the actor's
-    sensitivity reads 5× as many first steps: emml/diagnose.py); 0: none."""
+    sensitivity reads 5× as many first steps: emml/eval/diagnose.py); 0: none."""
     checkpoint_every: int = 10
     """Write the checkpoint every this many updates (and at the end)."""
     log_every: int = 10

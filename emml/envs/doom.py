@@ -110,7 +110,7 @@ class DoomEnv(gym.Env):
         if cfg.aux_labels:
             obs["aux"] = spaces.Box(0, 1, (V, *self.grid_hw), np.uint8)
             # the cells showing the episode's referent: privileged, read only by the diagnostics and the
-            # 'target_mask' control (emml/diagnose.py), never by a model under the paper's protocol
+            # 'target_mask' control (emml/eval/diagnose.py), never by a model under the paper's protocol
             obs["target"] = spaces.Box(0, 1, self.grid_hw, np.uint8)
         self.observation_space = spaces.Dict(obs)
         self.action_space = spaces.MultiDiscrete([len(MOVES), V])
@@ -319,8 +319,8 @@ class DoomEnv(gym.Env):
 
     def scene_grids(self) -> np.ndarray:
         """uint8 (5, h, w): the cells showing each actor of the scene in the current frame, in scene order (the
-        referent is row `episode.target`). Privileged, like the aux labels: for the diagnostics (emml/diagnose_eqa.py);
-        needs ``aux_labels``."""
+        referent is row `episode.target`). Privileged, like the aux labels: for the diagnostics
+        (emml/eval/diagnose_eqa.py); needs ``aux_labels``."""
         if self._labels is None:
             raise RuntimeError("scene_grids() reads the label buffer: make the env with aux_labels=True")
         buf, labels = self.state.labels_buffer, self.state.labels

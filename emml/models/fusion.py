@@ -179,7 +179,7 @@ class DualAttention(Fusion):
         """x_I (N, V, h, w), x_BoW (N, V), x_sent (N, V) -> FusionOutput.
 
         ``x_extra`` (N, k, h, w): detections of k new words appended to x_I by the transfer surgery (§5.4,
-        emml/transfer.py), with x_BoW then (N, V + k), word V + j gating channel j. They join the attention
+        emml/eval/transfer.py), with x_BoW then (N, V + k), word V + j gating channel j. They join the attention
         scores of Eq. 1-2 only, as a separate sum, so that an instruction without the new words gives bit for
         bit the scores it gave before; Eq. 3-5 keep the V channels (the new words answer no question)."""
         n, v, h, w = x_image.shape

@@ -153,7 +153,7 @@ class TextCache:
 
 def word_mask(words: tuple[str, ...], keep: frozenset[str]) -> Tensor:
     """(V,) 1.0 for each of `words` (in channel order) that is in `keep`, else 0.0: Eq. 1's mask of the content words
-    under `ModelConfig.eq1_words` = 'content' (`EmmlModel.read_words`, emml/probe_eqa.py)."""
+    under `ModelConfig.eq1_words` = 'content' (`EmmlModel.read_words`, emml/eval/probe_eqa.py)."""
     return torch.tensor([w in keep for w in words], dtype=torch.float32)
 
 
@@ -212,7 +212,7 @@ class EmmlModel(nn.Module):
         self.text_cache: TextCache | None = TextCache()
         """Acting-time cache of the instruction's encoding (None: encode at every step)."""
         self.detector: nn.Module | None = None
-        """Transfer to new words (§5.4, emml/transfer.py): a module mapping the observation to k extra x_I
+        """Transfer to new words (§5.4, emml/eval/transfer.py): a module mapping the observation to k extra x_I
         channels (N, k, h, w) in [0, 1], appended after the V conv3 channels; None under the paper's training."""
         self.type_gate: nn.Module | None = None
         """Control 'type_gate': the module that builds Eq. 4's gate from the dataset's word types

@@ -1,12 +1,12 @@
 """The report of `make demo`: the run's final greedy accuracies, its training curve, and the diagnostics of every
-evaluation (emml/diagnose.py), so that a newcomer sees both that the agent learns and why."""
+evaluation (emml/eval/diagnose.py), so that a newcomer sees both that the agent learns and why."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from emml.config.schema import TrainConfig
-from emml.diagnose import SCALARS
+from emml.eval.diagnose import SCALARS
 from emml.report.curves import plot_run
 from emml.runs.rundir import run_name
 from emml.runs.tracking import metric_history, tracking_uri

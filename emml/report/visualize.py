@@ -21,7 +21,7 @@ import torch  # noqa: E402
 
 from emml.config.schema import DoomConfig  # noqa: E402
 from emml.envs.doom import MOVES  # noqa: E402
-from emml.evaluate import obs_to_torch, playing  # noqa: E402
+from emml.eval.evaluate import obs_to_torch, playing  # noqa: E402
 from emml.report.savefig import save  # noqa: E402
 
 CHANNEL_WORDS = ("red", "green", "torch", "pillar", "smallest", "tall", "armor")

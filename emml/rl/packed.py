@@ -48,7 +48,7 @@ class StackedModels(nn.Module):
         if len(specs) != 1:
             raise ValueError("packed runs must share the architecture, vocabulary size and input size")
         if any(m.detector is not None for m in models):
-            raise ValueError("packed runs cannot carry transfer detectors (emml/transfer.py)")
+            raise ValueError("packed runs cannot carry transfer detectors (emml/eval/transfer.py)")
         if any(True for _ in models[0].buffers()):
             raise ValueError("packed runs stack parameters only; this model has buffers")
         self.runs = len(models)

@@ -29,7 +29,7 @@ from emml.config.schema import TrainConfig
 from emml.envs.doom import ANSWER
 from emml.envs.engine import RestartBudget, WorkerDied
 from emml.envs.vector import make_vector_env
-from emml.evaluate import obs_to_torch
+from emml.eval.evaluate import obs_to_torch
 
 log = logging.getLogger(__name__)
 

@@ -20,10 +20,10 @@ from tqdm import tqdm
 
 from emml import alloc
 from emml.config.schema import TrainConfig
-from emml.diagnose import SCALARS, diagnose, saturation_warning, summary_line
 from emml.envs.engine import stop_after
 from emml.envs.labels import channel_mask
-from emml.evaluate import evaluate
+from emml.eval.diagnose import SCALARS, diagnose, saturation_warning, summary_line
+from emml.eval.evaluate import evaluate
 from emml.models import build_model
 from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores

@@ -39,7 +39,7 @@ METRICS = "metrics.csv"
 RESULTS = "results.json"
 """The final score, its provenance and the config the run trained with (`save_results`)."""
 EVAL_SEED = 10_000
-"""Episode seeds of every greedy evaluation of a run: EVAL_SEED, EVAL_SEED + 1, … (emml.evaluate), recorded as
+"""Episode seeds of every greedy evaluation of a run: EVAL_SEED, EVAL_SEED + 1, … (emml.eval.evaluate), recorded as
 ``eval_seed`` beside the score."""
 RUN_FILES = (CHECKPOINT, METRICS, RESULTS)
 """Files any of which makes a folder a run dir."""
@@ -233,20 +233,6 @@ def load_model(path, device: str = "cpu", control: str | None = None):
 
         model.type_gate = TypeGate(tuple(ckpt["vocabulary"]), load_dataset(env.dataset))
     return model.to(device), cfg
-
-
-def evaluate_checkpoint(
-    path, episodes: int, seed: int = EVAL_SEED, device: str = "cpu", control: str | None = None
-) -> dict[str, float]:
-    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily over ``episodes``
-    per (task, split) from episode seed ``seed`` (emml.evaluate); ``control`` as in `load_model`."""
-    import torch
-
-    from emml.evaluate import evaluate
-
-    model, cfg = load_model(path, device, control)
-    torch.manual_seed(seed)
-    return evaluate(model, cfg.env, episodes, seed=seed, device=device)
 
 
 # --- results -------------------------------------------------------------------------------------------------------

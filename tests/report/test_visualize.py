@@ -8,7 +8,7 @@ from typer.testing import CliRunner
 
 from emml.cli import app
 from emml.config.profiles import profile_config
-from emml.evaluate import obs_to_torch
+from emml.eval.evaluate import obs_to_torch
 from emml.report.visualize import CHANNEL_WORDS, attention_figure, channels_figure, episode_gif, record_episode
 from emml.rl.trainer import train
 from emml.runs.rundir import CHECKPOINT, load_model

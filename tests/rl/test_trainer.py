@@ -13,6 +13,7 @@ import pytest
 
 from emml.config.profiles import profile_config
 from emml.config.schema import TrainConfig
+from emml.eval.evaluate import evaluate_checkpoint
 from emml.models import MODELS
 from emml.rl.trainer import train
 from emml.runs.checkpoint import load_checkpoint, save_checkpoint
@@ -23,7 +24,6 @@ from emml.runs.rundir import (
     RESULTS,
     ConfigMismatch,
     check_resumable,
-    evaluate_checkpoint,
     results_csv,
     run_dir,
     run_name,

@@ -9,11 +9,12 @@ from typer.testing import CliRunner
 
 from emml.cli import app
 from emml.config.profiles import profile_config
-from emml.rescore import NoProvenance, NotFinished, rescore
+from emml.eval.evaluate import evaluate_checkpoint
+from emml.eval.rescore import NoProvenance, NotFinished, rescore
 from emml.rl.trainer import train
 from emml.runs.checkpoint import load_checkpoint, save_checkpoint
 from emml.runs.results import read_results
-from emml.runs.rundir import CHECKPOINT, RESULTS, evaluate_checkpoint, results_csv, run_name
+from emml.runs.rundir import CHECKPOINT, RESULTS, results_csv, run_name
 
 
 def _finished_run(tracking, seed: int = 0):
@@ -52,7 +53,7 @@ def test_a_finished_run_is_rescored_with_its_provenance_kept(tracking, monkeypat
         path.write_text(json.dumps({**json.loads(path.read_text()), "note": "kept"}))
         return evaluate_checkpoint(*args, **kwargs)
 
-    monkeypatch.setattr("emml.runs.rundir.evaluate_checkpoint", meanwhile)
+    monkeypatch.setattr("emml.eval.evaluate.evaluate_checkpoint", meanwhile)
     assert rescore(result.run_dir, episodes=3, seed=10_050, force=True).played
     assert json.loads((result.run_dir / RESULTS).read_text())["note"] == "kept"
 
@@ -85,7 +86,7 @@ def test_an_unfinished_run_is_refused_before_anything_is_played(tracking, monkey
     path = result.run_dir / CHECKPOINT
     save_checkpoint(path, {**load_checkpoint(path), "finished": False})
     results, table = (result.run_dir / RESULTS).read_text(), results_csv(cfg).read_text()
-    monkeypatch.setattr("emml.runs.rundir.evaluate_checkpoint", lambda *a, **k: pytest.fail("played"))
+    monkeypatch.setattr("emml.eval.evaluate.evaluate_checkpoint", lambda *a, **k: pytest.fail("played"))
     with pytest.raises(NotFinished, match="unfinished run"):
         rescore(result.run_dir, episodes=2)
     out = CliRunner().invoke(app, ["rescore", str(result.run_dir), "--episodes", "2"])

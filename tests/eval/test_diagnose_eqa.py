@@ -1,4 +1,4 @@
-"""The per-question EQA diagnostics (emml/diagnose_eqa.py) are computed from the episodes they play: the same
+"""The per-question EQA diagnostics (emml/eval/diagnose_eqa.py) are computed from the episodes they play: the same
 outcomes as greedy evaluation, answers and attention per episode, and the gate the model reads in Eq. 4."""
 
 import dataclasses
@@ -7,9 +7,9 @@ import numpy as np
 import torch
 
 from emml.config.schema import DoomConfig
-from emml.diagnose_eqa import NO_ANSWER, diagnose_eqa, eqa_table, split_means
 from emml.envs.vector import make_env
-from emml.evaluate import play
+from emml.eval.diagnose_eqa import NO_ANSWER, diagnose_eqa, eqa_table, split_means
+from emml.eval.evaluate import play
 from emml.models import build_model
 from emml.models.type_gate import TypeGate
 from emml.tasks.language import Vocabulary, load_dataset

@@ -1,4 +1,4 @@
-"""The diagnostics of emml/diagnose.py measure what they claim: detector AP, attention on the referent, and the
+"""The diagnostics of emml/eval/diagnose.py measure what they claim: detector AP, attention on the referent, and the
 actor's sensitivity to where the referent stands."""
 
 from types import SimpleNamespace
@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from emml.config.schema import DoomConfig
-from emml.diagnose import average_precision, diagnose, saturation_warning, summary_line, x_image_saturation
+from emml.eval.diagnose import average_precision, diagnose, saturation_warning, summary_line, x_image_saturation
 from emml.models import build_model
 from emml.tasks.language import Vocabulary, load_dataset
 from tests.conftest import SMOKE

@@ -1,4 +1,4 @@
-"""Where SGN episodes end (emml/diagnose_sgn.py): every episode gets one end, the success rate is greedy
+"""Where SGN episodes end (emml/eval/diagnose_sgn.py): every episode gets one end, the success rate is greedy
 evaluation's for the same seeds, and a wrong-object end names the object the agent walked into. A scripted walker
 gives ends known in advance; a smoke checkpoint (64 frames: it times out everywhere) checks the command's plumbing."""
 
@@ -11,7 +11,9 @@ from typer.testing import CliRunner
 
 from emml.cli import app
 from emml.config.schema import DoomConfig
-from emml.diagnose_sgn import (
+from emml.envs.doom import FORWARD, LEFT
+from emml.envs.vector import make_env
+from emml.eval.diagnose_sgn import (
     ENDS,
     NONE,
     TARGET,
@@ -22,9 +24,7 @@ from emml.diagnose_sgn import (
     sgn_table,
     shared_attributes,
 )
-from emml.envs.doom import FORWARD, LEFT
-from emml.envs.vector import make_env
-from emml.evaluate import evaluate
+from emml.eval.evaluate import evaluate
 from emml.tasks.language import Vocabulary, load_dataset
 from tests.conftest import SMOKE
 from tests.fakes import ScriptedModel
@@ -140,8 +140,9 @@ def test_turning_on_the_spot_times_out(no_leftovers):
 
 def test_a_checkpoints_outcomes_match_its_evaluation(tracking, no_leftovers):
     from emml.config.profiles import profile_config
+    from emml.eval.evaluate import evaluate_checkpoint
     from emml.rl.trainer import train
-    from emml.runs.rundir import CHECKPOINT, EVAL_SEED, evaluate_checkpoint
+    from emml.runs.rundir import CHECKPOINT, EVAL_SEED
 
     over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test"}
     short = {"frames": 64, "eval_episodes": 1, "diagnose_episodes": 0, "env.max_steps": 12}

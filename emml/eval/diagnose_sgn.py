@@ -29,9 +29,9 @@ import numpy as np
 import torch
 
 from emml.config.schema import DoomConfig
-from emml.diagnose_eqa import actor_words
 from emml.envs.vector import make_env
-from emml.evaluate import eval_settings, play, playing
+from emml.eval.diagnose_eqa import actor_words
+from emml.eval.evaluate import eval_settings, play, playing
 from emml.tasks.language import Dataset, describe, load_dataset
 
 TARGET, WRONG, TIMEOUT = "target", "wrong object", "time-out"
@@ -210,7 +210,7 @@ def diagnose_sgn(
     batch: int = 8,
 ) -> dict:
     """The figures of the module docstring on ``episodes`` greedy SGN episodes of each split in ``splits`` that the
-    run is scored on, played as `emml.evaluate.evaluate` plays them (episode i: reset seed ``seed + i``)."""
+    run is scored on, played as `emml.eval.evaluate.evaluate` plays them (episode i: reset seed ``seed + i``)."""
     dataset = load_dataset(env_cfg.dataset)
     labels = bool(getattr(model, "reads_labels", False))  # as evaluate: only label-fed controls see the labels
     result: dict = {"model": model.cfg.name, "episodes": episodes, "seed": seed, "splits": {}}

@@ -1,4 +1,4 @@
-"""The offline probe of the EQA question encoder (emml/probe_eqa.py, issue 34): its result's structure, what it
+"""The offline probe of the EQA question encoder (emml/eval/probe_eqa.py, issue 34): its result's structure, what it
 trains (the GRU and Linear of a fresh x_sent encoder) and what it keeps frozen (the checkpoint's embedding and the
 rest of the model), and its refusals before any engine starts."""
 
@@ -10,7 +10,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-import emml.probe_eqa as probe
+import emml.eval.probe_eqa as probe
 from emml.cli import app
 from emml.config.profiles import profile_config
 from emml.models import build_model

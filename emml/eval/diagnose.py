@@ -31,7 +31,7 @@ import torch
 from emml.config.env_kinds import ENV_KINDS
 from emml.config.schema import DoomConfig
 from emml.envs.doom import DoomEnv
-from emml.evaluate import eval_settings, obs_to_torch, playing
+from emml.eval.evaluate import eval_settings, obs_to_torch, playing
 
 
 def average_precision(scores: np.ndarray, labels: np.ndarray) -> float:
@@ -209,8 +209,8 @@ def diagnose_checkpoint(
 ) -> dict:
     """Rebuild a checkpoint's model (its own config and vocabulary, ``control`` as in `emml.runs.rundir.load_model`)
     and diagnose it: the SGN figures above (none when ``episodes`` is 0) and, with ``eqa_episodes``, the EQA
-    per-question ones under "eqa" (emml/diagnose_eqa.py)."""
-    from emml.diagnose_eqa import diagnose_eqa
+    per-question ones under "eqa" (emml/eval/diagnose_eqa.py)."""
+    from emml.eval.diagnose_eqa import diagnose_eqa
     from emml.runs.rundir import load_model
 
     model, cfg = load_model(path, control=control)

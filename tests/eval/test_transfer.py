@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 import torch
 
+from emml.eval.transfer import LabelDetector, append_words, check_transferable, make_detector
 from emml.models import build_model
 from emml.tasks.language import Vocabulary, load_dataset
-from emml.transfer import LabelDetector, append_words, check_transferable, make_detector
 
 WORDS = ("red", "pillar")
 T, B, H, W = 2, 3, 60, 108
@@ -187,7 +187,7 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no
     """`emml run table4 --profile smoke` end to end: two training runs, each scored on the 28 test instructions
     after the surgery; the report fills all 15 rows for Easy and Hard; a second launch redoes nothing."""
     _short_episodes(monkeypatch, tmp_path)
-    from emml import transfer
+    from emml.eval import transfer
     from emml.launch import run_table
     from emml.report.tables import EXTRA_MARK, report_table
     from emml.runs.results import read_results
@@ -227,7 +227,7 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no
 
 def test_eval_settings_leave_out_splits_with_unknown_words():
     from emml.config.schema import DoomConfig
-    from emml.evaluate import eval_settings
+    from emml.eval.evaluate import eval_settings
 
     assert eval_settings(DoomConfig(tasks="sgn", vocabulary="train_instructions")) == [("sgn", "train", None)]
     assert len(eval_settings(DoomConfig())) == 4

@@ -38,7 +38,7 @@ import torch
 
 from emml.config.schema import DoomConfig
 from emml.envs.doom import MOVES
-from emml.evaluate import eval_settings, play, playing
+from emml.eval.evaluate import eval_settings, play, playing
 from emml.tasks.language import Dataset, Vocabulary, load_dataset
 
 NO_ANSWER = "(no answer)"
@@ -149,7 +149,7 @@ def _detectors(records: list[dict], x_ref: list[np.ndarray], words, dataset) -> 
 
 
 def _play(model, cfg: DoomConfig, plan, device, batch: int) -> tuple[list[dict], list[bool]]:
-    """Play ``plan`` greedily (`emml.evaluate.play`); per planned episode, its last step's record (the answering
+    """Play ``plan`` greedily (`emml.eval.evaluate.play`); per planned episode, its last step's record (the answering
     step when it answered) and its success."""
     records: dict[int, dict] = {}
 

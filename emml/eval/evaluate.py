@@ -15,6 +15,7 @@ import torch
 
 from emml.config.schema import DoomConfig
 from emml.envs.vector import make_env
+from emml.runs.rundir import EVAL_SEED, load_model
 
 SETTINGS = (("sgn", "train"), ("sgn", "test"), ("eqa", "train"), ("eqa", "test"))
 
@@ -28,7 +29,7 @@ def eval_settings(env_cfg: DoomConfig) -> list[tuple[str, str, tuple[str, ...] |
     """(task, split, instructions) to evaluate: the tasks the run trains on (a single-task run is scored on its
     task only, as in Table 3), both splits; a run restricted to some sentences is scored on those only. A split
     with words outside the run's vocabulary is left out (Table 4's runs know the training instructions' words
-    only: their test instructions are scored after the transfer surgery, emml/transfer.py)."""
+    only: their test instructions are scored after the transfer surgery, emml/eval/transfer.py)."""
     from emml.tasks.language import load_dataset, resolve_vocabulary
 
     ds = load_dataset(env_cfg.dataset)
@@ -128,3 +129,13 @@ def play(model, envs, plan: list[tuple[int, dict | None]], device, on_step=None)
                     active[i] = False
         episode_start = torch.as_tensor(starts, device=device).unsqueeze(0)
     return outcomes
+
+
+def evaluate_checkpoint(
+    path, episodes: int, seed: int = EVAL_SEED, device: str = "cpu", control: str | None = None
+) -> dict[str, float]:
+    """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily over ``episodes``
+    per (task, split) from episode seed ``seed`` (`evaluate`); ``control`` as in `load_model` (emml.runs.rundir)."""
+    model, cfg = load_model(path, device, control)
+    torch.manual_seed(seed)
+    return evaluate(model, cfg.env, episodes, seed=seed, device=device)

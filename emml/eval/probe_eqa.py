@@ -43,9 +43,9 @@ import torch
 from torch import nn
 
 from emml.config.schema import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
-from emml.diagnose_eqa import gate_missing
 from emml.envs.vector import make_env
-from emml.evaluate import eval_settings
+from emml.eval.diagnose_eqa import gate_missing
+from emml.eval.evaluate import eval_settings
 from emml.models.encoders import TextEncoder
 from emml.models.policy import word_mask
 from emml.runs.rundir import load_model

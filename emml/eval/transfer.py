@@ -123,7 +123,7 @@ def evaluate_instructions(
 ) -> dict[str, float]:
     """Greedy success per instruction, ``episodes`` each (instruction i plays seeds seed + i·episodes + j)."""
     from emml.envs.doom import DoomEnv
-    from emml.evaluate import play, playing
+    from emml.eval.evaluate import play, playing
 
     instructions = list(instructions)
     plan = [

@@ -1,5 +1,5 @@
 """Re-score a finished run with the final-evaluation protocol (issue 33): its checkpoint played greedily over
-`final_eval_episodes` per (task, split) from the episode seed `EVAL_SEED` (§5.1's accuracy, emml/evaluate.py), its
+`final_eval_episodes` per (task, split) from the episode seed `EVAL_SEED` (§5.1's accuracy, emml/eval/evaluate.py), its
 results.json metrics and results-table row rewritten. The training provenance stays (run_name, frames, seed,
 git_sha, run_id); the row adds the code that scored it (`scored_sha`), the episodes and their seed.
 
@@ -60,7 +60,7 @@ def rescore(
     (0: its config's `final_eval_episodes`; a checkpoint from before the field reads its default) from episode seed
     ``seed``. Writes results.json atomically, then (``record``) upserts the row of its results table (the
     checkpoint's `results_root`, or ``results_root``). Nothing is written unless every score was measured."""
-    from emml.runs.rundir import evaluate_checkpoint
+    from emml.eval.evaluate import evaluate_checkpoint
 
     rdir = Path(run) if Path(run).is_dir() else Path(run).parent
     if not (rdir / CHECKPOINT).is_file():

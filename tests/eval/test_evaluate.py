@@ -1,11 +1,11 @@
-"""The envelope of every greedy play (emml.evaluate.playing)."""
+"""The envelope of every greedy play (emml.eval.evaluate.playing)."""
 
 from __future__ import annotations
 
 import pytest
 from torch import nn
 
-from emml.evaluate import playing
+from emml.eval.evaluate import playing
 
 
 class _Env:
