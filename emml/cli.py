@@ -594,7 +594,7 @@ def transfer(
     """Table 4 on one checkpoint (§5.4): append detectors for new words, score every SGN test instruction that
     holds one, without fine-tuning; rows as in reproduce/table4.toml."""
     from emml.eval.transfer import transfer_checkpoint
-    from emml.registry import load_table
+    from emml.experiments.tables import load_table
 
     _check_checkpoint(checkpoint)
     _own_engines()
@@ -853,8 +853,8 @@ def list_experiments(
 ):
     """Every table in reproduce/ with its runs and how many are finished under the profile."""
     from emml.config.profiles import load_profiles
-    from emml.launch import run_states
-    from emml.registry import list_tables, load_table
+    from emml.experiments.launch import run_states
+    from emml.experiments.tables import list_tables, load_table
 
     if profile not in load_profiles():
         _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
@@ -907,8 +907,8 @@ def run_table(
     """Train every run of a table (skips finished runs, resumes interrupted ones); a placeholder table exits 0."""
     from dataclasses import asdict
 
-    from emml.launch import run_table as launch
-    from emml.registry import load_table
+    from emml.experiments.launch import run_table as launch
+    from emml.experiments.tables import load_table
 
     selection = {}
     for item in only:
@@ -917,7 +917,7 @@ def run_table(
             _fail(f"--only {item!r}: expected FIELD=VALUE, e.g. --only difficulty=easy")
         selection[key.strip()] = value.strip()
     try:
-        loaded = load_table(table)  # a .toml path: its name is the file's stem (emml.registry.own_table)
+        loaded = load_table(table)  # a .toml path: its name is the file's stem (emml.experiments.tables.own_table)
     except ValueError as e:
         _fail(str(e))
     if backend == "local" and not loaded.placeholder:
@@ -990,8 +990,8 @@ def campaign(
     import sys
     from dataclasses import asdict
 
-    from emml.campaign import load_campaign, pin_worktree, run_campaign, select_steps, status
     from emml.config.paths import project_path, project_root
+    from emml.experiments.campaign import load_campaign, pin_worktree, run_campaign, select_steps, status
     from emml.runs.tracking import tracking_uri
 
     step_args = [x for n in steps for x in ("--step", n)]
@@ -1040,10 +1040,11 @@ def campaign(
 
 
 def _runs_at_once(jobs: int, device: str) -> int:
-    """`jobs`, or when 0 what a launch on `device` would take (emml.launch.default_jobs); a device that is not one,
+    """`jobs`, or when 0 what a launch on `device` would take (emml.experiments.launch.default_jobs); a device that is
+    not one,
     or (for the default) that this machine lacks, fails by name."""
     from emml.config.schema import check_device_name
-    from emml.launch import default_jobs
+    from emml.experiments.launch import default_jobs
     from emml.rl.hardware import check_device
 
     try:
@@ -1057,7 +1058,7 @@ def _runs_at_once(jobs: int, device: str) -> int:
 
 def _status_text(plan, rows, at_once: int = 1, device: str = "cpu") -> str:
     """--status as text: one line per run, by step, and the estimated time left with `at_once` runs side by side."""
-    from emml.campaign import wall_seconds
+    from emml.experiments.campaign import wall_seconds
 
     def hours(seconds: float | None) -> str:
         return "?" if seconds is None else f"{seconds / 3600:.1f} h"
@@ -1078,7 +1079,7 @@ def _status_text(plan, rows, at_once: int = 1, device: str = "cpu") -> str:
     measured = "training frames/s and evaluation seconds measured from this machine's runs of each profile"
     if at_once == 1:
         left = f"~{hours(total)} on this machine (one at a time; {measured})"
-    else:  # each step a launch of `at_once` slots; a step of one run holds the machine alone (emml.campaign)
+    else:  # each step a launch of `at_once` slots; a step of one run holds the machine alone (experiments/campaign)
         left = (
             f"~{hours(total)} of run time, ~{hours(wall_seconds(rows, at_once))} on this machine with {at_once} "
             f"runs at a time on {device}, step by step (--jobs; {measured}, under the packing they trained at)"
@@ -1109,7 +1110,7 @@ def report(
         _check_store()
     try:
         if table.endswith(".toml"):  # a table of one's own: reported by its name, the file's stem
-            from emml.registry import own_table
+            from emml.experiments.tables import own_table
 
             table = own_table(table)
         data = report_table(table, profile, out=_out(out) if out else None)

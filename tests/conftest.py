@@ -176,8 +176,9 @@ def placeholder_table(tmp_path, monkeypatch):
     paper's numbers only), made from Table 5's paper numbers; returns its name."""
     import shutil
 
-    import emml.registry
+    import emml.experiments.tables
     import emml.report.tables
+    from emml.config.paths import REPRODUCE_DIR
 
     folder = tmp_path / "reproduce"
     (folder / "paper").mkdir(parents=True)
@@ -185,9 +186,11 @@ def placeholder_table(tmp_path, monkeypatch):
         'title = "A table still to build"\npaper_label = "tab:results_h3d"\nstatus = "placeholder"\n'
         'row_header = "Model"\n'
     )
-    shutil.copy(emml.registry.REPRODUCE_DIR / "paper" / "table5.csv", folder / "paper" / "table9.csv")
-    real_path, real_numbers = emml.registry.table_path, emml.report.tables.paper_numbers
-    monkeypatch.setattr(emml.registry, "table_path", lambda n: folder / f"{n}.toml" if n == "table9" else real_path(n))
+    shutil.copy(REPRODUCE_DIR / "paper" / "table5.csv", folder / "paper" / "table9.csv")
+    real_path, real_numbers = emml.experiments.tables.table_path, emml.report.tables.paper_numbers
+    monkeypatch.setattr(
+        emml.experiments.tables, "table_path", lambda n: folder / f"{n}.toml" if n == "table9" else real_path(n)
+    )
     monkeypatch.setattr(
         emml.report.tables,
         "paper_numbers",

@@ -187,13 +187,13 @@ def test_a_stopped_run_prints_a_resume_command_the_shell_reads_back(monkeypatch)
     """The resume line of a stopped `emml run` quotes each --only value: a row label has spaces."""
     import shlex
 
-    import emml.launch
-    from emml.launch import LaunchReport
+    import emml.experiments.launch
+    from emml.experiments.launch import LaunchReport
 
     def stopped(table, profile, **kwargs):
         return LaunchReport(table=table, profile=profile, backend="local", total=1, stopped="signal SIGTERM")
 
-    monkeypatch.setattr(emml.launch, "run_table", stopped)
+    monkeypatch.setattr(emml.experiments.launch, "run_table", stopped)
     result = runner.invoke(app, ["run", "table3", "--only", "row=w/o Reward Shaping", "--only", "seed=0"])
     assert result.exit_code == 130, result.output
     again = result.output.split("resume with: ", 1)[1].strip()

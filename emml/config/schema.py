@@ -118,8 +118,7 @@ class DoomConfig:
     """Which tasks/<name>.toml."""
 
     GYM_ID: ClassVar[str] = DOOM_ID
-    """The environment this class configures (not a field); it plays the kinds of emml/config/env_kinds.py with this
-    id."""
+    """The environment this class configures (not a field); it plays the kinds of env_kinds.py with this id."""
     DIFFICULTIES: ClassVar[tuple[str, ...]] = kinds_of(DOOM_ID)
     """The allowed `difficulty` values (not a field): Easy and Hard (§4)."""
 

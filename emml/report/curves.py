@@ -89,7 +89,7 @@ def plot_table(
     profile's); a run with neither is skipped with a note. When no run has a curve here, existing figures are kept
     rather than replaced by empty ones. Returns (paths, notes)."""
     from emml.config.profiles import profile_config, profile_seeds
-    from emml.registry import load_table
+    from emml.experiments.tables import load_table
     from emml.report import deviations
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, reports_dir, table_results
     from emml.runs.rundir import METRICS, path_of

@@ -1,14 +1,14 @@
 """The deviations from the paper in force for the runs a report shows, read from the runs' own configs (their
-results.json, emml/report/saved_config.py) against the declared list of emml/fidelity.py, and grouped: a line said
-once with the runs it holds for ("all 4 runs", "the Easy runs (3)"), never written by hand."""
+results.json, emml/report/saved_config.py) against the declared list of emml/experiments/fidelity.py, and grouped: a
+line said once with the runs it holds for ("all 4 runs", "the Easy runs (3)"), never written by hand."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from emml import fidelity
 from emml.config.env_kinds import env_label
+from emml.experiments import fidelity
 
 SAVED, NO_CONFIG, REFERENCE, DECLARED = "saved", "no saved config", "reference", "declared"
 """Where a run's config came from: its results.json; the registry because its results.json has no config yet
@@ -25,7 +25,7 @@ class ShownRun:
     attrs: dict
     """What a group of runs can be named by: row, difficulty, aux (the RunSpec's)."""
     config: dict
-    """The resolved config (`emml.fidelity.resolve`)."""
+    """The resolved config (`emml.experiments.fidelity.resolve`)."""
     source: str
     """SAVED, NO_CONFIG, REFERENCE or DECLARED."""
     skip: frozenset = field(default_factory=frozenset)
@@ -48,7 +48,7 @@ def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None,
     else:
         source = DECLARED if declared else NO_CONFIG if run_dir.exists() else REFERENCE
         saved = spec.to_config(profile).to_dict()
-    from emml.registry import list_tables
+    from emml.experiments.tables import list_tables
 
     # a paper table's row sets its overrides on purpose (Table 3's ablations); an experiment's rows are not the paper's
     paper_row = spec.table in list_tables()

@@ -19,7 +19,7 @@ def profiles_with_results(results_root: str | Path = "results") -> dict[str, lis
     even if a CSV of it lies here. The experiments beyond the paper's tables (reproduce/experiments/<name>.toml, e.g.
     issue 34's eqa_readout) with results are listed after the paper's tables, by name, loadable by it."""
     from emml.config.profiles import is_scratch, load_profiles
-    from emml.registry import EXPERIMENTS_DIR, list_experiments, list_tables, load_table, own_table
+    from emml.experiments.tables import EXPERIMENTS_DIR, list_experiments, list_tables, load_table, own_table
 
     known = load_profiles()
     experiments = set(list_experiments())
@@ -118,7 +118,7 @@ def write_reports(
     Dual-Attention checkpoint (when its run dir is here), and reports/index.md. Returns the index path."""
     import matplotlib.pyplot as plt
 
-    from emml.registry import load_table
+    from emml.experiments.tables import load_table
     from emml.report.curves import plot_table
     from emml.report.tables import _run_names, report_table, table_results
 

@@ -12,7 +12,7 @@ from emml.runs.rundir import write_json as _write
 
 
 def _is_metric(column: str) -> bool:
-    from emml.registry import METRICS, TRANSFER_METRICS
+    from emml.experiments.tables import METRICS, TRANSFER_METRICS
 
     return column in METRICS or column.split(":")[0] in TRANSFER_METRICS
 

@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 
 from emml.config.env_kinds import ENV_KINDS, env_label
-from emml.config.paths import project_path, project_root
-from emml.registry import REPRODUCE_DIR, Table, list_tables, load_table, table_ref
+from emml.config.paths import REPRODUCE_DIR, project_path, project_root
+from emml.experiments.tables import Table, list_tables, load_table, table_ref
 from emml.runs.results import read_results
 
 MISSING = "—"

@@ -417,5 +417,6 @@ def _log_line(update: int, frames: int, fps: float, m: dict, seconds: dict) -> s
 
 
 def train(cfg: TrainConfig, quiet: bool = False, parent_run_id: str | None = None) -> RunResult:
-    """Train (or resume, or skip if finished) one run; `parent_run_id` nests its MLflow run (emml/launch.py)."""
+    """Train (or resume, or skip if finished) one run; `parent_run_id` nests its MLflow run
+    (emml/experiments/launch.py)."""
     return Trainer(cfg, quiet=quiet, parent_run_id=parent_run_id).train()

@@ -1,17 +1,16 @@
 """Env kinds (emml/config/env_kinds.py): one declaration per kind, and every list derives from it; HouseEnv overrides
-the
-scene, the distance and the reach test of DoomEnv, not its episode loop."""
+the scene, the distance and the reach test of DoomEnv, not its episode loop."""
 
 import gymnasium as gym
 
 import emml  # noqa: F401  (registers the env ids)
-from emml import fidelity
 from emml.config.env_kinds import ENV_KINDS, GYM_ENVS, env_label, kinds_of
 from emml.config.schema import ENV_CONFIGS, ENV_DIFFICULTIES, DoomConfig, HouseConfig, env_config_class
 from emml.envs.doom import DoomEnv
 from emml.envs.house import HouseEnv
 from emml.envs.vector import env_class, make_env
-from emml.registry import DIFFICULTIES
+from emml.experiments import fidelity
+from emml.experiments.tables import DIFFICULTIES
 from emml.report.tables import DIFFICULTY_LABELS
 from tests.conftest import SMOKE
 

@@ -118,7 +118,7 @@ def test_refuses_what_it_cannot_transfer(vocab):
 
 
 def test_table4_rows_cover_every_test_instruction_once():
-    from emml.registry import load_table
+    from emml.experiments.tables import load_table
 
     table = load_table("table4")
     test = {s.text for s in load_dataset("doom").select("sgn", "test")}
@@ -152,7 +152,8 @@ def test_table4_rows_cover_every_test_instruction_once():
     ],
 )
 def test_a_broken_table4_names_the_key(tmp_path, old, new, key, message):
-    from emml.registry import REPRODUCE_DIR, load_table
+    from emml.config.paths import REPRODUCE_DIR
+    from emml.experiments.tables import load_table
 
     text = (REPRODUCE_DIR / "table4.toml").read_text()
     assert old in text
@@ -188,7 +189,7 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no
     after the surgery; the report fills all 15 rows for Easy and Hard; a second launch redoes nothing."""
     _short_episodes(monkeypatch, tmp_path)
     from emml.eval import transfer
-    from emml.launch import run_table
+    from emml.experiments.launch import run_table
     from emml.report.tables import EXTRA_MARK, report_table
     from emml.runs.results import read_results
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from rliable import metrics
 
-from emml.registry import load_table
+from emml.experiments.tables import load_table
 from emml.report.aggregate import improvement, iqm, probability_of_improvement, reference_row
 
 CELLS = [[0.92, 0.89, 0.93], [0.1, 0.4, 0.2], [0.5, 0.6, 0.7]]

@@ -83,7 +83,7 @@ def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(track
 
     import emml.report.curves as curves
     from emml.config.profiles import profile_config
-    from emml.registry import load_table
+    from emml.experiments.tables import load_table
 
     footers = []
     real = curves._footer

@@ -4,8 +4,8 @@ from emml.report.deviations import ShownRun, summarise, who
 
 
 def run(name, row, difficulty="easy", aux=True, cfg=None):
-    from emml import fidelity
     from emml.config.profiles import profile_config
+    from emml.experiments import fidelity
 
     config = fidelity.resolve((cfg or profile_config("quick", difficulty, model="ga", aux=aux)).to_dict())
     return ShownRun(name, {"row": row, "difficulty": difficulty, "aux": aux}, config, "saved")

@@ -1,7 +1,7 @@
 """reports/index.md: what a reader should read first, the experiments beyond the paper after its tables, and never
 smoke numbers."""
 
-from emml.registry import load_table
+from emml.experiments.tables import load_table
 from emml.report.index import profiles_with_results
 
 

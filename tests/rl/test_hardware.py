@@ -12,7 +12,7 @@ import torch
 
 from emml.config.profiles import profile_config
 from emml.config.schema import TrainConfig
-from emml.launch import run_table
+from emml.experiments.launch import run_table
 from emml.rl.hardware import check_runnable
 from emml.rl.trainer import Trainer
 
@@ -54,9 +54,8 @@ def test_the_launcher_refuses_before_any_run(no_cuda, tracking):
 
 def test_the_config_imports_no_torch_and_no_layer_above_it():
     """The layers contract (pyproject.toml, `make lint`) reads the source; this runs it: `import emml.config.schema`,
-    and
-    validating a config with model options (the model registry is asked where training starts, not here)."""
-    above = ("torch", "emml.rl", "emml.models", "emml.envs", "emml.tasks", "emml.runs.rundir")
+    and validating a config with model options (the model registry is asked where training starts, not here)."""
+    above = ("torch", "emml.rl", "emml.models", "emml.envs", "emml.tasks", "emml.runs")
     code = (
         "import sys; from emml.config.schema import TrainConfig, ModelConfig, apply_overrides; "
         "apply_overrides(TrainConfig(model='pacman'), {'model_options.pacman_frames': 3}).validate(); "

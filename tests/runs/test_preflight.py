@@ -156,7 +156,7 @@ def test_train_refuses_a_broken_results_csv_naming_file_and_line(content, why, t
 
 def test_run_refuses_before_its_parent_run(tracking, tmp_path, monkeypatch, no_leftovers):
     """`emml run` and the launcher: the store, the folders and the CSV are checked before the parent MLflow run."""
-    from emml.launch import run_table
+    from emml.experiments.launch import run_table
 
     monkeypatch.setattr("emml.config.paths.project_root", lambda: tmp_path)  # `emml run` writes under runs/, results/
     monkeypatch.setenv("MLFLOW_TRACKING_URI", "sqlite:////proc/mlflow.db")

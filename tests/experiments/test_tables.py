@@ -6,7 +6,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from emml.registry import REPRODUCE_DIR, list_tables, load_table, table_names, table_ref
+from emml.config.paths import REPRODUCE_DIR
+from emml.experiments.tables import list_tables, load_table, table_names, table_ref
 from emml.report.tables import paper_numbers
 from emml.runs.rundir import run_name
 

@@ -23,8 +23,8 @@ LAUNCH = textwrap.dedent(
     # job control (`make test &`, nohup) inherits SIGINT ignored, and Python then keeps it ignored: the launcher
     # never saw the stop (the stacks showed it still waiting on its runs 30 s after the Ctrl-C)
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    from emml.launch import run_table
-    from tests.test_launch_stop import slow_train
+    from emml.experiments.launch import run_table
+    from tests.experiments.test_launch_stop import slow_train
     report = run_table("table3", "smoke", jobs=2, run_root=sys.argv[1], results_root=sys.argv[2],
                        train_fn=slow_train, log=lambda m: None)
     print(json.dumps([report.stopped, len(report.unfinished), report.parent_run_id]), flush=True)
@@ -65,7 +65,7 @@ def test_a_stopped_launch_starts_nothing_more_and_leaves_no_worker(tracking, how
     runs, results = Path(tracking["run_root"]), Path(tracking["results_root"])
     proc = subprocess.Popen(
         [sys.executable, "-c", LAUNCH, str(runs), str(results)],
-        cwd=Path(__file__).resolve().parent.parent,
+        cwd=Path(__file__).resolve().parents[2],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

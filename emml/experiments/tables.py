@@ -226,8 +226,8 @@ def list_tables(directory: Path = REPRODUCE_DIR) -> list[str]:
 
 EXPERIMENTS_DIR = REPRODUCE_DIR / "experiments"
 """Tables beyond the paper's (reproduce/experiments/<name>.toml): a setting an issue measures, e.g. issue 34's x_sent
-readout. A campaign step names one as ``experiments/<name>`` (emml/campaign.py); `emml reports` reports those with
-results."""
+readout. A campaign step names one as ``experiments/<name>`` (emml/experiments/campaign.py); `emml reports` reports
+those with results."""
 
 
 EXPERIMENT_PREFIX = "experiments/"

@@ -1,9 +1,9 @@
-"""emml/fidelity.py: the declared settings of the paper, compared with a config."""
+"""emml/experiments/fidelity.py: the declared settings of the paper, compared with a config."""
 
 import pytest
 
-from emml import fidelity
 from emml.config.profiles import profile_config
+from emml.experiments import fidelity
 
 
 def test_every_declared_field_is_a_field_of_the_resolved_config():

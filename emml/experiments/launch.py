@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from emml.config.paths import project_path
-from emml.registry import RunSpec, load_table
+from emml.experiments.tables import RunSpec, load_table
 from emml.runs.rundir import run_name
 
 BACKENDS = ("local", "slurm")

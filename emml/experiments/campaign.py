@@ -8,9 +8,9 @@ its name, e.g. the paper profile's first curve evaluated every 100k frames rathe
 table is one of the paper's (reproduce/table*.toml) or an experiment beyond them, `experiments/<name>`
 (reproduce/experiments/<name>.toml: a table of one's own, `emml run FILE`, whose rows are the settings an issue
 measures, e.g. issue 34's x_sent readout).
-`emml campaign NAME` trains every unfinished run in that order through the table launcher (emml/launch.py), which
-skips finished runs and resumes interrupted ones; `--status` shows each run as done / running / interrupted / to do
-with its frames and an estimate of the time left, measured from this machine's own runs of the same profile.
+`emml campaign NAME` trains every unfinished run in that order through the table launcher (emml/experiments/launch.py),
+which skips finished runs and resumes interrupted ones; `--status` shows each run as done / running / interrupted / to
+do with its frames and an estimate of the time left, measured from this machine's own runs of the same profile.
 
 A run is "running" while a live process holds its lock (emml/runs/runlock.py). A campaign is long: `emml campaign`
 runs it from a git worktree of the current commit (`pin_worktree`), so that editing the checkout cannot reach a
@@ -29,7 +29,8 @@ from pathlib import Path
 
 import tomllib
 
-from emml.registry import REPRODUCE_DIR, RunSpec
+from emml.config.paths import REPRODUCE_DIR
+from emml.experiments.tables import RunSpec
 from emml.runs.rundir import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
@@ -53,7 +54,7 @@ class Step:
     profile: str
     """Profile (reproduce/profiles.toml)."""
     only: dict = field(default_factory=dict)
-    """RunSpec field → value or list of values (emml.launch.select_runs); lists order the runs."""
+    """RunSpec field → value or list of values (emml.experiments.launch.select_runs); lists order the runs."""
     frames: int | None = None
     """Frames to train each run to, instead of the profile's (None: the profile's)."""
     note: str = ""
@@ -63,7 +64,7 @@ class Step:
     and run, e.g. eval_every; never what it is: its name and results row stay the table's)."""
 
     def overrides(self) -> dict:
-        """The dotted TrainConfig overrides the step adds to its runs' own (emml.launch.with_overrides)."""
+        """The dotted TrainConfig overrides the step adds to its runs' own (emml.experiments.launch.with_overrides)."""
         return {**self.settings, **({"frames": self.frames} if self.frames is not None else {})}
 
 
@@ -116,8 +117,8 @@ def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
 def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
     from emml.config.profiles import load_profiles
-    from emml.launch import ONLY_FIELDS, select_runs
-    from emml.registry import table_names
+    from emml.experiments.launch import ONLY_FIELDS, select_runs
+    from emml.experiments.tables import table_names
 
     path = directory / f"{name}.toml"
     if not path.is_file():
@@ -188,7 +189,7 @@ def _declared(table: str, profile: str) -> dict:
     """Run name → (RunSpec, None) for the table's runs under the profile: what a selection is checked against,
     without reading any run dir."""
     from emml.config.profiles import profile_seeds
-    from emml.registry import load_table
+    from emml.experiments.tables import load_table
 
     return {spec.run_name(profile): (spec, None) for spec in load_table(table).runs(profile_seeds(profile))}
 
@@ -196,9 +197,10 @@ def _declared(table: str, profile: str) -> dict:
 def step_runs(
     step: Step, run_root: str | None = None, results_root: str | None = None, states: dict | None = None
 ) -> list[tuple[RunSpec, str]]:
-    """The step's runs in training order, each with its launcher state (emml.launch.STATES); ``states``: the table's
+    """The step's runs in training order, each with its launcher state (emml.experiments.launch.STATES); ``states``: the
+    table's
     run_states when already read (several steps of one table and profile read them once)."""
-    from emml.launch import run_states, select_runs, with_overrides
+    from emml.experiments.launch import run_states, select_runs, with_overrides
 
     if states is None:
         states = run_states(step.table, step.profile, run_root, results_root)
@@ -210,7 +212,7 @@ def step_runs(
 
 def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:
     """Every run of the campaign in order (a run two steps share is listed once, at its first step)."""
-    from emml.launch import run_states
+    from emml.experiments.launch import run_states
     from emml.runs.rundir import METRICS, run_dir
     from emml.runs.runlock import holder
 
@@ -245,8 +247,8 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
 
 def wall_seconds(rows: list[RunStatus], at_once: int) -> float:
     """Estimated wall-clock seconds to finish the campaign with `at_once` runs side by side: each step is a launch
-    (emml.launch.run_table) whose queue fills the free slot in the step's order, and the next step starts when the
-    step's last run ends. Runs with no estimate (``seconds_left`` None) count 0."""
+    (emml.experiments.launch.run_table) whose queue fills the free slot in the step's order, and the next step starts
+    when the step's last run ends. Runs with no estimate (``seconds_left`` None) count 0."""
     steps: dict[str, list[float]] = {}
     for r in rows:
         if r.state != "done":
@@ -320,10 +322,10 @@ def run_campaign(
     log: Callable[[str], None] = print,
     train_fn: Callable | None = None,
 ) -> list:
-    """Train every step's unfinished runs, step by step in the campaign's order (emml.launch.run_table per step);
-    returns the steps' LaunchReports. A failed run is reported and the campaign goes on, as a table does; a stop
+    """Train every step's unfinished runs, step by step in the campaign's order (emml.experiments.launch.run_table per
+    step); returns the steps' LaunchReports. A failed run is reported and the campaign goes on, as a table does; a stop
     (Ctrl-C, SIGTERM) ends it after the step it stopped (its report's `stopped`)."""
-    from emml.launch import run_table
+    from emml.experiments.launch import run_table
 
     reports = []
     for i, step in enumerate(campaign.steps, 1):

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from emml.campaign import load_campaign, pin_worktree, run_campaign, status, step_runs
-from emml.registry import load_table
+from emml.experiments.campaign import load_campaign, pin_worktree, run_campaign, status, step_runs
+from emml.experiments.tables import load_table
 from emml.runs.runlock import hold_run
-from tests.test_launch import calls, fake_train
+from tests.experiments.test_launch import calls, fake_train
 
 CAMPAIGN = """
 title = "a test campaign"
@@ -179,14 +179,14 @@ def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_
 
     from typer.testing import CliRunner
 
-    import emml.campaign
+    import emml.experiments.campaign
     from emml.cli import app
     from emml.config.paths import project_path
 
     monkeypatch.chdir(os.getcwd())  # restored after the test: the command changes directory before it execs
     tree = tmp_path / "tree"
     tree.mkdir()
-    monkeypatch.setattr(emml.campaign, "pin_worktree", lambda root, log: tree)
+    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log: tree)
     seen = {}
 
     def execve(path, args, env):
@@ -204,7 +204,7 @@ def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_
 
 
 def test_wall_time_fills_each_steps_slots_in_order_and_steps_follow_each_other():
-    from emml.campaign import RunStatus, wall_seconds
+    from emml.experiments.campaign import RunStatus, wall_seconds
 
     def run(step, seconds, state="to do"):
         return RunStatus(step, "table2", "quick", f"{step}-{seconds}", state, 0, 100, None, seconds)
@@ -231,7 +231,7 @@ def test_cli_status_says_how_many_runs_at_a_time_and_refuses_a_device_by_name(tr
 
 
 def test_steps_can_be_chosen_by_name_in_the_campaigns_order(tracking, campaigns):
-    from emml.campaign import select_steps
+    from emml.experiments.campaign import select_steps
 
     plan = load_campaign("mine", campaigns)
     assert select_steps(plan, []) is plan
@@ -250,7 +250,7 @@ def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking
 
     from typer.testing import CliRunner
 
-    import emml.campaign
+    import emml.experiments.campaign
     from emml.cli import app
 
     runner = CliRunner()
@@ -261,7 +261,7 @@ def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking
     result = runner.invoke(app, ["campaign", "reference", "--status", "--step", "nope", *roots])
     assert result.exit_code == 2 and "step='nope' is not a step of campaign 'reference'" in result.output
     monkeypatch.chdir(os.getcwd())
-    monkeypatch.setattr(emml.campaign, "pin_worktree", lambda root, log: tmp_path)
+    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log: tmp_path)
     seen = {}
 
     def execve(path, args, env):

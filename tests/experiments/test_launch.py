@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from emml.launch import run_states, run_table
+from emml.experiments.launch import run_states, run_table
 from emml.runs.checkpoint import save_checkpoint
 from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir, run_name
 from emml.runs.tracking import Tracker, find_runs
@@ -154,7 +154,7 @@ def test_cli_run_list_report(tmp_path, monkeypatch, placeholder_table):
 def test_runs_packed_on_a_gpu_are_capped_by_its_free_memory(monkeypatch):
     import torch
 
-    from emml import launch
+    from emml.experiments import launch
 
     monkeypatch.setattr(launch.os, "cpu_count", lambda: 16)
     monkeypatch.setattr(torch.cuda, "mem_get_info", lambda device=None: (7 * 2**30, 80 * 2**30))
@@ -200,7 +200,7 @@ def test_a_child_that_died_without_sending_is_a_failed_run_not_a_broken_launch()
     import multiprocessing
     from types import SimpleNamespace
 
-    from emml.launch import _received
+    from emml.experiments.launch import _received
 
     receive, send = multiprocessing.Pipe(duplex=False)
     send.close()
