@@ -40,10 +40,10 @@ def _check_project_files(
 ) -> None:
     """Every command reads reproduce/profiles.toml: a broken one is named in one line before anything runs; and
     every command first ends the engines that killed emml processes left (emml/envs/engine.py, sweep_orphans).
-    Plugins (--plugin, EMML_PLUGINS) load first, so that a bad one is named in one line (emml/plugins.py)."""
+    Plugins (--plugin, EMML_PLUGINS) load first, so that a bad one is named in one line (emml/models/plugins.py)."""
     import os
 
-    from emml.plugins import ENV_VAR, PluginError, add_plugins
+    from emml.models.plugins import ENV_VAR, PluginError, add_plugins
 
     if plugins or os.environ.get(ENV_VAR):
         try:
@@ -202,7 +202,7 @@ def bench_env(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """Raw ViZDoom vs our env (labels off/on), and the vector env with 1 and 2 workers."""
-    from emml.bench import bench_env as run
+    from emml.rl.bench import bench_env as run
 
     _own_engines(defer=False)
     _, cfg = _env_config(_gym_id(env_name), difficulty, height=height, width=width, interpolation=interpolation)
@@ -235,8 +235,8 @@ def bench_train_cmd(
 ):
     """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
     with --runs N, the aggregate of N packed runs against the raw simulator limit of the machine's cores."""
-    from emml.bench import PARTS, bench_train
     from emml.config.profiles import profile_config
+    from emml.rl.bench import PARTS, bench_train
     from emml.rl.hardware import check_runnable
 
     try:
@@ -306,7 +306,7 @@ def bench_alloc_cmd(
 ):
     """Training frames/s (model-only and end-to-end) under each allocator this machine has, interleaved in one
     run: tcmalloc and mimalloc where installed, glibc tuned in-process (the default without them) and untuned."""
-    from emml.bench import bench_alloc
+    from emml.rl.bench import bench_alloc
 
     r = bench_alloc(_child_bench_args(profile, updates, sets), rounds)
     lines = [f"allocators, median of {rounds} interleaved rounds (frames/s; ratio to the best):"]
@@ -329,7 +329,7 @@ def bench_workers_cmd(
     as_json: bool = typer.Option(False, "--json"),
 ):
     """End-to-end training frames/s with each number of envs per worker process, interleaved in one run."""
-    from emml.bench import bench_workers
+    from emml.rl.bench import bench_workers
 
     r = bench_workers(
         _child_bench_args(profile, updates, sets, [{"envs_per_worker": k} for k in per_worker]), per_worker, rounds
@@ -380,8 +380,8 @@ def _own_engines(defer: bool = True) -> None:
 
 def _use_tcmalloc() -> None:
     """Re-exec once under tcmalloc when installed, else tune glibc in-process (~2x CPU training speed either way,
-    docs/throughput.md); EMML_MALLOC picks one (emml.alloc.CHOICES)."""
-    from emml.alloc import reexec_under_tcmalloc
+    docs/throughput.md); EMML_MALLOC picks one (emml.rl.alloc.CHOICES)."""
+    from emml.rl.alloc import reexec_under_tcmalloc
 
     try:
         reexec_under_tcmalloc()
@@ -941,7 +941,7 @@ def run_table(
         _fail(str(e))
     data = asdict(report)
     if report.stopped:
-        from emml.plugins import configured
+        from emml.models.plugins import configured
 
         plugins = [arg for p in configured() for arg in ("--plugin", p)]  # a model of one's own needs its plugin
         only_args = [arg for o in only for arg in ("--only", o)]

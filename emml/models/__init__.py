@@ -1,7 +1,7 @@
 """Model zoo of "Embodied Multimodal Multitask Learning" (Chaplot et al. 2019,
 arXiv 1902.01385): the Dual-Attention model, its ablations (Section 4) and
 the fusion baselines of the appendix, all sharing one `EmmlModel` class; each model is declared once, in the
-model registry (emml/models/registry.py), which plugins extend (emml/plugins.py).
+model registry (emml/models/registry.py), which plugins extend (emml/models/plugins.py).
 """
 
 from __future__ import annotations

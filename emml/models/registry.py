@@ -3,7 +3,7 @@
 A model is a fusion architecture (a `Fusion` subclass: how x_I, x_BoW and x_sent become x_S and the answer logits)
 plus the `ModelConfig` switches it sets; an ablation of Section 4 is a variant, the same architecture with switches.
 The paper's models are the entries at the bottom of this module. A model of one's own registers from its own module,
-loaded as a plugin (emml/plugins.py), with the same call::
+loaded as a plugin (emml/models/plugins.py), with the same call::
 
     @register_model("toy", "Toy: x_S = vec(x_I ⊙ x_BoW)")
     class Toy(Fusion): ...
@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+from emml.models import plugins
 from emml.models.fusion import (
     Concat,
     DualAttention,
@@ -97,6 +98,7 @@ def _add(spec: ModelSpec) -> ModelSpec:
             return old
         raise ValueError(f"model {spec.name!r} is already registered (by {old.source}); choose another name")
     _ENTRIES[spec.name] = spec
+    plugins.count_registration()
     return spec
 
 
@@ -130,10 +132,8 @@ def register_variant(name: str, of: str, description: str, **switches: Any) -> M
 
 
 def _entries() -> dict[str, ModelSpec]:
-    """Every entry, after loading the plugins (once per process; emml/plugins.py)."""
-    from emml.plugins import load_plugins
-
-    load_plugins()
+    """Every entry, after loading the plugins (once per process; emml/models/plugins.py)."""
+    plugins.load_plugins()
     return _ENTRIES
 
 

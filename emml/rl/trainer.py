@@ -18,13 +18,13 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from emml import alloc
 from emml.config.schema import TrainConfig
 from emml.envs.engine import stop_after
 from emml.envs.labels import channel_mask
 from emml.eval.diagnose import SCALARS, diagnose, saturation_warning, summary_line
 from emml.eval.evaluate import evaluate
 from emml.models import build_model
+from emml.rl import alloc
 from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
 from emml.rl.hardware import check_runnable

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-import emml.plugins as plugins
+import emml.models.plugins as plugins
 from emml.cli import app
 from emml.models import registry
 

@@ -11,14 +11,14 @@ import sys
 import pytest
 from typer.testing import CliRunner
 
-from emml import alloc
 from emml.cli import app
+from emml.rl import alloc
 
 # A child process, so that mallopt and LD_PRELOAD start from glibc's defaults: after a warm-up, 20 times allocate,
 # fill and free a 64 MiB tensor (the size of a PPO minibatch's activations); count the loop's minor page faults.
 CHILD = """
 import json, resource, torch
-from emml import alloc
+from emml.rl import alloc
 alloc.tune_glibc()
 def faults():
     return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
@@ -47,7 +47,7 @@ def test_tuned_glibc_reuses_large_buffers_without_page_faults():
 
 TRAIN_CHILD = """
 import hashlib, torch
-from emml import alloc
+from emml.rl import alloc
 alloc.tune_glibc()
 from emml.models import build_model
 torch.manual_seed(0)

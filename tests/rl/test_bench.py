@@ -3,9 +3,9 @@
 import math
 import os
 
-from emml import alloc, bench
-from emml.bench import bench_train
 from emml.config.profiles import profile_config
+from emml.rl import alloc, bench
+from emml.rl.bench import bench_train
 
 
 def assert_ratio(r: dict, ratio: str, num: str, den: str) -> None:

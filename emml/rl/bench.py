@@ -298,7 +298,7 @@ def bench_train(
     import dataclasses
     import os
 
-    from emml import alloc
+    from emml.rl import alloc
     from emml.rl.compiled import wants_compile
 
     alloc.tune_glibc()  # as the trainer does: model-only and end-to-end measured on the same allocator
@@ -374,7 +374,7 @@ def allocator_envs() -> dict[str, dict[str, str]]:
     package) and mimalloc (the `cmeel-mimalloc` wheel) only where installed, glibc tuned and untuned always."""
     import sysconfig
 
-    from emml import alloc
+    from emml.rl import alloc
 
     envs = {}
     if alloc.tcmalloc_path():
