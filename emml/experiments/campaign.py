@@ -371,3 +371,85 @@ def pin_worktree(root: Path, log: Callable[[str], None] = print) -> Path:
         subprocess.run(["git", "worktree", "prune"], cwd=root, capture_output=True)
         git("worktree", "add", "--detach", str(tree), sha)
     return tree
+
+
+def runs_at_once(jobs: int, device: str) -> int:
+    """`jobs`, or when 0 what a launch on `device` would take (emml.experiments.launch.default_jobs); a device that is
+    not one, or (for the default) that this machine lacks, is a ValueError naming it (`emml campaign --status`)."""
+    from emml.config.schema import check_device_name
+    from emml.experiments.launch import default_jobs
+    from emml.rl.hardware import check_device
+
+    try:
+        check_device_name(device)
+        if not jobs:
+            check_device(device)
+    except ValueError as e:
+        raise ValueError(f"{e} (or give --jobs N to estimate for N runs at a time)") from None
+    return jobs or default_jobs(device)
+
+
+def status_text(plan, rows, at_once: int = 1, device: str = "cpu") -> str:
+    """--status as text: one line per run, by step, and the estimated time left with `at_once` runs side by side."""
+
+    def hours(seconds: float | None) -> str:
+        return "?" if seconds is None else f"{seconds / 3600:.1f} h"
+
+    lines = [f"{plan.name}: {plan.title}"]
+    width = max((len(r.run_name) for r in rows), default=0)
+    for step in plan.steps:
+        mine = [r for r in rows if r.step == step.name]
+        done = sum(r.state == "done" for r in mine)
+        lines.append(f"{step.name} ({step.table} [{step.profile}]): {done}/{len(mine)} done")
+        for r in mine:
+            who = f" pid {r.holder.get('pid')} on {r.holder.get('host')}" if r.holder else ""
+            left = "" if r.state == "done" else f", ~{hours(r.seconds_left)} left"
+            lines.append(f"  {r.state:<11} {r.run_name:<{width}} {r.frames:>10,}/{r.target:,} frames{left}{who}")
+    todo = [r.seconds_left for r in rows if r.state != "done"]
+    unknown = sum(s is None for s in todo)
+    total = sum(s for s in todo if s is not None)
+    measured = "training frames/s and evaluation seconds measured from this machine's runs of each profile"
+    if at_once == 1:
+        left = f"~{hours(total)} on this machine (one at a time; {measured})"
+    else:  # each step a launch of `at_once` slots; a step of one run holds the machine alone (`wall_seconds`)
+        left = (
+            f"~{hours(total)} of run time, ~{hours(wall_seconds(rows, at_once))} on this machine with {at_once} "
+            f"runs at a time on {device}, step by step (--jobs; {measured}, under the packing they trained at)"
+        )
+    lines.append(
+        f"left: {len(todo)} runs, {left}"
+        + (f"; {unknown} runs of a profile not yet measured here are not counted" if unknown else "")
+    )
+    return "\n".join(lines)
+
+
+def run_pinned(
+    name: str,
+    steps: list[str],
+    jobs: int = 0,
+    device: str = "cpu",
+    run_root: str | None = None,
+    results_root: str | None = None,
+    as_json: bool = False,
+    log: Callable[[str], None] = print,
+) -> None:
+    """Re-execute `emml campaign NAME --no-pin` (the same steps and options) from a worktree of HEAD (`pin_worktree`),
+    writing into this checkout's runs, results and MLflow store; does not return. A checkout that is no git one is a
+    ValueError."""
+    import sys
+
+    from emml.config.paths import project_path, project_root
+    from emml.runs.tracking import tracking_uri
+
+    tree = pin_worktree(project_root(), log=log)
+    roots = {
+        "--run-root": str(project_path(run_root or "runs")),
+        "--results-root": str(project_path(results_root or "results")),
+    }
+    args = [sys.executable, "-m", "emml.cli", "campaign", name, "--no-pin", "--jobs", str(jobs), "--device", device]
+    args += [x for kv in roots.items() for x in kv] + [x for n in steps for x in ("--step", n)]
+    args += ["--json"] if as_json else []
+    env = {**os.environ, "PYTHONPATH": str(tree), "MLFLOW_TRACKING_URI": tracking_uri()}
+    log(f"{name}: training from {tree} (commit {tree.name})")
+    os.chdir(tree)  # `python -m` puts the working directory first on sys.path: the tree's emml, not this one's
+    os.execve(sys.executable, args, env)

@@ -390,3 +390,11 @@ def _submit(report, args, folder, partition, time_min, gpus, cpus, cluster, wait
         for job, a in zip(jobs, args):
             _collect(report, a[0], a[1], job.result, log)
     return report
+
+
+def stopped_line(report, again: str) -> str:
+    """The one line a stopped launch ends with: what stopped, what was left, and the command that resumes it."""
+    return (
+        f"stopped by {report.stopped}: {len(report.done)} runs finished, {len(report.unfinished)} not (those in "
+        f"progress ended KILLED, resumable from their checkpoints); resume with: {again}"
+    )

@@ -1,0 +1,5 @@
+"""`python -m emml …`: the `emml` command."""
+
+from emml.cli import app
+
+app()

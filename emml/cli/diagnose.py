@@ -1,0 +1,120 @@
+"""Why a model does what it does: `emml diagnose` and `emml probe-eqa` (emml/eval/)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from emml.cli.common import _CONTROLS, _check_checkpoint, _echo, _fail, _own_engines
+
+
+def diagnose(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    episodes: int = typer.Option(
+        20, min=0, help="Sampled SGN episodes for the attention and detector figures (0: no SGN figures)."
+    ),
+    step0_episodes: int = typer.Option(100, min=0, help="Resets for the actor's sensitivity to the target slot."),
+    eqa_episodes: int = typer.Option(10, min=0, help="Greedy episodes per EQA question (0: no EQA table)."),
+    sgn_outcomes: int = typer.Option(
+        0, min=0, help="Greedy SGN episodes per split, seeded as `emml eval`: how each ends, per instruction (0: none)."
+    ),
+    split: str = typer.Option("both", help="The SGN splits of --sgn-outcomes: train | test | both."),
+    control: str = typer.Option(None, help="Play under a diagnostic control instead of the run's: " + _CONTROLS),
+    seed: int = 20_000,
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Why a model does (not) follow instructions: attention on the target, per-word detector AP, and how much
+    the first move depends on where the target stands (emml/eval/diagnose.py); per EQA question its accuracy, answers,
+    where the attention sits and the GA2 gate per channel (emml/eval/diagnose_eqa.py); per SGN instruction its success
+    and how its episodes end: target, wrong object (which), time-out (emml/eval/diagnose_sgn.py)."""
+    from emml.eval.diagnose import diagnose_checkpoint, summary_line
+    from emml.eval.diagnose_eqa import eqa_table
+    from emml.eval.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
+    from emml.tasks.language import check_choice
+
+    _check_checkpoint(checkpoint)
+    _own_engines()
+    try:
+        check_choice("split", split, ("train", "test", "both"))
+        result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed, eqa_episodes, control)
+        if sgn_outcomes:
+            splits = ("train", "test") if split == "both" else (split,)
+            result["sgn_outcomes"] = diagnose_sgn_checkpoint(checkpoint, sgn_outcomes, splits=splits, control=control)
+    except ValueError as e:  # a control the model cannot take, a split that is not one
+        _fail(str(e))
+    lines = []
+    if episodes:
+        ap = sorted(result["detector_ap_words"].items(), key=lambda x: -x[1])
+        slots = "; ".join(f"slot {s}: " + " ".join(f"{p:.2f}" for p in m) for s, m in result["step0_moves"].items())
+        lines += [
+            summary_line(result) + f" ({result['frames']} frames)",
+            "detector AP per word: " + ", ".join(f"{w} {v:.2f}" for w, v in ap),
+            _saturation_line(result),
+            "step-0 move distribution (forward left right answer) by target slot: "
+            + (slots or _no_step0(step0_episodes)),
+        ]
+    if "eqa" in result:
+        lines += ([""] if lines else []) + [eqa_table(result["eqa"])]
+    if "sgn_outcomes" in result:
+        lines += ([""] if lines else []) + [sgn_table(result["sgn_outcomes"])]
+    _echo(result, as_json, "\n".join(lines))
+
+
+def _saturation_line(result: dict) -> str:
+    """x_I's saturation (emml.eval.diagnose.x_image_saturation): how many channels are pinned, and which."""
+    channels = result["x_image_channels"]
+    pinned = [w for w, c in channels.items() if c["pinned"]]
+    return (
+        f"x_I saturation: {len(pinned)}/{len(channels)} channels pinned on every cell"
+        + (f" ({', '.join(pinned)})" if pinned else "")
+        + f"; spatial std of x_I {result['x_image_spatial_std']:.3f} (per channel: "
+        + ", ".join(f"{w} {c['spatial_std']:.3f}" for w, c in channels.items())
+        + ")"
+    )
+
+
+def _no_step0(step0_episodes: int) -> str:
+    """Why the step-0 figures are missing: none asked for, or a difficulty whose spawn is not fixed (Hard)."""
+    return "n/a (--step0-episodes 0)" if not step0_episodes else "n/a (the spawn is not fixed: Hard)"
+
+
+def probe_eqa_cmd(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt (Dual-Attention with its GA2 gate, on EQA)"),
+    episodes: int = typer.Option(40, help="First frames per question (seeds 30,000+)."),
+    readouts: str = typer.Option("last,mean", help="x_sent readouts to train, comma-separated: last | mean."),
+    seeds: int = typer.Option(3, help="Encoders trained per readout (seeds 0, 1, ...)."),
+    steps: int = typer.Option(600, help="Adam steps per encoder (minibatches of --batch frames)."),
+    batch: int = typer.Option(128, help="Frames per minibatch."),
+    lr: float = typer.Option(3e-3, help="Adam's learning rate."),
+    eq1_words: str = typer.Option(
+        "all", help="Words Eq. 1 sums the channels of: all (as the model) | content (function words left out)."
+    ),
+    init: str = typer.Option(
+        "checkpoint", help="Where the retrained GRU and Linear start: checkpoint (its weights) | fresh (a new draw)."
+    ),
+    activation: str = typer.Option("relu", help="x_sent's activation on the retrained Linear: relu | softplus."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Would another question encoder answer the EQA test questions (issue 34)? On the first frames of EQA
+    episodes, conv and Dual-Attention frozen, x_sent's encoder (GRU + Linear; the embedding copied from the
+    checkpoint, frozen) retrained on the training questions' answers per readout and seed; answer accuracy on the
+    train and test questions beside the checkpoint's own encoder (emml/eval/probe_eqa.py)."""
+    from emml.eval.probe_eqa import ProbeOptions, probe_checkpoint, probe_table
+
+    chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())
+    try:
+        options = ProbeOptions(
+            episodes, chosen, seeds, steps, batch, lr, eq1_words=eq1_words, init=init, activation=activation
+        ).validate()
+    except ValueError as e:
+        _fail(str(e))
+    _check_checkpoint(checkpoint)
+    _own_engines()
+    if not as_json:
+        typer.echo(f"probing {checkpoint}: {episodes} first frames per EQA question…", err=True)
+    try:
+        result = probe_checkpoint(checkpoint, options)
+    except ValueError as e:  # a model without a GA2 gate, a run not scored on EQA
+        _fail(str(e))
+    _echo(result, as_json, probe_table(result))

@@ -1,0 +1,169 @@
+"""Reports and figures: `emml report`, `reports`, `backfill-config`, `import-runs`, `video` and
+`emml visualize ...` (emml/report/)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from emml.cli.common import _check_store, _echo, _fail, _models, _out, _own_engines
+
+
+def report(
+    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5, or a table file of your own (x.toml)"),
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper"),
+    curves: bool = typer.Option(True, "--curves/--no-curves", help="Also plot training curves (needs MLflow)."),
+    out: Path = typer.Option(None, help="Output folder (default: reports/)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Ours beside the paper: reports/TABLE-PROFILE.md/.tex (mean (each seed) | paper, the runs' deviations from the
+    paper, an rliable aggregate) and -curves.png/.pdf (smoke: under scratch/reports)."""
+    from emml.config.profiles import load_profiles
+    from emml.report.tables import report_table
+
+    if profile not in load_profiles():
+        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
+    if curves:  # they read MLflow
+        _check_store()
+    try:
+        if table.endswith(".toml"):  # a table of one's own: reported by its name, the file's stem
+            from emml.experiments.tables import own_table
+
+            table = own_table(table)
+        data = report_table(table, profile, out=_out(out) if out else None)
+    except ValueError as e:
+        _fail(str(e))
+    data["notes"] = []
+    if curves:
+        from emml.report.curves import plot_table
+
+        paths, notes = plot_table(table, profile, out=_out(out) if out else None)
+        data["paths"] += [str(p) for p in paths]
+        data["notes"] = notes
+    text = "\n".join([data["caption"], *[f"note: {n}" for n in data["notes"]], *[f"wrote {p}" for p in data["paths"]]])
+    _echo(data, as_json, text)
+
+
+def reports(out: Path = typer.Option(None, help="Output folder (default: reports/).")):
+    """Every table, curve and figure for the profiles that have results, and reports/index.md linking them."""
+    from emml.report.index import write_reports
+
+    _check_store()  # the curves read MLflow
+    _own_engines()
+    typer.echo(f"wrote {write_reports(_out(out) if out else None, log=typer.echo)}")
+
+
+def backfill_config(
+    paths: list[Path] = typer.Argument(..., help="Run dirs, or folders holding them (e.g. runs/table2)."),
+):
+    """Copy each finished run's config from its checkpoint into its results.json (runs finished before the trainer
+    wrote it there), so reports read the deviations from the paper without loading checkpoints. A run still
+    training is skipped."""
+    from emml.config.paths import project_path
+    from emml.report.saved_config import backfill_config as backfill
+    from emml.report.saved_config import run_dirs
+
+    found = run_dirs([project_path(p) for p in paths])
+    if not found:
+        _fail(f"no run dir (a folder with checkpoint.pt) at or under {', '.join(map(str, paths))}")
+    for run_dir in found:
+        typer.echo(f"{run_dir}: {backfill(run_dir)}")
+
+
+def import_runs_cmd(
+    paths: list[Path] = typer.Argument(None, help="Run dirs, or folders holding them (default: runs/)."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Import finished run dirs (results.json, metrics.csv) into the MLflow store, one FINISHED run each in its
+    table's experiment with the trainer's tags, its config as params and its whole curve, so that `make ui` shows
+    the committed runs. Once: a run already in the store (trained or imported here) is skipped, and so is an
+    unfinished one (its trainer logs it)."""
+    from emml.config.paths import project_path
+    from emml.runs.import_runs import import_runs
+    from emml.runs.tracking import tracking_uri
+
+    roots = [project_path(p) for p in paths] if paths else [project_path("runs")]
+    missing = [str(p) for p in roots if paths and not p.exists()]
+    if missing:
+        _fail(f"no such run dir or folder: {', '.join(missing)}")
+    _check_store()
+    results = import_runs(roots, log=None if as_json else lambda r: typer.echo(r.line()))
+    counts = {k: sum(r.outcome == k for r in results) for k in ("imported", "skipped", "failed")}
+    text = ", ".join(f"{n} {k}" for k, n in counts.items()) + f" (MLflow store {tracking_uri()})"
+    _echo({"uri": tracking_uri(), **counts, "runs": [vars(r) for r in results]}, as_json, text)
+    if counts["failed"]:
+        _fail(f"{counts['failed']} run dirs not imported: their errors are above")
+
+
+def video(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    episodes: int = typer.Option(3, min=1, help="Episodes per task (SGN, then EQA unless the run is SGN only)."),
+    out: Path = typer.Option(Path("reports"), help="Folder for the GIFs."),
+    seed: int = 0,
+):
+    """A captioned GIF per greedy episode: the sentence, each action, the outcome."""
+    from emml.report.visualize import episode_gif, record_episode
+
+    ((_, model, cfg),) = _models(checkpoint)
+    _own_engines()
+    out = _out(out)
+    tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
+    for task in tasks:
+        for i in range(episodes):
+            ep = record_episode(model, cfg.env, task, seed + i)
+            path = episode_gif(ep, out / f"{checkpoint.parent.name}-{task}-s{seed + i}.gif")
+            typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'})")
+
+
+def visualize_channels(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    compare: Path | None = typer.Option(None, help="A second checkpoint (e.g. the No-Aux run) for another column."),
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+):
+    """The channel figure: per word, its aux label, each model's conv3 channel, and the frame."""
+    from emml.report.visualize import channels_figure
+
+    models = _models(checkpoint, *([compare] if compare else []))
+    _own_engines()
+    out = _out(out)
+    path = out / f"channels-{checkpoint.parent.name}.png"
+    channels_figure([(label, m) for label, m, _ in models], models[0][2].env, path, seed=seed)
+    typer.echo(f"wrote {path}")
+
+
+def visualize_attention(
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    task: str = typer.Option("sgn", help="sgn | eqa"),
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+    rows: int = typer.Option(6, min=1, help="Steps shown, spread over the episode."),
+):
+    """The attention figure: one greedy episode, rows over time (frame, x_spat, x_Ans, action), x_sent on top."""
+    from emml.report.visualize import attention_figure, record_episode
+    from emml.tasks.language import check_choice
+
+    try:
+        check_choice("task", task, ("sgn", "eqa"))
+    except ValueError as e:
+        _fail(str(e))
+    ((_, model, cfg),) = _models(checkpoint)
+    _own_engines()
+    out = _out(out)
+    ep = record_episode(model, cfg.env, task, seed)
+    path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
+    attention_figure(ep, path, rows)
+    typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'} in {len(ep.frames)} steps)")
+
+
+def visualize_house(
+    out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
+    seed: int = 0,
+):
+    """Three first-person views of the House with furniture in the episode's colours (Appendix C's example views)."""
+    from emml.report.house_views import house_views
+
+    _own_engines()
+    path = house_views(_out(out) / "house-views.png", seed=seed)
+    typer.echo(f"wrote {path}")

@@ -1,0 +1,190 @@
+"""The tables and campaigns: `emml list`, `emml run` and `emml campaign` (emml/experiments/)."""
+
+from __future__ import annotations
+
+import shlex
+
+import typer
+
+from emml.cli.common import _echo, _fail, _use_tcmalloc
+
+
+def list_experiments(
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper: which results count as finished."),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Every table in reproduce/ with its runs and how many are finished under the profile."""
+    from emml.config.profiles import load_profiles
+    from emml.experiments.launch import run_states
+    from emml.experiments.tables import list_tables, load_table
+
+    if profile not in load_profiles():
+        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
+    data, lines = [], []
+    for name in list_tables():
+        try:
+            table = load_table(name)
+            states = run_states(name, profile)
+        except ValueError as e:
+            _fail(str(e))
+        runs = [{"run_name": rname, "row": spec.row, "state": state} for rname, (spec, state) in states.items()]
+        finished = sum(r["state"] in ("finished", "unrecorded") for r in runs)
+        data.append(
+            {
+                "table": name,
+                "status": table.status,
+                "title": table.title,
+                "finished": finished,
+                "total": len(runs),
+                "runs": runs,
+            }
+        )
+        head = f"{name} ({table.paper_label}): {table.status}"
+        lines.append(head + ("" if table.placeholder else f", {finished}/{len(runs)} runs finished [{profile}]"))
+        lines += [f"  {r['state']:<10} {r['run_name']}" for r in runs]
+    _echo({"profile": profile, "tables": data}, as_json, "\n".join(lines))
+
+
+def run_table(
+    table: str = typer.Argument(
+        ...,
+        help="table2 | table3 | table4 | table5 (reproduce/<table>.toml), experiments/<name> "
+        "(reproduce/experiments/<name>.toml), or a table file of your own (x.toml)",
+    ),
+    profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
+    backend: str = typer.Option("local", help="local (process pool) | slurm (submitit)"),
+    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores; cuda: and what GPU memory holds)."),
+    device: str = typer.Option("cpu", help="cpu | cuda"),
+    partition: str = typer.Option(None, help="Slurm partition."),
+    time_min: int = typer.Option(24 * 60, help="Slurm time limit per run, minutes."),
+    gpus: int = typer.Option(0, help="GPUs per Slurm job."),
+    cpus: int = typer.Option(8, help="CPUs per Slurm job."),
+    wait: bool = typer.Option(False, help="Slurm: wait for the jobs to end."),
+    only: list[str] = typer.Option(
+        [], "--only", help="Only the runs whose FIELD=VALUE (row, model, difficulty, aux, seed), e.g. difficulty=easy."
+    ),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Train every run of a table (skips finished runs, resumes interrupted ones); a placeholder table exits 0."""
+    from dataclasses import asdict
+
+    from emml.experiments.launch import run_table as launch
+    from emml.experiments.launch import stopped_line
+    from emml.experiments.tables import load_table
+
+    selection = {}
+    for item in only:
+        key, sep, value = item.partition("=")
+        if not sep:
+            _fail(f"--only {item!r}: expected FIELD=VALUE, e.g. --only difficulty=easy")
+        selection[key.strip()] = value.strip()
+    try:
+        loaded = load_table(table)  # a .toml path: its name is the file's stem (emml.experiments.tables.own_table)
+    except ValueError as e:
+        _fail(str(e))
+    if backend == "local" and not loaded.placeholder:
+        _use_tcmalloc()  # ~2x CPU training speed; the pool's workers inherit LD_PRELOAD
+    try:
+        report = launch(
+            loaded.name,
+            profile,
+            backend=backend,
+            jobs=jobs or None,
+            device=device,
+            partition=partition,
+            time_min=time_min,
+            gpus=gpus,
+            cpus=cpus,
+            wait=wait,
+            log=(lambda m: None) if as_json else typer.echo,
+            only=selection,
+        )
+    except ValueError as e:
+        _fail(str(e))
+    data = asdict(report)
+    if report.stopped:
+        from emml.models.plugins import configured
+
+        plugins = [arg for p in configured() for arg in ("--plugin", p)]  # a model of one's own needs its plugin
+        only_args = [arg for o in only for arg in ("--only", o)]
+        # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
+        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *only_args])
+        _echo(data, as_json, stopped_line(report, again))
+        raise typer.Exit(130)
+    _echo(
+        data,
+        as_json,
+        f"{table} [{profile}]: {len(report.done)} trained, {len(report.skipped)} already finished, "
+        f"{len(report.failed)} failed" + (f", {len(report.submitted)} jobs submitted" if report.submitted else ""),
+    )
+    if report.failed:
+        raise typer.Exit(1)
+
+
+def campaign(
+    name: str = typer.Argument(..., help="A campaign of reproduce/campaigns/ (e.g. reference)."),
+    show_status: bool = typer.Option(False, "--status", help="Show each run as done / running / interrupted / to do."),
+    pin: bool = typer.Option(
+        True,
+        "--pin/--no-pin",
+        help="Train from a git worktree of this commit (.campaign/<sha>), so edits cannot reach it.",
+    ),
+    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores)."),
+    device: str = typer.Option("cpu", help="cpu | cuda"),
+    run_root: str = typer.Option(None, help="Run dirs (default: the checkout's runs/)."),
+    results_root: str = typer.Option(None, help="Results CSVs (default: the checkout's results/)."),
+    steps: list[str] = typer.Option(
+        [], "--step", help="Only this step (by name, as --status shows it; repeatable); the campaign's order stays."
+    ),
+    as_json: bool = typer.Option(False, "--json"),
+):
+    """Train a campaign's unfinished runs in its order (resuming interrupted ones), or show its status."""
+    from dataclasses import asdict
+
+    from emml.experiments.campaign import (
+        load_campaign,
+        run_campaign,
+        run_pinned,
+        runs_at_once,
+        select_steps,
+        status,
+        status_text,
+    )
+    from emml.experiments.launch import stopped_line
+
+    step_args = [x for n in steps for x in ("--step", n)]
+    try:
+        plan = select_steps(load_campaign(name), steps)
+    except ValueError as e:
+        _fail(str(e))
+    if show_status:
+        rows = status(plan, run_root, results_root)
+        try:
+            at_once = runs_at_once(jobs, device)
+        except ValueError as e:
+            _fail(str(e))
+        _echo([asdict(r) for r in rows], as_json, status_text(plan, rows, at_once, device))
+        return
+    if pin:  # re-exec from a worktree of HEAD, writing into this checkout's runs, results and MLflow store
+        try:
+            run_pinned(name, steps, jobs, device, run_root, results_root, as_json, log=typer.echo)
+        except ValueError as e:
+            _fail(str(e))
+    _use_tcmalloc()
+    try:
+        reports = run_campaign(plan, run_root, results_root, device=device, jobs=jobs or None, log=typer.echo)
+    except ValueError as e:
+        _fail(str(e))
+    failed = {k: v for r in reports for k, v in r.failed.items()}
+    if reports and reports[-1].stopped:
+        again = shlex.join(["emml", "campaign", name, *step_args])
+        _echo([asdict(r) for r in reports], as_json, stopped_line(reports[-1], again))
+        raise typer.Exit(130)
+    _echo(
+        [asdict(r) for r in reports],
+        as_json,
+        f"{name}: {sum(len(r.done) for r in reports)} trained, {sum(len(r.skipped) for r in reports)} already "
+        f"finished, {len(failed)} failed",
+    )
+    if failed:
+        raise typer.Exit(1)
