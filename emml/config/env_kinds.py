@@ -1,9 +1,10 @@
 """Env kinds: where a run trains — Doom Easy, Doom Hard (§4 'Environments', §5.1) or the House (Appendix C).
 
 Each kind is declared once, here; every list of difficulties, table label, paper budget and config class derives
-from `ENV_KINDS` (emml/config/schema.py, profiles.py, registry.py, fidelity.py, report/). Pure data with no import from
-the package, so the config layer reads it: the config class of a kind is the one declaring its gym id (`GYM_ID`,
-emml/config/schema.py), and its env class the one that id is registered with (emml/__init__.py, emml/envs/vector.py).
+from `ENV_KINDS` (config/schema.py and profiles.py, experiments/tables.py and fidelity.py, report/). Pure data with no
+import from the package, so the config layer reads it: the config class of a kind is the one declaring its gym id
+(`GYM_ID`, emml/config/schema.py), and its env class the one that id is registered with (emml/__init__.py,
+emml/envs/vector.py).
 """
 
 from __future__ import annotations

@@ -11,7 +11,8 @@ A plugin is a module that registers models when imported (`emml.models.register_
 
 Loading is lazy and idempotent: the model registry loads the plugins the first time it is read (emml/models/
 registry.py), and again only those added since; each plugin is imported once per process. A plugin that fails
-raises one `PluginError` naming it and the cause. Imports nothing of emml at module level: any layer may call it.
+raises one `PluginError` naming it and the cause. Imports nothing of emml (the registry tells it of each model
+it adds: `count_registration`), so that the registry may load it and any layer may call it.
 """
 
 from __future__ import annotations
