@@ -1056,7 +1056,7 @@ def _runs_at_once(jobs: int, device: str) -> int:
 
 def _status_text(plan, rows, at_once: int = 1, device: str = "cpu") -> str:
     """--status as text: one line per run, by step, and the estimated time left with `at_once` runs side by side."""
-    from emml.campaign import wall_seconds
+    from emml.campaign import NODE_RUNS, wall_seconds
 
     def hours(seconds: float | None) -> str:
         return "?" if seconds is None else f"{seconds / 3600:.1f} h"
@@ -1066,7 +1066,13 @@ def _status_text(plan, rows, at_once: int = 1, device: str = "cpu") -> str:
     for step in plan.steps:
         mine = [r for r in rows if r.step == step.name]
         done = sum(r.state == "done" for r in mine)
-        lines.append(f"{step.name} ({step.table} [{step.profile}]): {done}/{len(mine)} done")
+        cost = ""
+        if done < len(mine):
+            here = sum(r.seconds_left or 0.0 for r in mine if r.state != "done")
+            node = wall_seconds(mine, NODE_RUNS, node=True)
+            cost = f"; ~{hours(here)} here, ~{node / 60:.0f} min of a GPU node ({NODE_RUNS} at a time, training)"
+        lines.append(f"{step.name} ({step.table} [{step.profile}]): {done}/{len(mine)} done{cost}")
+        lines.append(f"  decides: {', '.join(step.claims)}" if step.claims else "  decides: no claim (an experiment)")
         for r in mine:
             who = f" pid {r.holder.get('pid')} on {r.holder.get('host')}" if r.holder else ""
             left = "" if r.state == "done" else f", ~{hours(r.seconds_left)} left"
