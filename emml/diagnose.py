@@ -195,7 +195,8 @@ def summary_line(result: dict) -> str:
     parts = []
     for k in SCALARS:
         v = result.get(k)
-        parts.append(f"{k} {'n/a' if v is None else f'{v:.2f}'}")
+        digits = 3 if k == "x_image_spatial_std" else 2  # a collapsed map's spread is below 0.01
+        parts.append(f"{k} {'n/a' if v is None else f'{v:.{digits}f}'}")
     return "diagnose: " + ", ".join(parts)
 
 
