@@ -51,6 +51,7 @@ def test_table3_expands_to_ablations_and_single_task_runs():
     names = {r.run_name("quick") for r in runs}
     assert "dual_attention-easy-noaux-noshaping-ansgate-s0-quick" in names  # No Aux: the answer loss to GA2 (48)
     assert "da_no_ga2-easy-noaux-s0-quick" in names  # no GA2 gate to keep it to
+    assert "da_no_sa-easy-noaux-s0-quick" in names  # its policy reads x_I per cell: no collapse, the paper's loss
     assert "dual_attention-easy-aux-sgnonly-s0-quick" in names and "dual_attention-easy-aux-eqaonly-s0-quick" in names
     single = [r for r in runs if r.row == "DA Single-Task"]
     assert {(r.overrides["env.tasks"], r.metrics) for r in single} == {("sgn", ("sgn_test",)), ("eqa", ("eqa_test",))}
