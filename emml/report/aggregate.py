@@ -213,7 +213,7 @@ def summary(table, cells) -> tuple[list[dict[str, str]], str] | None:
             line[f"{label}: {ref} − row [95% CI]"] = line[f"{label}: P({ref} > row)"] = (
                 f"{MISSING} ({ref}: no run here)"
             )
-    present = {k for line in lines.values() for k in line}
+    present = list(dict.fromkeys(k for line in lines.values() for k in line))  # ordered: the same bytes each time
     order = [k for label in labels.values() for k in (f"{label} IQM", f"{label}: {ref} − row", f"{label}: P({ref} >")]
     columns = sorted(present, key=lambda k: next((i for i, o in enumerate(order) if k.startswith(o)), -1))
     out = [{k: line.get(k, "") for k in columns} for line in lines.values()]

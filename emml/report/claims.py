@@ -484,8 +484,8 @@ def markdown(decisions: list[Decision], profile: str) -> str:
 
 
 def _cell(text: str) -> str:
-    """Text for a Markdown table cell or line: pipes escaped, angle brackets kept as text (not HTML)."""
-    return text.replace("|", r"\|").replace("<", "&lt;").replace(">", "&gt;")
+    """Text for a Markdown table cell or line: pipes escaped, '<known_object>' kept as text (not an HTML tag)."""
+    return text.replace("|", r"\|").replace("<", "&lt;")
 
 
 def write_claims(
