@@ -54,6 +54,11 @@ def diagnose(
             "step-0 move distribution (forward left right answer) by target slot: "
             + (slots or _no_step0(step0_episodes)),
         ]
+    if result["conv3_one_way"] is not None:
+        lines.append(
+            f"conv3 since its init: {result['conv3_one_way']:.0%} of a channel's weights moved one way (median; 50%: "
+            f"no common direction), weight sum moved {result['conv3_shift']:.2f} (median |sum|)"
+        )
     if "eqa" in result:
         lines += ([""] if lines else []) + [eqa_table(result["eqa"])]
     if "sgn_outcomes" in result:

@@ -78,6 +78,27 @@ def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid") -> dict:
     }
 
 
+def conv3_drift(model, cfg) -> dict:
+    """How conv3 moved from its initial weights (the run's seeded init, rebuilt): per channel the share of its weights
+    moved in the channel's majority direction (0.5: no common direction; 1: a uniform signed shift, which over the
+    non-negative relu(conv2) inputs moves the whole channel at once: the No Aux collapse, issue 48) and the sum of
+    its weight changes. Medians over channels."""
+    from emml.models import build_model
+
+    torch.manual_seed(cfg.seed)  # the trainer's seeding before it builds the model (emml/rl/trainer.py)
+    env = cfg.env
+    init = build_model(
+        cfg.model, model.image_encoder.conv3.out_channels, env.height, env.width, env.max_steps, **cfg.model_options
+    )
+    delta = (model.image_encoder.conv3.weight - init.image_encoder.conv3.weight).detach().flatten(1)
+    moved = delta != 0
+    if not moved.any():  # an untrained model: no direction to speak of
+        return {"conv3_one_way": None, "conv3_shift": 0.0}
+    same = (torch.sign(delta) == torch.sign(delta.mean(1, keepdim=True))) & moved
+    one_way = same.sum(1) / moved.sum(1).clamp(min=1)
+    return {"conv3_one_way": float(one_way.median()), "conv3_shift": float(delta.sum(1).abs().median())}
+
+
 def saturation_warning(result: dict) -> str | None:
     """The training log's warning when x_I has collapsed (`SATURATION_WARNING`), else None."""
     frac = result.get("x_image_saturated")
@@ -195,7 +216,8 @@ def summary_line(result: dict) -> str:
     parts = []
     for k in SCALARS:
         v = result.get(k)
-        parts.append(f"{k} {'n/a' if v is None else f'{v:.2f}'}")
+        digits = 3 if k == "x_image_spatial_std" else 2  # a collapsed map's spread is below 0.01
+        parts.append(f"{k} {'n/a' if v is None else f'{v:.{digits}f}'}")
     return "diagnose: " + ", ".join(parts)
 
 
@@ -215,6 +237,7 @@ def diagnose_checkpoint(
 
     model, cfg = load_model(path, control=control)
     result = diagnose(model, cfg.env, episodes, step0_episodes, seed) if episodes else {}
+    result.update(conv3_drift(model, cfg))
     if eqa_episodes:
         result["eqa"] = diagnose_eqa(model, cfg.env, eqa_episodes, seed)
     result["control"] = model.cfg.control

@@ -34,10 +34,16 @@ from emml.experiments.tables import RunSpec
 from emml.runs.rundir import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
-STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "note")
+STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "claim", "note")
 TOP_KEYS = ("title", "steps")
 OWN_KEYS = ("frames", "run_root", "results_root")
 """RUNTIME fields a step may not `set`: its `frames` key sets the first; the campaign's options own the roots."""
+NODE_FPS = {"quick": 360.0, "paper": 300.0}
+"""Training frames/s of one run on a lent GPU node (one H100, 16 cores) with `NODE_RUNS` runs side by side, by
+profile: measured there on 2026-11-26 (docs/throughput.md, 'A GPU node': 353-381 and 298-319 per run). Training
+only: the evaluations add minutes per run."""
+NODE_RUNS = 8
+"""Runs side by side on a GPU node (the runs the measurement above packed)."""
 STATES = ("done", "running", "interrupted", "to do")
 """done: finished and recorded; running: a live process holds the run's lock; interrupted: a checkpoint to resume
 from; to do: nothing yet (or a reference row with no run dir here, which is trained again)."""
@@ -59,6 +65,9 @@ class Step:
     """Frames to train each run to, instead of the profile's (None: the profile's)."""
     note: str = ""
     """Why the step is there (free text)."""
+    claims: tuple[str, ...] = ()
+    """The claims its runs decide (ids of reproduce/claims.toml, emml/experiments/claims.py); none for a step that
+    measures something of ours (an experiment of an issue)."""
     settings: dict = field(default_factory=dict)
     """The step's `set`: TrainConfig.RUNTIME field → value for its runs, over the profile's (how a run is measured
     and run, e.g. eval_every; never what it is: its name and results row stay the table's)."""
@@ -94,6 +103,8 @@ class RunStatus:
     """Who trains it (pid, host) when running."""
     seconds_left: float | None = None
     """Estimated seconds to finish it on this machine; None when no run of its profile was measured here."""
+    node_seconds_left: float | None = None
+    """Estimated seconds of training to finish it on a GPU node, `NODE_RUNS` runs side by side (`NODE_FPS`)."""
 
 
 def select_steps(campaign: Campaign, names: list[str]) -> Campaign:
@@ -117,6 +128,7 @@ def list_campaigns(directory: Path = CAMPAIGNS_DIR) -> list[str]:
 def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
     from emml.config.profiles import load_profiles
+    from emml.experiments.claims import load_claims
     from emml.experiments.launch import ONLY_FIELDS, select_runs
     from emml.experiments.tables import table_names
 
@@ -134,6 +146,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
         raise ValueError(f"{path}: 'steps' must be a non-empty array of tables ([[steps]])")
     steps, profiles = [], load_profiles()
     tables = table_names()
+    known_claims = load_claims()
     for i, raw in enumerate(raw_steps):
         where = f"steps[{i}]"
         _check_keys(path, where, raw, STEP_KEYS)
@@ -151,7 +164,14 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
         if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
             raise ValueError(f"{path}: {where}.frames={frames!r} must be a positive integer")
         step = Step(
-            raw["name"], raw["table"], raw["profile"], only, frames, raw.get("note", ""), _settings(path, where, raw)
+            raw["name"],
+            raw["table"],
+            raw["profile"],
+            only,
+            frames,
+            raw.get("note", ""),
+            _claims(path, where, raw, known_claims),
+            _settings(path, where, raw),
         )
         try:  # the selection names runs the table has (the values present are named otherwise)
             select_runs(_declared(step.table, step.profile), step.only)
@@ -159,6 +179,20 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
             raise ValueError(f"{path}: {where}.only: {e}") from None
         steps.append(step)
     return Campaign(name, path, str(data.get("title", name)), tuple(steps))
+
+
+def _claims(path: Path, where: str, raw: dict, known: dict) -> tuple[str, ...]:
+    """The step's `claim`: one id of reproduce/claims.toml or a list of them."""
+    value = raw.get("claim", [])
+    ids = [value] if isinstance(value, str) else value
+    if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):
+        raise ValueError(f"{path}: {where}.claim must be a claim id or a list of them")
+    for i in ids:
+        if i not in known:
+            raise ValueError(
+                f"{path}: {where}.claim={i!r} is not a claim of reproduce/claims.toml; allowed: {', '.join(known)}"
+            )
+    return tuple(ids)
 
 
 def _settings(path: Path, where: str, raw: dict) -> dict:
@@ -241,18 +275,23 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
             else:
                 state, frames = "to do", 0
             left = None if state == "done" else speed.seconds(cfg, max(target - frames, 0))
-            out.append(RunStatus(step.name, step.table, step.profile, run_name(cfg), state, frames, target, who, left))
+            fps = NODE_FPS.get(step.profile)
+            node = None if state == "done" or not fps else max(target - frames, 0) / fps
+            out.append(
+                RunStatus(step.name, step.table, step.profile, run_name(cfg), state, frames, target, who, left, node)
+            )
     return out
 
 
-def wall_seconds(rows: list[RunStatus], at_once: int) -> float:
+def wall_seconds(rows: list[RunStatus], at_once: int, node: bool = False) -> float:
     """Estimated wall-clock seconds to finish the campaign with `at_once` runs side by side: each step is a launch
     (emml.experiments.launch.run_table) whose queue fills the free slot in the step's order, and the next step starts
-    when the step's last run ends. Runs with no estimate (``seconds_left`` None) count 0."""
+    when the step's last run ends. Runs with no estimate (``seconds_left`` None) count 0. ``node``: from the GPU-node
+    estimates (``node_seconds_left``) instead of this machine's."""
     steps: dict[str, list[float]] = {}
     for r in rows:
         if r.state != "done":
-            steps.setdefault(r.step, []).append(r.seconds_left or 0.0)
+            steps.setdefault(r.step, []).append((r.node_seconds_left if node else r.seconds_left) or 0.0)
     total = 0.0
     for seconds in steps.values():
         slots = [0.0] * max(1, at_once)
@@ -276,7 +315,8 @@ def _frames_logged(metrics: Path) -> int:
 
 class _Speed:
     """This machine's measured cost of a profile: training frames/s (median `charts/fps` of its runs here) and the
-    seconds of one evaluation (median `perf/eval_s`), read from the run dirs' metrics mirrors."""
+    seconds of one evaluation (median `perf/eval_s`), read from the run dirs' metrics mirrors of the closest runs:
+    same model and domain first."""
 
     def __init__(self):
         self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
@@ -285,11 +325,18 @@ class _Speed:
         from emml.config.paths import project_path
         from emml.runs.rundir import METRICS
 
-        key = (cfg.profile, cfg.model)
+        difficulty = cfg.env.difficulty
+        key = (cfg.profile, cfg.model, difficulty)
         if key not in self._cache:
             root = project_path(cfg.run_root)
-            same_model = sorted(root.glob(f"*/{cfg.model}-*-{cfg.profile}/{METRICS}"))
-            files = same_model or sorted(root.glob(f"*/*-{cfg.profile}/{METRICS}"))
+            # the closest runs measured here: the same model in the same domain (a House episode is 420 steps and
+            # its maps larger), then any model there, then the same model anywhere, then any run of the profile
+            patterns = [f"{cfg.model}-{difficulty}-*", f"*-{difficulty}-*", f"{cfg.model}-*", "*"]
+            files = []
+            for pattern in patterns:
+                files = sorted(root.glob(f"*/{pattern}-{cfg.profile}/{METRICS}"))
+                if files:
+                    break
             fps, evals = [], []
             for path in files[-6:]:  # the most recent few: enough for a median, cheap to read
                 for line in path.read_text().splitlines()[1:]:
@@ -400,7 +447,13 @@ def status_text(plan, rows, at_once: int = 1, device: str = "cpu") -> str:
     for step in plan.steps:
         mine = [r for r in rows if r.step == step.name]
         done = sum(r.state == "done" for r in mine)
-        lines.append(f"{step.name} ({step.table} [{step.profile}]): {done}/{len(mine)} done")
+        cost = ""
+        if done < len(mine):
+            here = sum(r.seconds_left or 0.0 for r in mine if r.state != "done")
+            node = wall_seconds(mine, NODE_RUNS, node=True)
+            cost = f"; ~{hours(here)} here, ~{node / 60:.0f} min of a GPU node ({NODE_RUNS} at a time, training)"
+        lines.append(f"{step.name} ({step.table} [{step.profile}]): {done}/{len(mine)} done{cost}")
+        lines.append(f"  decides: {', '.join(step.claims)}" if step.claims else "  decides: no claim (an experiment)")
         for r in mine:
             who = f" pid {r.holder.get('pid')} on {r.holder.get('host')}" if r.holder else ""
             left = "" if r.state == "done" else f", ~{hours(r.seconds_left)} left"

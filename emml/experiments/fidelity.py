@@ -259,6 +259,15 @@ CHOICES: tuple[OurChoice, ...] = (
     ),
     OurChoice("frame skip", ("env.frame_skip",), "paper silent", lambda v, c: f"{v[0]} tics a step"),
     OurChoice(
+        "answer loss on",
+        ("answer_supervision",),
+        "paper silent: §3.2 'a supervised cross-entropy loss'",
+        lambda v, c: {"eqa_steps": "every step of an EQA episode", "answer_steps": "the answering step only"}.get(
+            v[0], v[0]
+        ),
+        lambda c: c["env.tasks"] != "sgn",
+    ),
+    OurChoice(
         "score:",
         ("score_episodes",),
         "paper silent on its evaluation size",

@@ -29,7 +29,7 @@ TRANSFER_METRICS = ("sgn_transfer",)
 """What a transfer table's cells read: the mean of their instructions' `sgn_transfer:<instruction>` columns."""
 TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows", "transfer")
 COLUMN_KEYS = ("difficulties", "aux", "metrics")
-ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "from_table")
+ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "noaux_overrides", "from_table")
 TRANSFER_KEYS = ("model", "overrides", "words", "detector")
 TRANSFER_RUN_ROW = "Training run (before transfer)"
 """The `RunSpec.row` of a transfer table's runs: one training setting serves every row (its curve's label)."""
@@ -114,12 +114,19 @@ class Row:
     from_table: str | None = None
     """The row's runs are that table's (same run names, run dirs and results rows), not trained again: Table 3's
     "DA Multi-Task" is Table 2's Dual-Attention."""
+    noaux_overrides: dict = field(default_factory=dict)
+    """Extra overrides for the row's runs without the auxiliary task only (over `overrides` and `metric_overrides`):
+    Dual-Attention's No Aux runs keep the answer loss to the GA2 gate (issue 48, docs/fidelity.md 'No Aux')."""
 
     def settings(self, metrics: tuple[str, ...]) -> list[tuple[dict, tuple[str, ...]]]:
         """(overrides, metrics filled) for each distinct setting of the row."""
         if not self.metric_overrides:
             return [(dict(self.overrides), metrics)]
         return [({**self.overrides, **self.metric_overrides[m]}, (m,)) for m in metrics]
+
+    def for_aux(self, overrides: dict, aux: bool) -> dict:
+        """A setting's overrides for its runs with (``aux``) or without the auxiliary task."""
+        return dict(overrides) if aux else {**overrides, **self.noaux_overrides}
 
 
 @dataclass(frozen=True)
@@ -186,7 +193,10 @@ class Table:
                     for overrides, metrics in row.settings(tuple(self.metrics.values())):
                         for seed in seeds:
                             owner = row.from_table or self.name
-                            out.append(RunSpec(owner, row.label, row.model, difficulty, aux, seed, overrides, metrics))
+                            spec = RunSpec(
+                                owner, row.label, row.model, difficulty, aux, seed, row.for_aux(overrides, aux), metrics
+                            )
+                            out.append(spec)
         return out
 
     def cell_runs(self, row: str, difficulty: str, aux: bool, metric: str, runs: list[RunSpec]) -> list[RunSpec]:
@@ -379,7 +389,7 @@ def _parse(name: str, path: Path, data: dict) -> Table:
         table = Table(**common, rows=rows, transfer=transfer, **columns)
     else:
         columns = _parse_columns(path, data)
-        rows = _parse_rows(path, data, tuple(columns["metrics"].values()))
+        rows = _parse_rows(path, data, tuple(columns["metrics"].values()), no_aux=False in columns["aux"])
         table = Table(**common, rows=rows, **columns)
     _check_runs(path, table)
     return table
@@ -405,7 +415,8 @@ def _parse_columns(path: Path, data: dict, allowed: tuple[str, ...] = METRICS) -
     return {"difficulties": tuple(difficulties), "aux": tuple(aux), "metrics": dict(metrics)}
 
 
-def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, ...]:
+def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...], no_aux: bool = True) -> tuple[Row, ...]:
+    """The rows; ``no_aux``: the table has runs without the auxiliary task (else `noaux_overrides` play no part)."""
     raw = _typed(path, "rows", data.get("rows", []), list, "an array of tables ([[rows]])")
     if not raw:
         raise _err(path, "rows", "an active table needs at least one [[rows]]")
@@ -427,27 +438,46 @@ def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...]) -> tuple[Row, 
             _typed(path, f"{where}.metric_overrides.{m}", extra, dict, "a table of overrides")
         if per_metric and set(per_metric) != set(metrics):
             raise _err(path, f"{where}.metric_overrides", f"must give every column metric: {', '.join(metrics)}")
-        for key, ov in [(f"{where}.overrides", overrides)] + [
+        noaux = _typed(path, f"{where}.noaux_overrides", r.get("noaux_overrides", {}), dict, "a table")
+        settings = [(f"{where}.overrides", overrides)] + [
             (f"{where}.metric_overrides.{m}", {**overrides, **e}) for m, e in per_metric.items()
-        ]:
+        ]
+        for key, ov in settings + [(f"{where}.noaux_overrides", {**ov, **noaux}) for _, ov in settings if noaux]:
             _config(path, key, r["model"], ov)
         from_table = r.get("from_table")
         if from_table is not None:
-            _from_table(path, f"{where}.from_table", from_table, r["model"], overrides, per_metric)
-        rows.append(Row(r["label"], r["model"], dict(overrides), dict(per_metric), from_table=from_table))
+            _from_table(
+                path, f"{where}.from_table", from_table, r["model"], overrides, per_metric, noaux if no_aux else None
+            )
+        rows.append(
+            Row(r["label"], r["model"], dict(overrides), dict(per_metric), from_table=from_table, noaux_overrides=noaux)
+        )
     return tuple(rows)
 
 
-def _from_table(path: Path, key: str, name, model: str, overrides: dict, per_metric: dict) -> None:
-    """A row borrowing another table's runs names a table (not itself borrowing) that trains this very setting."""
+def _from_table(path: Path, key: str, name, model: str, overrides: dict, per_metric: dict, noaux: dict | None) -> None:
+    """A row borrowing another table's runs names a table (not itself borrowing) that trains this very setting
+    (``noaux``: its No Aux overrides, None when the borrowing table has no No Aux column)."""
     tables = [t for t in list_tables() if t != path.stem]
     if name not in tables:
         raise _err(path, key, f"{name!r} is not allowed; choose one of {', '.join(tables)}")
     other = load_table(name)
     if any(r.from_table for r in other.rows) or per_metric:
         raise _err(path, key, f"only a plain row may borrow, from a table that borrows nothing ({name})")
-    if not any(r.model == model and r.overrides == overrides and not r.metric_overrides for r in other.rows):
-        raise _err(path, key, f"{name} has no row of model {model!r} with overrides {overrides} to borrow the runs of")
+    if not any(
+        r.model == model
+        and r.overrides == overrides
+        and (noaux is None or r.noaux_overrides == noaux)
+        and not r.metric_overrides
+        for r in other.rows
+    ):
+        raise _err(
+            path,
+            key,
+            f"{name} has no row of model {model!r} with overrides {overrides}"
+            + (f" and noaux_overrides {noaux}" if noaux is not None else "")
+            + " to borrow the runs of",
+        )
 
 
 def _parse_transfer(path: Path, data: dict) -> tuple[Transfer, str]:

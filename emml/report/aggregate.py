@@ -1,6 +1,10 @@
 """An aggregate under each table that stays honest with few seeds (Agarwal et al. 2021, "Deep RL at the edge of the
-statistical precipice"; the rliable package): per metric, each row's interquartile mean (IQM) over its runs in every
-cell, with a 95% stratified-bootstrap interval, and the probability that Dual-Attention beats each other row.
+statistical precipice"; the rliable package), comparing like with like (issue 49): per setting (difficulty × aux)
+and metric, each row's interquartile mean (IQM) over its runs in that cell, with a 95% bootstrap interval, and beside
+the reference row (Dual-Attention as the paper proposes it) the mean difference with its interval and the
+probability that the reference beats the row. Nothing pools Aux with No Aux or Easy with Hard (until issue 49 a
+row's IQM pooled every cell it had, so Dual-Attention's read its Aux and No Aux runs together beside rows with Aux
+runs only); runs and cells are counted apart; a row with one run in a cell has no interval.
 
 Statistics and intervals are rliable's (`rliable.metrics.aggregate_iqm`, `rliable.metrics.probability_of_improvement`,
 `rliable.library.get_interval_estimates`: runs resampled with replacement within each cell, rliable's strata; a
@@ -113,55 +117,125 @@ def reference_row(table) -> str | None:
     return None
 
 
-def _show(e: Estimate) -> str:
-    where = f"n={e.runs}" + (f" in {e.cells} cells" if e.cells > 1 else "")
+def mean_difference(x: list[float], y: list[float], reps: int = REPS, seed: int = SEED) -> Estimate:
+    """mean(x) - mean(y) over one cell's runs, with its 95% percentile interval from resampling each row's runs with
+    replacement (a Generator seeded with ``seed``); no interval (``spread`` False) when either row has one run:
+    resampling one run cannot move it."""
+    x_, y_ = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    value = float(x_.mean() - y_.mean())
+    if len(x_) < 2 or len(y_) < 2:
+        return Estimate(value, value, value, len(x_) + len(y_), 1, False)
+    rng = np.random.default_rng(seed)
+    diffs = x_[rng.integers(0, len(x_), (reps, len(x_)))].mean(1) - y_[rng.integers(0, len(y_), (reps, len(y_)))].mean(
+        1
+    )
+    alpha = (1 - CONFIDENCE) / 2 * 100
+    lo, hi = np.percentile(diffs, [alpha, 100 - alpha])
+    return Estimate(value, float(lo), float(hi), len(x_) + len(y_), 1, True)
+
+
+@dataclass
+class Comparison:
+    """One row in one cell (a setting: difficulty × aux, and a metric) against the reference row in the same cell."""
+
+    difficulty: str
+    aux: bool
+    metric: str
+    row: str
+    iqm: Estimate
+    """The row's IQM over its runs in the cell."""
+    difference: Estimate | None = None
+    """mean(reference) - mean(row) in the cell; None for the reference row or when the reference has no run there."""
+    improvement: Estimate | None = None
+    """P(reference > row) in the cell, rliable's; None as `difference`."""
+    reference_runs: int = 0
+    """Runs of the reference row in the cell."""
+
+
+def compare(table, cells) -> list[Comparison]:
+    """Per setting (difficulty × aux: Aux and No Aux apart, Easy and Hard apart) and metric, every row with runs in
+    that cell: its IQM, and beside the reference row's runs in the same cell the mean difference and P(reference >
+    row). A row without runs in a setting is not compared there; nothing pools cells of different settings."""
+    ref = reference_row(table)
+    by = {(c.row, c.difficulty, c.aux, c.metric): c.values for c in cells}
+    out = []
+    for difficulty, aux, metric in table.columns():
+        theirs = by.get((ref, difficulty, aux, metric), []) if ref is not None else []
+        for row in (r.label for r in table.rows):
+            own = by.get((row, difficulty, aux, metric), [])
+            if not own:
+                continue
+            c = Comparison(difficulty, aux, metric, row, iqm([own]), reference_runs=len(theirs))
+            if theirs and row != ref:
+                c.difference = mean_difference(theirs, own)
+                p = probability_of_improvement([theirs], [own])
+                one = len(theirs) < 2 or len(own) < 2  # one run on a side: resampling has nothing to move
+                c.improvement = Estimate(p.value, p.value, p.value, p.runs, 1, False) if one else p
+            out.append(c)
+    return out
+
+
+def _runs(n: int) -> str:
+    return f"{n} run{'s' if n != 1 else ''}"
+
+
+def _show(e: Estimate, what: str, signed: bool = False) -> str:
+    value = f"{e.value:+.2f}" if signed else f"{e.value:.2f}"
     if not e.spread:
-        return f"{e.value:.2f} ({where}, no interval)"
-    return f"{e.value:.2f} [{e.lo:.2f}, {e.hi:.2f}] ({where})"
+        return f"{value} ({what}: no interval)"
+    lo, hi = (f"{e.lo:+.2f}", f"{e.hi:+.2f}") if signed else (f"{e.lo:.2f}", f"{e.hi:.2f}")
+    return f"{value} [{lo}, {hi}] ({what})"
 
 
-def summary(table, cells) -> tuple[dict[str, dict[str, str]], str] | None:
-    """Row label → column → text: each row's IQM per metric and P(reference > row) per metric, over the cells
-    (difficulty × aux) of the metric, for the rows that have runs; and the footer saying what they are. None for a
+def summary(table, cells) -> tuple[list[dict[str, str]], str] | None:
+    """The aggregate's lines, one per setting and row with runs there (Setting, row, then per metric its IQM, the
+    mean difference to the reference row and P(reference > row)), and the footer saying what they are. None for a
     transfer table (every row reads the same runs) or when no row has runs."""
+    from emml.config.env_kinds import env_label
+
     if table.transfer is not None or not any(c.values for c in cells):
         return None
     ref = reference_row(table)
-    by: dict[tuple[str, str], dict] = {}
-    for c in cells:
-        by.setdefault((c.row, c.metric), {})[(c.difficulty, c.aux)] = c.values
-    out: dict[str, dict[str, str]] = {}
-    for label, metric in table.metrics.items():
-        for row in (r.label for r in table.rows):
-            own = by.get((row, metric), {})
-            if not any(own.values()):
-                continue
-            out.setdefault(row, {})[f"{label} IQM [95% CI]"] = _show(iqm(list(own.values())))
-            if ref is None or row == ref:
-                continue
-            theirs = by.get((ref, metric), {})
-            keys = [k for k in own if own[k] and theirs.get(k)]
-            p = probability_of_improvement([theirs[k] for k in keys], [own[k] for k in keys])
-            column = f"P({ref} > row), {label}"
-            out[row][column] = MISSING if p is None else _show(p)
-    if not out:
-        return None
-    columns = list(dict.fromkeys(k for row in out.values() for k in row))
-    out = {row: {c: values.get(c, "") for c in columns} for row, values in out.items()}
-    compare = (
-        f" P({ref} > row) = the probability that a run of {ref} scores higher than a run of the row in the same cell "
-        "(ties count half; rliable.metrics.probability_of_improvement), averaged over the cells both have runs in, "
-        "with its 95% interval from resampling both rows' runs within each cell."
+    labels = {v: k for k, v in table.metrics.items()}
+    lines: dict[tuple, dict[str, str]] = {}
+    for c in compare(table, cells):
+        setting = f"{env_label(c.difficulty)} · {'Aux' if c.aux else 'No Aux'}"
+        line = lines.setdefault((setting, c.row), {"Setting": setting, table.row_header: c.row})
+        label = labels.get(c.metric, c.metric)
+        line[f"{label} IQM [95% CI]"] = _show(c.iqm, _runs(c.iqm.runs) + " in 1 cell")
+        if ref is None:
+            continue
+        if c.difference is not None:
+            runs = f"{c.reference_runs} vs {_runs(c.iqm.runs)} in 1 cell"
+            line[f"{label}: {ref} − row [95% CI]"] = _show(c.difference, runs, signed=True)
+            line[f"{label}: P({ref} > row)"] = _show(c.improvement, runs)
+        elif c.row != ref:
+            line[f"{label}: {ref} − row [95% CI]"] = line[f"{label}: P({ref} > row)"] = (
+                f"{MISSING} ({ref}: no run here)"
+            )
+    present = list(dict.fromkeys(k for line in lines.values() for k in line))  # ordered: the same bytes each time
+    order = [k for label in labels.values() for k in (f"{label} IQM", f"{label}: {ref} − row", f"{label}: P({ref} >")]
+    columns = sorted(present, key=lambda k: next((i for i, o in enumerate(order) if k.startswith(o)), -1))
+    out = [{k: line.get(k, "") for k in columns} for line in lines.values()]
+    compare_text = (
+        f" {ref} − row = the difference of the two rows' means in that cell, with its 95% percentile interval from "
+        f"resampling each row's runs with replacement ({REPS:,} resamples, seed {SEED}); P({ref} > row) = the "
+        f"probability that a run of {ref} scores higher than a run of the row in the same cell (ties count half; "
+        "rliable.metrics.probability_of_improvement), with its 95% interval from the same resampling "
+        "(rliable.library.get_interval_estimates). Read the difference beside the probability: P = 1.00 says every "
+        "run is ahead, not by how much."
         if ref is not None
         else ""
     )
     footer = (
-        "Aggregate per metric over the table's cells (rliable; Agarwal et al. 2021): IQM = the interquartile mean of "
-        "a row's runs over every cell (the mean of the middle 50% of scores, rliable.metrics.aggregate_iqm), with a "
-        f"95% stratified-bootstrap percentile interval (each cell's runs resampled with replacement, {REPS:,} "
-        f"resamples, seed {SEED}; rliable.library.get_interval_estimates).{compare} n = runs read (a row whose cells "
-        "hold unequal numbers of seeds is read on the first k of each, k the fewest); one run per cell has nothing to "
-        "resample: no "
-        "interval. With three seeds or fewer the intervals are wide: read them, not the point alone."
+        "Aggregate per setting (difficulty × aux: Aux and No Aux apart, Easy and Hard apart) and metric, so that rows "
+        "compare like with like: each number reads one cell of the table above, over the runs (seeds) it holds, and "
+        "a row with no run in a setting is not compared there; runs and cells are counted apart. IQM = the "
+        "interquartile mean of a row's runs (rliable.metrics.aggregate_iqm; Agarwal et al. 2021; with 3 runs or fewer "
+        "it is their mean), with a 95% bootstrap percentile interval (the cell's runs resampled with replacement, "
+        f"{REPS:,} resamples, seed {SEED}).{compare_text} Where a row has one run in the cell, resampling has nothing "
+        "to move: no interval is given, and the number is one seed's. With three seeds or fewer the intervals are "
+        "wide: read them, not the point alone; whether a claim holds is decided on the claims page "
+        "(claims-<profile>.md) against the evaluation's binomial error."
     )
     return out, footer

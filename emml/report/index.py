@@ -108,6 +108,23 @@ def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tup
     return paths
 
 
+def claims_lines(profiles: dict, out: Path, results_root: str | Path) -> list[str]:
+    """Write each profile's claims page (emml/report/claims.py) and return the index's lead: a link per profile with
+    its status counts."""
+    from emml.report.claims import campaign_costs, counts, write_claims
+
+    costs = campaign_costs() if profiles else {}
+    lines = []
+    for profile in profiles:
+        path, decisions = write_claims(profile, out, results_root, costs)
+        summary = ", ".join(f"{n} {status}" for status, n in counts(decisions).items() if n)
+        lines += [
+            f"**Claims ({profile})**: [{path.name}]({path.name}), the paper's {len(decisions)} claims: {summary}.",
+            "",
+        ]
+    return lines
+
+
 def write_reports(
     out: str | Path | None = None,
     results_root: str | Path = "results",
@@ -132,6 +149,7 @@ def write_reports(
         "read from their configs. Smoke runs (512 frames) are not results and are never listed.",
         "",
     ]
+    lines[2:2] = claims_lines(profiles_with_results(results_root), out, results_root)  # the page leads with them
     drawn: set[str] = set()  # the best runs whose figures are drawn: a table borrowing one draws it once
     for profile, tables in profiles_with_results(results_root).items():
         lines += [f"## Profile `{profile}`", ""]

@@ -326,9 +326,7 @@ def report_table(
         md += [deviations.markdown(devs), ""]
     md += [flat.to_markdown(), ""]
     if agg is not None:
-        agg_df = pd.DataFrame.from_dict(agg[0], orient="index")
-        agg_df.index.name = table.row_header
-        md += [agg_df.to_markdown(), "", agg[1], ""]
+        md += [pd.DataFrame(agg[0]).to_markdown(index=False), "", agg[1], ""]
     md += [f"Results: `{shown}`", ""]
     md_path.write_text("\n".join(md))
     tex_df, _ = layout(table, cells, tex=True)
@@ -344,15 +342,16 @@ def report_table(
         column_format="l" + "c" * tex_df.shape[1],
     )
     if agg is not None:
-        agg_tex = pd.DataFrame.from_dict(agg[0], orient="index")
-        agg_tex.index = pd.Index([_tex_escape(str(i)) for i in agg_tex.index], name=table.row_header)
-        agg_tex.columns = [_tex_escape(c) for c in agg_tex.columns]
-        tex += "\n" + agg_tex.reset_index().replace(MISSING, "---").to_latex(
+        agg_tex = pd.DataFrame(agg[0]).map(lambda v: _tex_escape(str(v)).replace("−", "-"))
+        agg_tex.columns = [_tex_escape(c).replace("−", "-") for c in agg_tex.columns]
+        tex += "\n" + agg_tex.replace(MISSING, "---", regex=True).to_latex(
             index=False,
             escape=False,
-            caption=_tex_caption(f"Aggregate of Table {name.removeprefix('table')} [{profile}]. {agg[1]}"),
+            caption=_tex_caption(
+                f"Aggregate of Table {name.removeprefix('table')} [{profile}]. {agg[1]}".replace("−", "-")
+            ),
             label=f"tab:ours-{name}-{profile}-aggregate",
-            column_format="l" + "c" * agg_tex.shape[1],
+            column_format="ll" + "c" * (agg_tex.shape[1] - 2),
         )
     tex_path.write_text(tex)
     return {

@@ -64,9 +64,12 @@ def test_diagnose_a_checkpoint(tracking, no_leftovers):
     assert 0.0 <= data["attention_on_target"] <= 1.0 and 0.0 <= data["actor_sensitivity"] <= 1.0
     assert all(0.0 <= ap <= 1.0 for ap in data["detector_ap_words"].values())
     assert "eqa" not in data and data["control"] == "none"
+    assert 0.0 <= data["x_image_saturated"] <= 1.0 and data["x_image_channels"]
+    assert 0.0 <= data["conv3_one_way"] <= 1.0  # trained a few updates: its conv moved (issue 48)
     both = ["--episodes", "1", "--step0-episodes", "5", "--eqa-episodes", "1"]
     text = runner.invoke(app, ["diagnose", str(path), *both])
     assert text.exit_code == 0 and "detector AP per word" in text.output and "slot" in text.output
+    assert "x_I saturation:" in text.output and "conv3 since its init:" in text.output
     assert "EQA per question" in text.output and "what color is the torch" in text.output
     no_step0 = runner.invoke(
         app, ["diagnose", str(path), "--episodes", "1", "--step0-episodes", "0", "--eqa-episodes", "0"]

@@ -10,7 +10,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from emml.config.schema import DoomConfig
-from emml.eval.diagnose import average_precision, diagnose, saturation_warning, summary_line, x_image_saturation
+from emml.eval.diagnose import (
+    average_precision,
+    conv3_drift,
+    diagnose,
+    saturation_warning,
+    summary_line,
+    x_image_saturation,
+)
 from emml.models import build_model
 from emml.tasks.language import Vocabulary, load_dataset
 from tests.conftest import SMOKE
@@ -122,3 +129,22 @@ def test_a_saturated_conv_is_flagged_on_real_frames(no_leftovers):
     assert collapsed["x_image_spatial_std"] < 1e-3
     assert "pinned" in saturation_warning(collapsed)
     assert "x_image_saturated 1.00" in summary_line(collapsed)
+
+
+def test_conv3_drift_tells_a_uniform_shift_from_learning():
+    """The run's init rebuilt from its seed: untouched, no direction; a uniform signed shift (the No Aux collapse's
+    signature), every weight one way; independent noise, about half."""
+    from emml.config.schema import TrainConfig
+
+    cfg = TrainConfig(model="dual_attention", seed=3, env=_env_cfg())
+    torch.manual_seed(cfg.seed)
+    model = build_model("dual_attention", len(cfg.env.vocabulary), cfg.env.height, cfg.env.width, cfg.env.max_steps)
+    assert conv3_drift(model, cfg) == {"conv3_one_way": None, "conv3_shift": 0.0}
+    weight = model.image_encoder.conv3.weight
+    with torch.no_grad():
+        weight.add_(0.01)
+    shifted = conv3_drift(model, cfg)
+    assert shifted["conv3_one_way"] == 1.0 and shifted["conv3_shift"] == pytest.approx(0.01 * weight[0].numel())
+    with torch.no_grad():
+        weight.sub_(0.01).add_(torch.randn(weight.shape, generator=torch.Generator().manual_seed(0)) * 0.01)
+    assert 0.4 < conv3_drift(model, cfg)["conv3_one_way"] < 0.6

@@ -97,6 +97,10 @@ def test_status_shows_a_run_held_by_a_live_process_as_running(tracking, campaign
             r"steps\[0\].set 'eval_episodes'",
         ),
         ("title = 'x'\n", r"'steps' must be a non-empty array"),
+        (
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nclaim = "da-is-great"\n',
+            r"steps\[0\].claim='da-is-great' is not a claim of reproduce/claims.toml; allowed: da-best-easy-aux",
+        ),
     ],
 )
 def test_a_bad_campaign_fails_naming_the_file_and_the_key(campaigns, text, message):
@@ -114,7 +118,14 @@ def test_the_reference_campaign_loads():
     paper = next(s for s in plan.steps if s.profile == "paper")  # its curve has the quick runs' points (100k apart)
     assert paper.overrides() == {"eval_every": 100_000, "eval_episodes": 100, "frames": 1_500_000}
     experiment = next(s for s in plan.steps if s.table == "experiments/eqa_readout")  # issue 34's experiment
-    assert load_table(experiment.table).name == "eqa_readout"
+    assert load_table(experiment.table).name == "eqa_readout" and not experiment.claims
+    # issue 50: every step of the paper's tables names the claims it decides; Hard, Table 4 Hard and Table 5 are in
+    assert all(s.claims for s in plan.steps if not s.table.startswith("experiments/"))
+    decided = {c for s in plan.steps for c in s.claims}
+    assert {"da-best-hard-aux", "transfer-hard", "house-da-best", "da-best-easy-noaux"} <= decided
+    first_hard = next(i for i, s in enumerate(plan.steps) if s.only.get("difficulty") == "hard")
+    first_seeds = next(i for i, s in enumerate(plan.steps) if s.name == "seeds-1-2")
+    assert first_hard < first_seeds  # a claim no run tests comes before more seeds of a decided one
 
 
 def test_an_experiment_step_trains_its_own_rows_and_borrows_the_papers(tracking, campaigns):
@@ -170,6 +181,10 @@ def test_cli_status_and_an_unknown_campaign(tracking):
     result = runner.invoke(app, ["campaign", "reference", "--status", *roots])
     assert result.exit_code == 0, result.output
     assert "table2-aux-s0 (table2 [quick]): 0/7 done" in result.output and "to do" in result.output
+    # each step: its claims, and its cost here and on a GPU node (8 quick runs side by side at NODE_FPS)
+    assert "  decides: da-best-hard-aux" in result.output
+    assert "table5-house-s0 (table5 [quick]): 0/2 done" in result.output
+    assert f"~{5_000_192 / 360 / 60:.0f} min of a GPU node (8 at a time" in result.output
     rows = json.loads(runner.invoke(app, ["campaign", "reference", "--status", "--json", *roots]).output)
     assert rows[0]["run_name"] == "concat-easy-aux-s0-quick" and rows[0]["state"] == "to do"
 
@@ -207,12 +222,15 @@ def test_wall_time_fills_each_steps_slots_in_order_and_steps_follow_each_other()
     from emml.experiments.campaign import RunStatus, wall_seconds
 
     def run(step, seconds, state="to do"):
-        return RunStatus(step, "table2", "quick", f"{step}-{seconds}", state, 0, 100, None, seconds)
+        return RunStatus(
+            step, "table2", "quick", f"{step}-{seconds}", state, 0, 100, None, seconds, seconds and 2 * seconds
+        )
 
     rows = [run("a", 10.0), run("a", 20.0), run("a", 5.0), run("a", 99.0, "done"), run("b", 7.0), run("b", None)]
     assert wall_seconds(rows, 1) == 10 + 20 + 5 + 7  # one at a time: the sum; done and unmeasured runs count 0
     assert wall_seconds(rows, 2) == 20 + 7  # a: 10 then 5 beside 20; b: alone, after a's last run
     assert wall_seconds(rows, 8) == 20 + 7
+    assert wall_seconds(rows, 8, node=True) == 2 * (20 + 7)  # from the GPU-node estimates
 
 
 def test_cli_status_says_how_many_runs_at_a_time_and_refuses_a_device_by_name(tracking):

@@ -174,28 +174,64 @@ def test_a_run_without_its_run_dir_falls_back_to_its_registry_config_and_says_so
 
 
 def test_the_aggregate_under_the_table(tmp_path):
-    """IQM per row and metric over its cells, P(Dual-Attention > row), reproducible to the digit."""
+    """Per setting and metric: IQM per row, the mean difference to Dual-Attention and P(Dual-Attention > row), each
+    with its interval when both rows have runs to resample; reproducible to the digit."""
 
     def value(spec):  # Dual-Attention ahead of every baseline in every cell
         return 0.5 + 0.1 * spec.seed if spec.row == "Dual-Attention" else 0.1 * (spec.seed + 1)
 
     fake_results("table2", tmp_path / "results", value=value)
     rep = report("table2", tmp_path)
-    rows = rep["aggregate"]["rows"]
-    assert list(rows) == [r.label for r in load_table("table2").rows]
+    lines = {(r["Setting"], r["Model"]): r for r in rep["aggregate"]["rows"]}
+    assert len(lines) == 4 * 7  # Easy/Hard × Aux/No Aux apart, every row in each
+    da = lines[("Easy · Aux", "Dual-Attention")]
     value, lo, hi = map(
-        float,
-        re.match(r"(\S+) \[(\S+), (\S+)\] \(n=12 in 4 cells\)", rows["Dual-Attention"]["SGN IQM [95% CI]"]).groups(),
+        float, re.match(r"(\S+) \[(\S+), (\S+)\] \(3 runs in 1 cell\)", da["SGN IQM [95% CI]"]).groups()
     )
-    assert value == 0.60 and 0.5 <= lo < value < hi <= 0.7  # IQM of 0.5 / 0.6 / 0.7 in 4 cells
-    assert rows["GA"]["SGN IQM [95% CI]"].startswith("0.20 [")
-    assert rows["GA"]["P(Dual-Attention > row), SGN"].startswith("1.00 [1.00, 1.00]")
-    assert rows["Dual-Attention"]["P(Dual-Attention > row), SGN"] == ""
+    assert value == 0.60 and 0.5 <= lo < value < hi <= 0.7  # IQM (the mean) of 0.5 / 0.6 / 0.7 in one cell
+    ga = lines[("Hard · No Aux", "GA")]
+    assert ga["SGN IQM [95% CI]"].startswith("0.20 [")
+    assert re.match(
+        r"\+0\.40 \[\+0\.\d\d, \+0\.\d\d\] \(3 vs 3 runs in 1 cell\)", ga["SGN: Dual-Attention − row [95% CI]"]
+    )
+    assert ga["SGN: P(Dual-Attention > row)"].startswith("1.00 [")
+    assert da["SGN: P(Dual-Attention > row)"] == ""
     md = (tmp_path / "reports" / "table2-quick.md").read_text()
-    assert "stratified-bootstrap" in md and "rliable" in md
+    assert "stratified" not in md and "rliable" in md and "Aux and No Aux apart" in md
     first = md
     report("table2", tmp_path)
     assert (tmp_path / "reports" / "table2-quick.md").read_text() == first
+
+
+def test_the_aggregate_compares_like_with_like_issue_49(tmp_path):
+    """Issue 49's Table 3: DA Multi-Task has an Aux (0.93) and a No Aux (0.19) cell on seed 0, the ablations Aux only
+    (0.89-0.93). The aggregate read 'DA Multi-Task SGN IQM 0.56' beside 0.89-0.93 (both of its cells pooled) and
+    P(DA > row) '1.00 [1.00, 1.00] (n=4)' from one cell; now each setting is compared apart, one run per cell has no
+    interval, and the difference is shown beside P."""
+    sgn = {"DA Multi-Task": 0.934, "w/o GA2": 0.91, "w/o Task Indicator": 0.93, "w/o Reward Shaping": 0.90}
+    keep = {"dual_attention-easy-noaux-s0-quick"}
+
+    def value(spec):
+        if spec.row == "DA Multi-Task" and not spec.aux:
+            return 0.194
+        return sgn.get(spec.row, 0.3)
+
+    everything = fake_results("table3", tmp_path / "results", value=value)
+    seed0_aux = everything[(everything["seed"] == 0) & everything["aux"]]
+    drop = set(everything["run_name"]) - set(seed0_aux["run_name"]) - keep
+    (tmp_path / "results" / "table3" / "quick.csv").unlink()
+    (tmp_path / "results" / "table3").rmdir()
+    fake_results("table3", tmp_path / "results", drop=tuple(drop), value=value)
+    rep = report("table3", tmp_path)
+    lines = {(r["Setting"], r["Model"]): r for r in rep["aggregate"]["rows"]}
+    assert lines[("Easy · Aux", "DA Multi-Task")]["SGN IQM [95% CI]"] == "0.93 (1 run in 1 cell: no interval)"
+    assert lines[("Easy · No Aux", "DA Multi-Task")]["SGN IQM [95% CI]"] == "0.19 (1 run in 1 cell: no interval)"
+    assert {k for k in lines if k[0] == "Easy · No Aux"} == {("Easy · No Aux", "DA Multi-Task")}  # nothing to compare
+    ga2 = lines[("Easy · Aux", "w/o GA2")]
+    assert ga2["SGN: DA Multi-Task − row [95% CI]"] == "+0.02 (1 vs 1 run in 1 cell: no interval)"
+    assert ga2["SGN: P(DA Multi-Task > row)"] == "1.00 (1 vs 1 run in 1 cell: no interval)"
+    aggregate = (tmp_path / "reports" / "table3-quick.md").read_text().split("| Setting")[1]
+    assert "0.56" not in aggregate and "[1.00, 1.00]" not in aggregate and "n=4" not in aggregate
 
 
 def test_a_report_written_twice_is_the_same_bytes(tmp_path):

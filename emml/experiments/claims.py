@@ -1,0 +1,116 @@
+"""The paper's claims as data (reproduce/claims.toml): each one the comparison of table cells that decides it.
+
+The campaign's steps name the claims their runs decide (emml/campaign.py, `--status`); the reports state each claim
+beside the cells that decide it. Loading checks every claim against its table (rows, metrics, columns) before any
+compute, with errors that name the file, the claim and the allowed values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import tomllib
+
+from emml.config.paths import REPRODUCE_DIR
+from emml.experiments.tables import load_table
+
+CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"
+KINDS = ("best", "below", "level", "at_least", "aux_helps")
+"""best: `row` above every other row; below: each of `rows` below `than`; level: each of `rows` within `margin` of
+`than`; at_least: each of `rows` at or above `value`; aux_helps: each of `rows` as high with aux as without."""
+KEYS = ("id", "text", "source", "kind", "table", "row", "rows", "than", "where", "metrics", "margin", "value")
+WHERE_KEYS = ("difficulty", "aux")
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One claim of the paper and the cells that decide it."""
+
+    id: str
+    """Short name (campaign steps and reports refer to it)."""
+    text: str
+    """The claim in a sentence."""
+    source: str
+    """Where the paper makes it (section, table, its numbers)."""
+    kind: str
+    """One of KINDS."""
+    table: str
+    """The table whose cells decide it (reproduce/<table>.toml)."""
+    rows: tuple[str, ...]
+    """The rows compared: `row` for 'best'; the ablations for 'below' and 'level'; every row of the table when the
+    file names none ('at_least', 'aux_helps')."""
+    metrics: tuple[str, ...]
+    """The results columns compared (sgn_test, eqa_test, ...)."""
+    where: dict = field(default_factory=dict)
+    """RunSpec fields fixing the table's columns (difficulty, aux); a field absent: every value of it."""
+    than: str | None = None
+    """The reference row of 'below' and 'level'."""
+    margin: float | None = None
+    """'level': the largest difference that still counts as level (ours: the paper says 'little effect')."""
+    value: float | None = None
+    """'at_least': the threshold."""
+
+
+def load_claims(path: Path = CLAIMS_FILE) -> dict[str, Claim]:
+    """Every claim of the file by id, checked against its table."""
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise ValueError(f"{path}: cannot be read as TOML: {e}") from None
+    claims: dict[str, Claim] = {}
+    for i, raw in enumerate(data.get("claims", [])):
+        where = f"{path}: claims[{i}]"
+        unknown = sorted(set(raw) - set(KEYS))
+        if unknown:
+            raise ValueError(f"{where}: key {unknown[0]!r} is unknown; allowed: {', '.join(KEYS)}")
+        for key in ("id", "text", "source", "kind", "table", "metrics"):
+            if key not in raw:
+                raise ValueError(f"{where}: {key} is required")
+        if raw["id"] in claims:
+            raise ValueError(f"{where}: id={raw['id']!r} is used twice; ids must be unique")
+        if raw["kind"] not in KINDS:
+            raise ValueError(f"{where}.kind={raw['kind']!r} is unknown; allowed: {', '.join(KINDS)}")
+        claims[raw["id"]] = _claim(where, raw)
+    if not claims:
+        raise ValueError(f"{path}: no [[claims]]")
+    return claims
+
+
+def _claim(where: str, raw: dict) -> Claim:
+    table = load_table(raw["table"])
+    labels = [r.label for r in table.rows]
+    kind = raw["kind"]
+    needs = {"best": ("row",), "below": ("rows", "than"), "level": ("rows", "than", "margin"), "at_least": ("value",)}
+    for key in needs.get(kind, ()):
+        if key not in raw:
+            raise ValueError(f"{where}: kind={kind!r} needs {key!r}")
+    rows = (raw["row"],) if kind == "best" else tuple(raw.get("rows", labels))
+    for label in [*rows, *([raw["than"]] if "than" in raw else [])]:
+        if label not in labels:
+            raise ValueError(f"{where}: row {label!r} is not a row of {raw['table']}; allowed: {', '.join(labels)}")
+    metrics = tuple(raw["metrics"])
+    allowed = tuple(table.metrics.values())
+    for m in metrics:
+        if m not in allowed:
+            raise ValueError(f"{where}.metrics: {m!r} is not a column of {raw['table']}; allowed: {', '.join(allowed)}")
+    cells = dict(raw.get("where", {}))
+    for key, value in cells.items():
+        if key not in WHERE_KEYS:
+            raise ValueError(f"{where}.where: {key!r} is unknown; allowed: {', '.join(WHERE_KEYS)}")
+        values = table.difficulties if key == "difficulty" else table.aux
+        if value not in values:
+            raise ValueError(f"{where}.where.{key}={value!r} is not a column of {raw['table']}; allowed: {values}")
+    return Claim(
+        raw["id"],
+        raw["text"],
+        raw["source"],
+        kind,
+        raw["table"],
+        rows,
+        metrics,
+        cells,
+        raw.get("than"),
+        raw.get("margin"),
+        raw.get("value"),
+    )

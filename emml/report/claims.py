@@ -1,0 +1,502 @@
+"""The claims page (issue 49): each claim of reproduce/claims.toml (emml/experiments/claims.py) decided from a
+profile's results, with the numbers per row and seed that decide it, the runs still missing and, where the campaign
+knows them, what they cost.
+
+A claim is one of STATUSES. The cells are the table pages' (emml/report/tables.py: `table_results`, `build_cells`),
+so a claim reads exactly the numbers its table shows. The rules (`RULES`, stated on the page):
+
+- an ordering ('best', 'below', 'aux_helps') holds in a cell when the higher row is above the lower in every seed
+  both rows have, and the gap of their means exceeds the binomial standard error of that gap at the evaluation's
+  episode count (each results row's `eval_episodes`);
+- 'level': the two means within `margin`; 'at_least': every row's mean at or above `value`;
+- a row at chance (its mean within `LEAVE` of the task's chance, `CHANCE`) has not learned at this budget: what it
+  loses says nothing against the paper, and two rows at chance are level trivially.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+SUPPORTED, CONTRADICTED, BUDGET, UNTESTABLE = (
+    "supported",
+    "contradicted",
+    "not supported at this budget",
+    "untestable yet",
+)
+STATUSES = (SUPPORTED, CONTRADICTED, BUDGET, UNTESTABLE)
+CHANCE = {"sgn": 0.2, "eqa": 1 / 3}
+"""Chance per task: SGN, walking to one of the 5 objects (docs/fidelity.md); EQA, the paper's Text only row, which
+sees no frame, scores 0.33 in every column of its Table 2 (ours reads the test split's answer priors: 0.45)."""
+LEAVE = 0.1
+"""A row has left chance when its mean is above chance + LEAVE (SGN 0.30, EQA 0.43): the binomial noise of a 500
+episode evaluation is about 0.02, of a 100 episode one about 0.045."""
+Z = 1.0
+"""A gap counts when it exceeds Z binomial standard errors of the difference of the two means."""
+SEEDS_ENOUGH = 3
+"""Fewer seeds than this: the decision says on how many it rests."""
+HOLDS, REVERSED, UNCLEAR, MISSING = "holds", "reversed", "unclear", "missing"
+
+
+@dataclass
+class Score:
+    """One run's number in a cell."""
+
+    run: str
+    seed: int
+    value: float
+    episodes: int
+    """Episodes the number is the success rate of (the results row's eval_episodes × the instructions a transfer
+    row averages)."""
+    frames: int
+
+
+@dataclass
+class Check:
+    """One comparison a claim makes: two cells, or a cell against a threshold."""
+
+    what: str
+    """E.g. 'SGN test, Easy · Aux: Dual-Attention > Text only'."""
+    outcome: str
+    """HOLDS, REVERSED (the opposite holds by the same rule), UNCLEAR or MISSING."""
+    detail: str
+    """The numbers: each seed's, the gap and its standard error."""
+    chance: bool = False
+    """The row the claim puts higher (the reference of 'level') is at chance in the seeds compared."""
+    seeds: int = 0
+    """Seeds the comparison read."""
+    high: list[Score] = field(default_factory=list)
+    """The scores of the row the claim puts higher (the reference of 'level'), every seed."""
+    numbers: str = ""
+    """The means compared, short: '0.38 vs 0.45'."""
+    setting: str = ""
+    metric: str = ""
+    subject: str = ""
+    """The row the claim puts higher."""
+
+
+@dataclass
+class Decision:
+    """A claim decided from one profile's results."""
+
+    id: str
+    text: str
+    source: str
+    kind: str
+    table: str
+    profile: str
+    status: str
+    phrase: str
+    """The evidence in a phrase (the page's top block)."""
+    checks: list[Check] = field(default_factory=list)
+    evidence: list[dict] = field(default_factory=list)
+    """One line per row and cell: row, setting, metric, each seed's value."""
+    missing: list[str] = field(default_factory=list)
+    """Declared runs of the claim's cells with no results row."""
+    frames: list[int] = field(default_factory=list)
+    seeds: int = 0
+    """The fewest seeds any comparison present read."""
+    costs: list[str] = field(default_factory=list)
+    """What the missing runs cost, from the campaign (emml.experiments.campaign.status), when it knows them."""
+
+    @property
+    def label(self) -> str:
+        """The status, with the seeds it rests on when fewer than SEEDS_ENOUGH."""
+        if self.status == UNTESTABLE or not self.seeds or self.seeds >= SEEDS_ENOUGH:
+            return self.status
+        return f"{self.status} (on {self.seeds} seed{'s' if self.seeds != 1 else ''})"
+
+
+RULES = [
+    "**supported**: every comparison of the claim holds. 'best' / 'below' (and 'aux_helps', per row with both "
+    "settings): the higher row is above the lower one in every seed both have, and the gap of their means exceeds "
+    f"{Z:g} binomial standard error of that gap, sqrt(Σ p(1−p)/N)/k per row over its k seeds with N the evaluation's "
+    "episodes (a results row's eval_episodes; a transfer row: times its instructions). 'level': the two means "
+    "within the claim's margin, the reference row not at chance. 'at_least': every row's mean at or above the "
+    "claim's value.",
+    "**contradicted**: some comparison is reversed by the same rule (the lower row above in every seed, the gap "
+    "beyond the standard error; 'level': the difference beyond the margin in every seed and by more than the "
+    "standard error; 'at_least': the mean below the value by more than the standard error, every seed below) while "
+    "the row the claim puts higher has left chance: it learned, and still loses.",
+    "**not supported at this budget**: the cells are there, but the ordering holds in no seed, or only in some, or "
+    "within the standard error; or the row the claim puts higher is at chance (it has not learned with the "
+    "profile's frames, so its loss says nothing against the paper, and two rows at chance are level trivially).",
+    "**untestable yet**: a cell the claim compares has no finished run (the missing runs are listed); numbers "
+    "already there are shown.",
+    f"Chance: SGN {CHANCE['sgn']:.2f} (one of five objects); EQA {CHANCE['eqa']:.2f} (the paper's Text only row, which "
+    f"sees no frame, scores 0.33 in every column); a row is at chance when its mean is at most chance + {LEAVE:.2f}. "
+    "Comparisons pair seeds: a row with more seeds than the other is compared on the seeds both have (its other "
+    "seeds are shown). Fewer than 3 seeds: the status says on how many it rests.",
+]
+
+
+def _chance(metric: str) -> float:
+    return CHANCE["eqa" if metric.startswith("eqa") else "sgn"]
+
+
+def _se(scores: list[Score]) -> float:
+    """Binomial standard error of the mean of the scores (each a success rate over its episodes)."""
+    var = sum(s.value * (1 - s.value) / max(s.episodes, 1) for s in scores)
+    return math.sqrt(var) / len(scores)
+
+
+def _seeds(scores: list[Score]) -> str:
+    return " · ".join(f"{s.value:.3f} (s{s.seed})" for s in scores)
+
+
+def _pair(hi: list[Score], lo: list[Score]) -> tuple[list[Score], list[Score]]:
+    common = sorted({s.seed for s in hi} & {s.seed for s in lo})
+    return [s for s in hi if s.seed in common], [s for s in lo if s.seed in common]
+
+
+def order(what: str, hi: list[Score], lo: list[Score], metric: str) -> Check:
+    """Whether `hi` is above `lo` (HOLDS), below (REVERSED) or neither, by the rule of RULES."""
+    if not hi or not lo:
+        return _missing(what, hi, lo, metric)
+    h, lw = _pair(hi, lo)
+    if not h:
+        return Check(what, MISSING, f"no seed in common ({_seeds(hi)} against {_seeds(lo)})")
+    diffs = [a.value - b.value for a, b in zip(h, lw)]
+    gap, se = float(np.mean(diffs)), math.sqrt(_se(h) ** 2 + _se(lw) ** 2)
+    if all(d > 0 for d in diffs) and gap > Z * se:
+        outcome = HOLDS
+    elif all(d < 0 for d in diffs) and -gap > Z * se:
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    at_chance = float(np.mean([s.value for s in h])) <= _chance(metric) + LEAVE
+    detail = f"{_seeds(h)} against {_seeds(lw)}: gap {gap:+.3f}, standard error {se:.3f}"
+    if at_chance:
+        detail += f"; the higher row at chance ({_chance(metric):.2f} + {LEAVE:.2f})"
+    return Check(what, outcome, detail, at_chance, len(h), hi, f"{_mean(h):.2f} vs {_mean(lw):.2f}")
+
+
+def _missing(what: str, hi: list[Score], lo: list[Score], metric: str) -> Check:
+    """A comparison with a cell still empty; `chance` when the row the claim puts higher is there and at chance."""
+    if not hi:
+        return Check(what, MISSING, "no run yet in " + ("either cell" if not lo else "the higher row's cell"))
+    mean = float(np.mean([s.value for s in hi]))
+    at_chance = mean <= _chance(metric) + LEAVE
+    detail = f"no run yet in the lower row's cell; the higher row {_seeds(hi)}"
+    if at_chance:
+        detail += f", at chance ({_chance(metric):.2f} + {LEAVE:.2f})"
+    return Check(what, MISSING, detail, at_chance, high=hi)
+
+
+def level(what: str, row: list[Score], ref: list[Score], metric: str, margin: float) -> Check:
+    """Whether `row` is within `margin` of `ref` (HOLDS), clearly beyond it (REVERSED) or neither."""
+    if not row or not ref:
+        return _missing(what, ref, row, metric)
+    r, f = _pair(row, ref)
+    if not r:
+        return Check(what, MISSING, f"no seed in common ({_seeds(row)} against {_seeds(ref)})")
+    diffs = [a.value - b.value for a, b in zip(r, f)]
+    diff, se = float(np.mean(diffs)), math.sqrt(_se(r) ** 2 + _se(f) ** 2)
+    at_chance = float(np.mean([s.value for s in f])) <= _chance(metric) + LEAVE
+    beyond = all(abs(d) > margin for d in diffs) and len({d > 0 for d in diffs}) == 1
+    if abs(diff) <= margin and not at_chance:
+        outcome = HOLDS
+    elif beyond and abs(diff) - margin > Z * se:
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    detail = f"{_seeds(r)} against {_seeds(f)}: difference {diff:+.3f} (margin {margin:g}), standard error {se:.3f}"
+    if at_chance:
+        detail += f"; the reference row at chance ({_chance(metric):.2f} + {LEAVE:.2f})"
+    return Check(what, outcome, detail, at_chance, len(r), ref, f"{_mean(r):.2f} vs {_mean(f):.2f}")
+
+
+def threshold(what: str, row: list[Score], metric: str, value: float) -> Check:
+    """Whether the row's mean is at or above `value` (HOLDS), clearly below it (REVERSED) or neither."""
+    if not row:
+        return Check(what, MISSING, "no run yet")
+    mean, se = float(np.mean([s.value for s in row])), _se(row)
+    at_chance = mean <= _chance(metric) + LEAVE
+    if mean >= value:
+        outcome = HOLDS
+    elif all(s.value < value for s in row) and value - mean > Z * se:
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    detail = f"{_seeds(row)}: mean {mean:.3f} against {value:g}, standard error {se:.3f}"
+    return Check(what, outcome, detail, at_chance, len(row), row, f"{mean:.2f} vs {value:g}")
+
+
+def _status(checks: list[Check], subject: bool = True) -> str:
+    """The claim's status from its comparisons (RULES); `subject`: the row the claim puts higher is one row (not
+    'aux_helps'), so that row at chance anywhere leaves the claim unsupported at this budget, cells missing or not."""
+    outcomes = [c.outcome for c in checks]
+    if any(c.outcome == REVERSED and not c.chance for c in checks):
+        return CONTRADICTED
+    if any(c.chance and (c.outcome in (REVERSED, UNCLEAR) or (subject and c.outcome == MISSING)) for c in checks):
+        return BUDGET
+    if MISSING in outcomes:
+        return UNTESTABLE
+    if all(o == HOLDS for o in outcomes):
+        return SUPPORTED
+    return BUDGET
+
+
+def _phrase(status: str, checks: list[Check]) -> str:
+    """The evidence in a phrase, per setting: how many comparisons hold, and the one that decides against."""
+    groups: dict[str, list[Check]] = {}
+    for c in checks:
+        groups.setdefault(c.setting, []).append(c)
+    parts = []
+    for setting, cs in groups.items():
+        present = [c for c in cs if c.outcome != MISSING]
+        left = len(cs) - len(present)
+        chance = [c for c in cs if c.chance and c.outcome != HOLDS]
+        if not present:
+            if chance:
+                values = ", ".join(dict.fromkeys(f"{c.metric} {_mean(c.high):.2f}" for c in chance))
+                parts.append(f"{setting}: {chance[0].subject} at chance ({values}), {_n(left)} not run yet")
+            else:
+                parts.append(f"{setting}: {_n(left)} not run yet")
+            continue
+        text = f"{setting}: {sum(c.outcome == HOLDS for c in present)} of {len(present)} hold"
+        text += f", {left} not run yet" if left else ""
+        failing = [c for c in present if c.outcome != HOLDS]
+        worst = next((c for c in failing if c.outcome == REVERSED and not c.chance), None) or next(
+            (c for c in failing if c.chance), failing[0] if failing else None
+        )
+        if worst is not None:
+            note = f" ({worst.subject} at chance)" if worst.chance else ""
+            text += f"; {worst.outcome}: {worst.metric} {worst.what.split(': ', 1)[1]} {worst.numbers}{note}"
+        parts.append(text)
+    return "; ".join(parts)
+
+
+def _n(k: int) -> str:
+    return f"{k} comparison{'s' if k != 1 else ''}"
+
+
+def _mean(scores: list[Score]) -> float:
+    return float(np.mean([s.value for s in scores]))
+
+
+def _setting(difficulty: str, aux: bool) -> str:
+    from emml.config.env_kinds import env_label
+
+    return f"{env_label(difficulty)} · {'Aux' if aux else 'No Aux'}"
+
+
+def decide(claim, profile: str, results_root: str | Path | None = None) -> Decision:
+    """The claim decided from the results of `profile` (results/<table>/<profile>.csv and the tables it borrows
+    from), by the rules of RULES."""
+    from emml.config.profiles import profile_seeds
+    from emml.experiments.tables import load_table
+    from emml.report.tables import METRIC_LABELS, build_cells, paper_numbers, table_results
+
+    table = load_table(claim.table)
+    results = table_results(table, profile, results_root)
+    cells = build_cells(table, profile, results, paper_numbers(table.name))
+    rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
+    runs = table.runs(profile_seeds(profile))
+
+    def wanted(c) -> bool:
+        return c.metric in claim.metrics and all(
+            getattr(c, "difficulty" if k == "difficulty" else "aux") == v for k, v in claim.where.items()
+        )
+
+    scores: dict[tuple, list[Score]] = {}
+    missing: list[str] = []
+    evidence: list[dict] = []
+    frames: set[int] = set()
+    involved = _involved(claim, table)
+    for c in (c for c in cells if wanted(c) and c.row in involved):
+        per = len(table.cell_columns(c.row, c.metric))
+        found = []
+        for name, value in zip(c.runs, c.values):
+            row = rows[name]
+            found.append(Score(name, int(row["seed"]), value, int(row["eval_episodes"]) * per, int(row["frames"])))
+            frames.add(int(row["frames"]))
+        scores[(c.row, c.difficulty, c.aux, c.metric)] = found
+        declared = [s.run_name(profile) for s in table.cell_runs(c.row, c.difficulty, c.aux, c.metric, runs)]
+        missing += [n for n in declared if n not in c.runs and n not in missing]
+        evidence.append(
+            {
+                "row": c.row,
+                "setting": _setting(c.difficulty, c.aux),
+                "metric": METRIC_LABELS.get(c.metric, c.metric),
+                "values": {s.seed: s.value for s in found},
+                "declared": c.expected,
+            }
+        )
+    checks = _checks(claim, table, scores)
+    present = [c.seeds for c in checks if c.outcome != MISSING]
+    status = _status(checks, claim.kind != "aux_helps")
+    return Decision(
+        claim.id,
+        claim.text,
+        claim.source,
+        claim.kind,
+        table.name,
+        profile,
+        status,
+        _phrase(status, checks),
+        checks,
+        evidence,
+        missing,
+        sorted(frames),
+        min(present) if present else 0,
+    )
+
+
+def _involved(claim, table) -> set[str]:
+    if claim.kind == "best":
+        return {r.label for r in table.rows}
+    return {*claim.rows, *([claim.than] if claim.than else [])}
+
+
+def _checks(claim, table, scores: dict[tuple, list[Score]]) -> list[Check]:
+    from emml.config.env_kinds import env_label
+    from emml.report.tables import METRIC_LABELS
+
+    out = []
+    keys = sorted({(d, a, m) for (_, d, a, m) in scores}, key=lambda k: (claim.metrics.index(k[2]), k[0], not k[1]))
+
+    def where(d, a, m) -> str:
+        return f"{METRIC_LABELS.get(m, m)}, {_setting(d, a)}"
+
+    if claim.kind == "aux_helps":
+        for row in claim.rows:
+            for d, m in dict.fromkeys((d, m) for (d, _, m) in keys):
+                with_, without = scores.get((row, d, True, m), []), scores.get((row, d, False, m), [])
+                what = f"{METRIC_LABELS.get(m, m)}, {env_label(d)}: {row} Aux > No Aux"
+                out.append(_tag(order(what, with_, without, m), env_label(d), m, f"{row} Aux"))
+        return out
+    for d, a, m in keys:
+        get = lambda row, key=(d, a, m): scores.get((row, *key), [])  # noqa: E731
+        if claim.kind == "best":
+            top = claim.rows[0]
+            for other in (r.label for r in table.rows if r.label != top):
+                out.append(
+                    _tag(order(f"{where(d, a, m)}: {top} > {other}", get(top), get(other), m), _setting(d, a), m, top)
+                )
+        elif claim.kind == "below":
+            for row in claim.rows:
+                check = order(f"{where(d, a, m)}: {claim.than} > {row}", get(claim.than), get(row), m)
+                out.append(_tag(check, _setting(d, a), m, claim.than))
+        elif claim.kind == "level":
+            for row in claim.rows:
+                what = f"{where(d, a, m)}: {row} level with {claim.than}"
+                out.append(_tag(level(what, get(row), get(claim.than), m, claim.margin), _setting(d, a), m, claim.than))
+        elif claim.kind == "at_least":
+            for row in claim.rows:
+                check = threshold(f"{where(d, a, m)}: {row} ≥ {claim.value:g}", get(row), m, claim.value)
+                out.append(_tag(check, _setting(d, a), m, row))
+    return out
+
+
+def _tag(check: Check, setting: str, metric: str, subject: str) -> Check:
+    """The check with its setting, metric and higher row named (the phrase groups by setting)."""
+    from emml.report.tables import METRIC_LABELS
+
+    check.setting, check.metric, check.subject = setting, METRIC_LABELS.get(metric, metric), subject
+    return check
+
+
+def campaign_costs(campaign: str = "reference") -> dict[str, str]:
+    """Run name → what it costs to finish, from the campaign's status (its step, state, and the estimates here and
+    on a GPU node); {} when the campaign cannot be read. Deterministic for a given tree: it reads run dirs only."""
+    try:
+        from emml.experiments.campaign import load_campaign, status
+
+        rows = status(load_campaign(campaign))
+    except Exception:  # noqa: BLE001 - the costs are optional: a page without them is still the page
+        return {}
+    out = {}
+    for r in rows:
+        if r.state == "done":
+            continue
+        here = f"~{r.seconds_left / 3600:.1f} h here" if r.seconds_left else "no estimate here"
+        node = f", ~{r.node_seconds_left / 3600:.1f} h on a GPU node" if r.node_seconds_left else ""
+        out[r.run_name] = f"campaign step `{r.step}`, {r.state}: {here}{node}"
+    return out
+
+
+def decide_all(profile: str, results_root: str | Path | None = None, costs: dict[str, str] | None = None) -> list:
+    """Every claim of reproduce/claims.toml decided from `profile`'s results, in the file's order."""
+    from emml.experiments.claims import load_claims
+
+    out = []
+    for claim in load_claims().values():
+        d = decide(claim, profile, results_root)
+        if costs:
+            d.costs = [f"`{n}`: {costs[n]}" for n in d.missing if n in costs]
+        out.append(d)
+    return out
+
+
+def counts(decisions: list[Decision]) -> dict[str, int]:
+    return {s: sum(d.status == s for d in decisions) for s in STATUSES}
+
+
+def markdown(decisions: list[Decision], profile: str) -> str:
+    """The claims page: one line per claim at the top, the rules, then a section per claim."""
+    n = counts(decisions)
+    frames = sorted({f for d in decisions for f in d.frames})
+    lines = [
+        f"# Claims ({profile})",
+        "",
+        f"The paper's claims (reproduce/claims.toml) decided from the '{profile}' profile's results "
+        f"({', '.join(f'{f:,}' for f in frames) or 'no'} frames per run), by the rules below. "
+        + ", ".join(f"{v} {k}" for k, v in n.items())
+        + ". Regenerated by `make reports`.",
+        "",
+        "| Claim | Status | Evidence |",
+        "|:--|:--|:--|",
+    ]
+    for d in decisions:
+        lines.append(f"| [{d.id}](#{d.id}) | {d.label} | {_cell(d.phrase)} |")
+    lines += ["", "## Decision rules", ""] + [f"- {r}" for r in RULES]
+    if profile != "paper":
+        lines += [
+            f"- The '{profile}' profile is not the paper's protocol (fewer frames, smaller input: each table page "
+            "lists its deviations): 'not supported at this budget' says no more than that.",
+        ]
+    for d in decisions:
+        lines += ["", f'<a id="{d.id}"></a>', "", f"## {d.id}: {d.label}", "", f"> {d.text}", ""]
+        lines += [
+            f"Paper: {d.source}. Kind `{d.kind}`, decided on [{d.table}-{profile}.md]({d.table}-{profile}.md).",
+            "",
+        ]
+        seeds = sorted({s for e in d.evidence for s in e["values"]})
+        if seeds:
+            lines += ["| Row | Setting | Metric | " + " | ".join(f"seed {s}" for s in seeds) + " |"]
+            lines += ["|:--|:--|:--|" + "--:|" * len(seeds)]
+            for e in d.evidence:
+                vals = " | ".join(f"{e['values'][s]:.3f}" if s in e["values"] else "—" for s in seeds)
+                lines.append(f"| {_cell(e['row'])} | {e['setting']} | {e['metric']} | {vals} |")
+            lines.append("")
+        elif d.evidence:
+            lines += [f"No run of its cells has finished ({len(d.evidence)} cells).", ""]
+        lines += ["Comparisons:", ""] + [f"- {_cell(c.what)}: **{c.outcome}** ({_cell(c.detail)})" for c in d.checks]
+        if d.missing:
+            lines += ["", f"Missing runs ({len(d.missing)}): " + ", ".join(f"`{m}`" for m in d.missing) + "."]
+        if d.costs:
+            lines += ["", "Their cost (emml campaign reference --status):", ""] + [f"- {c}" for c in d.costs]
+    return "\n".join(lines) + "\n"
+
+
+def _cell(text: str) -> str:
+    """Text for a Markdown table cell or line: pipes escaped, '<known_object>' kept as text (not an HTML tag)."""
+    return text.replace("|", r"\|").replace("<", "&lt;")
+
+
+def write_claims(
+    profile: str, out: str | Path | None = None, results_root: str | Path | None = None, costs: dict | None = None
+) -> tuple[Path, list[Decision]]:
+    """reports/claims-<profile>.md (scratch/reports for a scratch profile, as the table pages: `reports_dir`)."""
+    from emml.report.tables import reports_dir
+
+    folder = reports_dir(profile, out)
+    folder.mkdir(parents=True, exist_ok=True)
+    decisions = decide_all(profile, results_root, costs)
+    path = folder / f"claims-{profile}.md"
+    path.write_text(markdown(decisions, profile))
+    return path, decisions

@@ -1,0 +1,51 @@
+"""The paper's claims as data (reproduce/claims.toml, emml/experiments/claims.py): the committed file loads and names
+real rows, metrics and columns; a bad claim fails naming the file, the claim and the allowed values."""
+
+import pytest
+
+from emml.experiments.claims import KINDS, load_claims
+from emml.experiments.tables import load_table
+
+
+def test_the_committed_claims_load_and_point_at_their_tables():
+    claims = load_claims()
+    assert {"da-best-easy-aux", "da-best-hard-aux", "da-best-easy-noaux", "house-da-best", "transfer-hard"} <= set(
+        claims
+    )
+    for claim in claims.values():
+        assert claim.kind in KINDS
+        labels = {r.label for r in load_table(claim.table).rows}
+        assert set(claim.rows) <= labels and (claim.than is None or claim.than in labels)
+    assert claims["da-best-hard-aux"].where == {"difficulty": "hard", "aux": True}
+    assert claims["aux-helps"].rows == tuple(r.label for r in load_table("table2").rows)  # no rows: all of them
+
+
+GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_test"]\n'
+
+
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        ('kind = "wins"\nrow = "GA"\n', r"claims\[0\].kind='wins' is unknown; allowed: best, below"),
+        ('kind = "best"\n', r"kind='best' needs 'row'"),
+        ('kind = "best"\nrow = "GPT"\n', r"row 'GPT' is not a row of table2; allowed: Text only"),
+        ('kind = "best"\nrow = "GA"\nwhere = { difficulty = "house" }\n', r"where.difficulty='house' is not a column"),
+        ('kind = "best"\nrow = "GA"\nwhere = { seed = 0 }\n', r"where: 'seed' is unknown; allowed: difficulty, aux"),
+        ('kind = "level"\nrows = ["GA"]\nthan = "FiLM"\n', r"kind='level' needs 'margin'"),
+        ('kind = "best"\nrow = "GA"\nweight = 2\n', r"key 'weight' is unknown"),
+    ],
+)
+def test_a_bad_claim_fails_naming_the_file_and_the_field(tmp_path, body, message):
+    path = tmp_path / "claims.toml"
+    path.write_text("[[claims]]\n" + GOOD + body)
+    with pytest.raises(ValueError, match=message) as e:
+        load_claims(path)
+    assert "claims.toml" in str(e.value)
+
+
+def test_a_claim_id_is_unique(tmp_path):
+    path = tmp_path / "claims.toml"
+    one = "[[claims]]\n" + GOOD + 'kind = "best"\nrow = "GA"\n'
+    path.write_text(one + one)
+    with pytest.raises(ValueError, match="id='x' is used twice"):
+        load_claims(path)

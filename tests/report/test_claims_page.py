@@ -1,0 +1,99 @@
+"""The claims page (emml/report/claims.py, issue 49) on a FIXTURE of made-up results rows in tmp_path (never
+results): a claim flips when a results row changes; the binomial error, missing cells, chance and the seed count
+decide as the page's rules say; the page is the same bytes twice."""
+
+import pandas as pd
+
+from emml.experiments.claims import load_claims
+from emml.report.claims import (
+    BUDGET,
+    CONTRADICTED,
+    SUPPORTED,
+    UNTESTABLE,
+    Score,
+    decide,
+    order,
+    write_claims,
+)
+from tests.report.test_tables import PROFILE, fake_results
+
+CLAIMS = load_claims()
+
+
+def da_ahead(spec):
+    """Dual-Attention 0.5 / 0.6 / 0.7 over seeds 0-2, every other row 0.1 / 0.2 / 0.3."""
+    return 0.5 + 0.1 * spec.seed if spec.model == "dual_attention" else 0.1 * (spec.seed + 1)
+
+
+def edit(root, table: str, run: str, **values) -> None:
+    """Change one results row of the fixture, as a rescored run would."""
+    path = root / table / f"{PROFILE}.csv"
+    df = pd.read_csv(path)
+    for column, value in values.items():
+        df.loc[df["run_name"] == run, column] = value
+    df.to_csv(path, index=False)
+
+
+def test_a_claim_flips_when_a_results_row_changes(tmp_path):
+    root = tmp_path / "results"
+    fake_results("table2", root, value=da_ahead)
+    claim = CLAIMS["da-best-easy-aux"]
+    d = decide(claim, PROFILE, root)
+    assert d.status == SUPPORTED and d.label == SUPPORTED and d.seeds == 3 and not d.missing
+    edit(root, "table2", "text_only-easy-aux-s1-quick", eqa_test=0.95)  # one seed of one baseline ahead
+    d = decide(claim, PROFILE, root)
+    assert d.status == BUDGET and "Text only" in d.phrase
+    for seed in (0, 2):
+        edit(root, "table2", f"text_only-easy-aux-s{seed}-quick", eqa_test=0.95)  # now ahead in every seed
+    d = decide(claim, PROFILE, root)
+    assert d.status == CONTRADICTED and "reversed: EQA test Dual-Attention > Text only" in d.phrase
+
+
+def test_a_gap_inside_the_binomial_error_is_no_win():
+    """Issue 49: 0.380 against 0.372 on 500 episodes (standard error of the gap ~0.03) counted as a full win."""
+    hi, lo = [Score("a", 0, 0.380, 500, 1)], [Score("b", 0, 0.372, 500, 1)]
+    assert order("x", hi, lo, "eqa_test").outcome == "unclear"
+    assert order("x", [Score("a", 0, 0.5, 500, 1)], lo, "eqa_test").outcome == "holds"
+    assert order("x", lo, [Score("a", 0, 0.5, 500, 1)], "eqa_test").outcome == "reversed"
+    two = [Score("a", 0, 0.9, 500, 1), Score("a", 1, 0.2, 500, 1)]  # ahead in one seed only
+    assert order("x", two, [Score("b", 0, 0.5, 500, 1), Score("b", 1, 0.3, 500, 1)], "sgn_test").outcome == "unclear"
+
+
+def test_missing_cells_are_untestable_and_name_their_runs(tmp_path):
+    root = tmp_path / "results"
+    fake_results("table2", root, value=da_ahead, drop=("pacman-hard-aux-s0-quick", "pacman-hard-aux-s1-quick"))
+    d = decide(CLAIMS["da-best-hard-aux"], PROFILE, root)
+    assert d.status == SUPPORTED  # PACMAN's seed 2 is there: compared on it
+    fake_results(
+        "table2", tmp_path / "r2", value=da_ahead, drop=tuple(f"pacman-hard-aux-s{s}-quick" for s in (0, 1, 2))
+    )
+    d = decide(CLAIMS["da-best-hard-aux"], PROFILE, tmp_path / "r2")
+    assert d.status == UNTESTABLE and d.missing == [f"pacman-hard-aux-s{s}-quick" for s in (0, 1, 2)]
+
+
+def test_a_row_at_chance_is_not_supported_at_this_budget_and_one_seed_says_so(tmp_path):
+    root = tmp_path / "results"
+
+    def da_at_chance(spec):  # Dual-Attention at SGN chance, below a baseline: it has not learned
+        return 0.2 if spec.model == "dual_attention" else 0.25
+
+    drop = [f"{m}-easy-noaux-s{s}-quick" for m in ("dual_attention", "ga") for s in (1, 2)]
+    fake_results("table2", root, value=da_at_chance, drop=tuple(drop))
+    d = decide(CLAIMS["da-best-easy-noaux"], PROFILE, root)
+    assert d.status == BUDGET and "at chance" in d.phrase
+    assert d.label == f"{BUDGET} (on 1 seed)"
+
+
+def test_the_page_leads_with_a_line_per_claim_and_is_the_same_bytes_twice(tmp_path):
+    root = tmp_path / "results"
+    for table in ("table2", "table3"):
+        fake_results(table, root, value=da_ahead)
+    path, decisions = write_claims(PROFILE, tmp_path / "reports", root)
+    text = path.read_text()
+    assert path.name == "claims-quick.md" and len(decisions) == len(CLAIMS)
+    top = text.split("## Decision rules")[0]
+    for claim in CLAIMS:
+        assert f"| [{claim}](#{claim}) |" in top
+    assert "## Decision rules" in text and "binomial standard error" in text
+    write_claims(PROFILE, tmp_path / "reports", root)
+    assert path.read_text() == text
