@@ -154,7 +154,9 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
     assert devs["input 84×150 (paper 168×300, App. A)"].startswith("46 of 48 runs: ")
     assert devs["x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5)"].startswith("40 of 48 runs: ")
     wrong = "wrong-object/answer reward -0.2 (paper silent: §5.1 names only +1 and -0.001 per step)"
-    assert choices[wrong] == "2 of 48 runs: dual_attention-easy-aux-s0-quick, dual_attention-easy-noaux-s0-quick"
+    assert (
+        choices[wrong] == "2 of 48 runs: dual_attention-easy-aux-s0-quick, dual_attention-easy-noaux-ansgate-s0-quick"
+    )
     assert wrong in (tmp_path / "reports" / "table3-quick.md").read_text()
 
 
@@ -209,7 +211,7 @@ def test_the_aggregate_compares_like_with_like_issue_49(tmp_path):
     P(DA > row) '1.00 [1.00, 1.00] (n=4)' from one cell; now each setting is compared apart, one run per cell has no
     interval, and the difference is shown beside P."""
     sgn = {"DA Multi-Task": 0.934, "w/o GA2": 0.91, "w/o Task Indicator": 0.93, "w/o Reward Shaping": 0.90}
-    keep = {"dual_attention-easy-noaux-s0-quick"}
+    keep = {"dual_attention-easy-noaux-ansgate-s0-quick"}
 
     def value(spec):
         if spec.row == "DA Multi-Task" and not spec.aux:
