@@ -35,7 +35,8 @@ from emml.runs.diskspace import no_space_names
 CHECKPOINT = "checkpoint.pt"
 """The run's state (`save_checkpoint`): written every `checkpoint_every` updates, at a stop, and at the end."""
 METRICS = "metrics.csv"
-"""Every metric point of the run (step,key,value), mirrored beside its checkpoint (emml.runs.tracking.Tracker.mirror_to)."""
+"""Every metric point of the run (step,key,value), mirrored beside its checkpoint
+(emml.runs.tracking.Tracker.mirror_to)."""
 RESULTS = "results.json"
 """The final score, its provenance and the config the run trained with (`save_results`)."""
 EVAL_SEED = 10_000

@@ -1,5 +1,5 @@
-"""Pre-flight (emml/runs/preflight.py) by fault injection: a broken store, an unwritable folder, a broken results CSV or a
-bad field is refused in one line naming it, with exit code 2, in seconds, before any engine, model or MLflow run —
+"""Pre-flight (emml/runs/preflight.py) by fault injection: a broken store, an unwritable folder, a broken results CSV or
+a bad field is refused in one line naming it, with exit code 2, in seconds, before any engine, model or MLflow run —
 nothing is written."""
 
 from __future__ import annotations
