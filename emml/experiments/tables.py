@@ -75,6 +75,9 @@ class RunSpec:
     """Transfer tables: what to append and score after training (emml/eval/transfer.py); None otherwise."""
     instructions: tuple[str, ...] = ()
     """Transfer tables: the instructions scored after training (every row's)."""
+    departures: tuple[str, ...] = ()
+    """The keys of `overrides` that depart from the paper rather than define the row (a row's `noaux_overrides`):
+    the reports list them as deviations, where the row's own overrides are the experiment."""
 
     def to_config(self, profile: str, **fields) -> TrainConfig:
         """The run's TrainConfig under `profile` (extra `fields`, e.g. run_root, go to TrainConfig)."""
@@ -194,7 +197,15 @@ class Table:
                         for seed in seeds:
                             owner = row.from_table or self.name
                             spec = RunSpec(
-                                owner, row.label, row.model, difficulty, aux, seed, row.for_aux(overrides, aux), metrics
+                                owner,
+                                row.label,
+                                row.model,
+                                difficulty,
+                                aux,
+                                seed,
+                                row.for_aux(overrides, aux),
+                                metrics,
+                                departures=() if aux else tuple(row.noaux_overrides),
                             )
                             out.append(spec)
         return out

@@ -50,9 +50,11 @@ def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None,
         saved = spec.to_config(profile).to_dict()
     from emml.experiments.tables import list_tables
 
-    # a paper table's row sets its overrides on purpose (Table 3's ablations); an experiment's rows are not the paper's
+    # a paper table's row sets its overrides on purpose (Table 3's ablations); an experiment's rows are not the paper's;
+    # a row's departures (its No Aux overrides, issue 48) are deviations all the same
     paper_row = spec.table in list_tables()
-    skip = frozenset(k.replace("model_options.", "model.") for k in spec.overrides) if paper_row else frozenset()
+    own = [k for k in spec.overrides if k not in spec.departures]
+    skip = frozenset(k.replace("model_options.", "model.") for k in own) if paper_row else frozenset()
     attrs = {"row": spec.row, "difficulty": spec.difficulty, "aux": spec.aux}
     config = fidelity.resolve(saved)
     if row is not None and row.get("eval_episodes") is not None:

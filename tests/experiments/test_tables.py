@@ -75,6 +75,7 @@ def test_noaux_overrides_reach_the_no_aux_runs_only():
         False: "dual_attention-easy-noaux-ansgate-s0-quick",
         True: "dual_attention-easy-aux-s0-quick",
     }
+    assert {r.aux: r.departures for r in runs} == {False: ("model_options.answer_grad",), True: ()}
     baselines = [r for r in load_table("table2").runs([0]) if r.model != "dual_attention" and not r.aux]
     assert all("model_options.answer_grad" not in r.overrides for r in baselines)
     house = [r for r in load_table("table5").runs([0]) if r.model == "dual_attention"]

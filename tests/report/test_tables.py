@@ -131,6 +131,8 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
     assert devs["frames 1.5M (paper 10M, §5.1)"] == "all 48 runs"
     assert "- x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5): all but the w/o SA runs (42 of 48)" in md
     assert "48 runs from their saved config" in md and "reward shaping" not in md  # the w/o RS row is the experiment
+    gated = [line for line in devs if line.startswith("answer loss trains x_sent only")]  # No Aux's departure (48)
+    assert len(gated) == 1 and devs[gated[0]].startswith("18 of 48 runs"), devs
     choices = dict(rep["deviations"]["choices"])
     assert choices["wrong-object/answer reward 0 (paper silent: §5.1 names only +1 and -0.001 per step)"] == (
         "all 48 runs"
