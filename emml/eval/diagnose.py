@@ -85,11 +85,12 @@ def conv3_drift(model, cfg) -> dict:
     its weight changes. Medians over channels."""
     from emml.models import build_model
 
-    torch.manual_seed(cfg.seed)  # the trainer's seeding before it builds the model (emml/rl/trainer.py)
     env = cfg.env
-    init = build_model(
-        cfg.model, model.image_encoder.conv3.out_channels, env.height, env.width, env.max_steps, **cfg.model_options
-    )
+    with torch.random.fork_rng(devices=[]):  # the caller's generator is left as it was
+        torch.manual_seed(cfg.seed)  # the trainer's seeding before it builds the model (emml/rl/trainer.py)
+        init = build_model(
+            cfg.model, model.image_encoder.conv3.out_channels, env.height, env.width, env.max_steps, **cfg.model_options
+        )
     delta = (model.image_encoder.conv3.weight - init.image_encoder.conv3.weight).detach().flatten(1)
     moved = delta != 0
     if not moved.any():  # an untrained model: no direction to speak of

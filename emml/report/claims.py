@@ -152,6 +152,21 @@ def _pair(hi: list[Score], lo: list[Score]) -> tuple[list[Score], list[Score]]:
     return [s for s in hi if s.seed in common], [s for s in lo if s.seed in common]
 
 
+def _paired_gap(a: list[Score], b: list[Score]) -> tuple[list[float], float, float]:
+    """On seeds already paired (`_pair`): the per-seed differences a - b, their mean and its binomial standard error."""
+    diffs = [x.value - y.value for x, y in zip(a, b)]
+    return diffs, float(np.mean(diffs)), math.sqrt(_se(a) ** 2 + _se(b) ** 2)
+
+
+def _at_chance(scores: list[Score], metric: str) -> bool:
+    """Whether the scores' mean is within LEAVE of the metric's chance: the row has not learned at this budget."""
+    return _mean(scores) <= _chance(metric) + LEAVE
+
+
+def _chance_note(metric: str) -> str:
+    return f"({_chance(metric):.2f} + {LEAVE:.2f})"
+
+
 def order(what: str, hi: list[Score], lo: list[Score], metric: str) -> Check:
     """Whether `hi` is above `lo` (HOLDS), below (REVERSED) or neither, by the rule of RULES."""
     if not hi or not lo:
@@ -159,18 +174,17 @@ def order(what: str, hi: list[Score], lo: list[Score], metric: str) -> Check:
     h, lw = _pair(hi, lo)
     if not h:
         return Check(what, MISSING, f"no seed in common ({_seeds(hi)} against {_seeds(lo)})")
-    diffs = [a.value - b.value for a, b in zip(h, lw)]
-    gap, se = float(np.mean(diffs)), math.sqrt(_se(h) ** 2 + _se(lw) ** 2)
+    diffs, gap, se = _paired_gap(h, lw)
     if all(d > 0 for d in diffs) and gap > Z * se:
         outcome = HOLDS
     elif all(d < 0 for d in diffs) and -gap > Z * se:
         outcome = REVERSED
     else:
         outcome = UNCLEAR
-    at_chance = float(np.mean([s.value for s in h])) <= _chance(metric) + LEAVE
+    at_chance = _at_chance(h, metric)
     detail = f"{_seeds(h)} against {_seeds(lw)}: gap {gap:+.3f}, standard error {se:.3f}"
     if at_chance:
-        detail += f"; the higher row at chance ({_chance(metric):.2f} + {LEAVE:.2f})"
+        detail += f"; the higher row at chance {_chance_note(metric)}"
     return Check(what, outcome, detail, at_chance, len(h), hi, f"{_mean(h):.2f} vs {_mean(lw):.2f}")
 
 
@@ -178,11 +192,10 @@ def _missing(what: str, hi: list[Score], lo: list[Score], metric: str) -> Check:
     """A comparison with a cell still empty; `chance` when the row the claim puts higher is there and at chance."""
     if not hi:
         return Check(what, MISSING, "no run yet in " + ("either cell" if not lo else "the higher row's cell"))
-    mean = float(np.mean([s.value for s in hi]))
-    at_chance = mean <= _chance(metric) + LEAVE
+    at_chance = _at_chance(hi, metric)
     detail = f"no run yet in the lower row's cell; the higher row {_seeds(hi)}"
     if at_chance:
-        detail += f", at chance ({_chance(metric):.2f} + {LEAVE:.2f})"
+        detail += f", at chance {_chance_note(metric)}"
     return Check(what, MISSING, detail, at_chance, high=hi)
 
 
@@ -193,9 +206,8 @@ def level(what: str, row: list[Score], ref: list[Score], metric: str, margin: fl
     r, f = _pair(row, ref)
     if not r:
         return Check(what, MISSING, f"no seed in common ({_seeds(row)} against {_seeds(ref)})")
-    diffs = [a.value - b.value for a, b in zip(r, f)]
-    diff, se = float(np.mean(diffs)), math.sqrt(_se(r) ** 2 + _se(f) ** 2)
-    at_chance = float(np.mean([s.value for s in f])) <= _chance(metric) + LEAVE
+    diffs, diff, se = _paired_gap(r, f)
+    at_chance = _at_chance(f, metric)
     beyond = all(abs(d) > margin for d in diffs) and len({d > 0 for d in diffs}) == 1
     if abs(diff) <= margin and not at_chance:
         outcome = HOLDS
@@ -205,7 +217,7 @@ def level(what: str, row: list[Score], ref: list[Score], metric: str, margin: fl
         outcome = UNCLEAR
     detail = f"{_seeds(r)} against {_seeds(f)}: difference {diff:+.3f} (margin {margin:g}), standard error {se:.3f}"
     if at_chance:
-        detail += f"; the reference row at chance ({_chance(metric):.2f} + {LEAVE:.2f})"
+        detail += f"; the reference row at chance {_chance_note(metric)}"
     return Check(what, outcome, detail, at_chance, len(r), ref, f"{_mean(r):.2f} vs {_mean(f):.2f}")
 
 
@@ -213,8 +225,8 @@ def threshold(what: str, row: list[Score], metric: str, value: float) -> Check:
     """Whether the row's mean is at or above `value` (HOLDS), clearly below it (REVERSED) or neither."""
     if not row:
         return Check(what, MISSING, "no run yet")
-    mean, se = float(np.mean([s.value for s in row])), _se(row)
-    at_chance = mean <= _chance(metric) + LEAVE
+    mean, se = _mean(row), _se(row)
+    at_chance = _at_chance(row, metric)
     if mean >= value:
         outcome = HOLDS
     elif all(s.value < value for s in row) and value - mean > Z * se:
