@@ -127,9 +127,11 @@ class Row:
             return [(dict(self.overrides), metrics)]
         return [({**self.overrides, **self.metric_overrides[m]}, (m,)) for m in metrics]
 
-    def for_aux(self, overrides: dict, aux: bool) -> dict:
-        """A setting's overrides for its runs with (``aux``) or without the auxiliary task."""
-        return dict(overrides) if aux else {**overrides, **self.noaux_overrides}
+    def for_aux(self, overrides: dict, aux: bool) -> tuple[dict, tuple[str, ...]]:
+        """A setting's overrides for its runs with (``aux``) or without the auxiliary task, and which of them depart
+        from the paper (`RunSpec.departures`: the No Aux overrides)."""
+        extra = {} if aux else self.noaux_overrides
+        return {**overrides, **extra}, tuple(extra)
 
 
 @dataclass(frozen=True)
@@ -194,20 +196,22 @@ class Table:
             for difficulty in self.difficulties:
                 for aux in self.aux:
                     for overrides, metrics in row.settings(tuple(self.metrics.values())):
+                        settings, departures = row.for_aux(overrides, aux)
+                        owner = row.from_table or self.name
                         for seed in seeds:
-                            owner = row.from_table or self.name
-                            spec = RunSpec(
-                                owner,
-                                row.label,
-                                row.model,
-                                difficulty,
-                                aux,
-                                seed,
-                                row.for_aux(overrides, aux),
-                                metrics,
-                                departures=() if aux else tuple(row.noaux_overrides),
+                            out.append(
+                                RunSpec(
+                                    owner,
+                                    row.label,
+                                    row.model,
+                                    difficulty,
+                                    aux,
+                                    seed,
+                                    dict(settings),
+                                    metrics,
+                                    departures=departures,
+                                )
                             )
-                            out.append(spec)
         return out
 
     def cell_runs(self, row: str, difficulty: str, aux: bool, metric: str, runs: list[RunSpec]) -> list[RunSpec]:
