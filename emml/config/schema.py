@@ -303,9 +303,9 @@ SENTENCE_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
 EQ1_WORDS: tuple[str, ...] = ("all", "content")
 """Values of `ModelConfig.eq1_words`: Eq. 1 gates x_I with every word of the text (the paper's x_BoW), or with its
 content words only."""
-ANSWER_GRADS: tuple[str, ...] = ("all", "gate")
+ANSWER_GRADS: tuple[str, ...] = ("all", "gate", "centered")
 """Values of `ModelConfig.answer_grad`: Eq. 5's answer loss trains the conv and x_sent (the paper's, end to end),
-or x_sent only."""
+x_sent only, or both with its gradient into x_I centred over the cells."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
@@ -372,8 +372,11 @@ class ModelConfig:
     """Dual-Attention with GA2: what Eq. 5's answer loss trains. 'all', the conv (through x_I and the map of Eq. 1-3)
     and the GA2 gate's encoder x_sent, as end-to-end training does (the default; the paper stops no gradient); or,
     opt-in, 'gate', x_sent only: x_SA is read with its gradient stopped in Eq. 4-5, so that the detectors learn from
-    the aux labels and the policy, not from the answers (without aux labels, the policy alone). Values are
-    unchanged. Measured in docs/fidelity.md (issue 34): retraining a checkpoint's conv offline on EQA frames, the
+    the aux labels and the policy, not from the answers (without aux labels, the policy alone); or, opt-in,
+    'centered', both, with the gradient that reaches x_I through Eq. 3 centred over the h×w cells of each frame and
+    channel: it raises a detector where Eq. 2's map attends against where it does not, and cannot shift a whole
+    channel (which pins sigmoid x_I without aux labels: docs/fidelity.md, issue 48). Values are unchanged.
+    Measured in docs/fidelity.md (issue 34): retraining a checkpoint's conv offline on EQA frames, the
     answer loss beside the aux loss holds the keys' detectors at AP 0.11-0.33 where the aux loss alone reaches
     0.81-0.86."""
     x_image: str = "sigmoid"
@@ -420,7 +423,12 @@ class ModelConfig:
         check_choice("ModelConfig.sentence_readout", self.sentence_readout, SENTENCE_READOUTS)
         check_choice("ModelConfig.sentence_activation", self.sentence_activation, SENTENCE_ACTIVATIONS)
         self._unit_option("eq1_words", EQ1_WORDS, "ga1", "chooses the words of Eq. 1")
-        self._unit_option("answer_grad", ANSWER_GRADS, "ga2", "keeps the answer loss to the GA2 gate")
+        self._unit_option("answer_grad", ANSWER_GRADS, "ga2", "sets the answer loss's reach into the conv")
+        if self.answer_grad == "centered" and not self.spatial_attention:  # it centres the gradient Eq. 3 passes
+            raise ValueError(
+                "ModelConfig.answer_grad='centered' centres the answer's gradient through Eq. 3: only with "
+                "spatial_attention=True (got False); allowed without it: 'all', 'gate'"
+            )
         if self.x_image not in ("sigmoid", "relu"):
             raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
         if self.control not in CONTROLS:

@@ -77,6 +77,30 @@ def spatial_attention(y_image: Tensor, y_spat: Tensor) -> Tensor:
     return y_image * y_spat[:, None, :, :]
 
 
+class _CenteredGrad(torch.autograd.Function):
+    """Identity on (N, C, h, w); backward removes each frame's and channel's mean over the h×w cells from the
+    gradient, so that what passes moves a channel at some cells against others, never the whole channel at once."""
+
+    generate_vmap_rule = True  # the packed trainer vmaps the model over its runs (emml/rl/packed.py)
+
+    @staticmethod
+    def forward(x: Tensor) -> Tensor:
+        return x.view_as(x)
+
+    @staticmethod
+    def setup_context(ctx, inputs, output) -> None:
+        pass
+
+    @staticmethod
+    def backward(ctx, grad: Tensor) -> Tensor:
+        return grad - grad.mean(dim=(2, 3), keepdim=True)
+
+
+def centered_grad(x: Tensor) -> Tensor:
+    """x, unchanged; its gradient centred over the cells of every frame and channel (`_CenteredGrad`)."""
+    return _CenteredGrad.apply(x)
+
+
 class DualAttention(Fusion):
     """The Dual-Attention unit f_DA (Section 3.1, Eq. 1-5); parameter-free.
 
@@ -92,7 +116,9 @@ class DualAttention(Fusion):
     Opt-in, ``eq1_words='content'`` (`ModelConfig.eq1_words`): Eq. 1 gates with x_BoW * m, m the run's content
     words (1) and function words (0), set from the run's words by `read_words` or restored with a checkpoint.
     Opt-in, ``answer_grad='gate'`` (`ModelConfig.answer_grad`): Eq. 4 reads x_SA with its gradient stopped, so that
-    the answer loss trains x_sent only; every value is unchanged.
+    the answer loss trains x_sent only; ``answer_grad='centered'``: Eq. 3 reads x_I with its gradient centred over
+    the cells (`centered_grad`), so that the answer loss moves a detector where the map attends against where it
+    does not, never a whole channel (issue 48); every value is unchanged under both.
 
     Ablation switches (Section 4, "Ablation tests"):
 
@@ -198,7 +224,8 @@ class DualAttention(Fusion):
                 scores = scores + gated_attention(x_extra, x_bow[:, v:]).sum(dim=1)
             scores = scores.reshape(n, h * w)
             x_spat = torch.softmax(scores, dim=1).reshape(n, h, w)  # Eq. 2: softmax over HxW
-            x_sa = spatial_attention(x_image, x_spat)  # Eq. 3
+            # Eq. 3; opt-in, the answer loss's gradient into x_I with its cell-wise mean removed (answer_grad)
+            x_sa = spatial_attention(centered_grad(x_image) if self.answer_grad == "centered" else x_image, x_spat)
             # x_S = h·w·vec(x_spat) under state_scale (mean 1 per cell; the paper writes vec(x_spat)); opt-in, the
             # policy reads a sharper copy of Eq. 2's map instead, with no gradient back into the scores
             t = self.state_temperature

@@ -13,6 +13,7 @@ from emml.models.fusion import (
     ImageOnly,
     Pacman,
     TextOnly,
+    spatial_attention,
 )
 
 # Vocabulary of the hand-made example: 0 pillar, 1 torch, 2 red, 3 green.
@@ -215,6 +216,35 @@ def test_answer_grad_gate_keeps_the_answer_loss_out_of_the_detectors():
     torch.testing.assert_close(gate_sent, grad_sent)
     (state_i,) = torch.autograd.grad(gate.state[0, 0], x_i)
     assert state_i.abs().sum() > 0  # the policy still trains them through x_S
+
+
+def test_answer_grad_centered_moves_a_detector_where_the_map_attends_never_a_whole_channel():
+    """`answer_grad='centered'` (issue 48): the same values; the answer's gradient into x_I sums to zero over the
+    cells of every frame and channel (no common shift: what pinned the No Aux conv), is the paper's gradient less
+    its cell mean, and still reaches x_sent as before; a flat map passes nothing into x_I."""
+    x_i = torch.rand(3, 4, 2, 3, requires_grad=True)
+    bow = torch.tensor([[0.0, 1.0, 1.0, 0.0]]).repeat(3, 1)
+    sent = torch.rand(3, 4, requires_grad=True)
+    plain = DualAttention(4, 2, 3)(x_i, bow, sent)
+    centered = DualAttention(4, 2, 3, answer_grad="centered")(x_i, bow, sent)
+    torch.testing.assert_close(centered.answer_logits, plain.answer_logits, rtol=0, atol=0)
+    torch.testing.assert_close(centered.state, plain.state, rtol=0, atol=0)
+    weights = torch.randn(3, 4)
+    grad_i, grad_sent = torch.autograd.grad((plain.answer_logits * weights).sum(), (x_i, sent))
+    cent_i, cent_sent = torch.autograd.grad((centered.answer_logits * weights).sum(), (x_i, sent))
+    torch.testing.assert_close(cent_i.sum(dim=(2, 3)), torch.zeros(3, 4), rtol=0, atol=1e-6)
+    assert cent_i.abs().sum() > 0  # what moves one cell against another still reaches the detectors
+    # through Eq. 3 the paper's gradient less its cell mean; through Eq. 2's softmax, already centred
+    direct = torch.autograd.grad(
+        (spatial_attention(x_i, plain.attention.detach()) * sent[:, :, None, None] * weights[:, :, None, None]).sum(),
+        x_i,
+    )[0]
+    torch.testing.assert_close(cent_i - grad_i, -direct.mean(dim=(2, 3), keepdim=True).expand_as(direct))
+    torch.testing.assert_close(cent_sent, grad_sent)
+    flat = torch.full((1, 4, 2, 3), 0.5, requires_grad=True)  # a flat x_I: a flat map, a uniform answer gradient
+    out = DualAttention(4, 2, 3, answer_grad="centered")(flat, bow[:1], sent[:1].detach())
+    (flat_grad,) = torch.autograd.grad(out.answer_logits[0, 2], flat)
+    torch.testing.assert_close(flat_grad, torch.zeros_like(flat_grad), rtol=0, atol=1e-7)
 
 
 def test_eq1_over_the_content_words_drops_the_function_words_channels_from_the_attention():

@@ -288,6 +288,7 @@ def test_unknown_model_name_lists_known_names():
         ({"answer_grad": "none"}, "answer_grad"),
         ({"name": "ga", "answer_grad": "gate"}, "answer_grad"),
         ({"ga2": False, "answer_grad": "gate"}, "answer_grad"),
+        ({"spatial_attention": False, "answer_grad": "centered"}, "answer_grad"),
         ({"state_scale": 1}, "state_scale"),
         ({"state_temperature": 0}, "state_temperature"),
         ({"state_temperature": "sharp"}, "state_temperature"),
