@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import logging
 import random
+import sys
 import time
 
 import numpy as np
@@ -292,16 +293,19 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
             for r, t in enumerate(trainers):
                 if t.eval_missed(frames):
                     t._eval(learner.run_model(r), frames)
+        total = cfg.num_updates * cfg.frames_per_update
+        # a progress bar on a terminal only: piped to a file its \r frames would fill the log (the lines stay)
         bar = tqdm(
-            total=cfg.num_updates * cfg.frames_per_update,
+            total=total,
             initial=frames,
             unit="frame",
-            disable=quiet,
+            disable=quiet or not sys.stderr.isatty(),
             dynamic_ncols=True,
             smoothing=0.1,
         )
+        tasks = TASKS if cfg.env.tasks == "both" else (cfg.env.tasks,)  # the tasks the run plays, as lines say them
         since_line = dict.fromkeys(TIME_SPLIT, 0.0)  # the log line's split: since the previous line
-        log_mark = (time.perf_counter(), frames)
+        log_mark = start_mark = (time.perf_counter(), frames)
         while update < cfg.num_updates:
             t_start = time.perf_counter()
             with conv_precision(model, cfg.precision):
@@ -334,21 +338,24 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                 since_line[part] += value
             first = logged[0]
             bar.update(B * T)
-            bar.set_postfix(
-                sgn=f"{first.get('train/success_sgn', 0):.2f}", eqa=f"{first.get('train/success_eqa', 0):.2f}"
-            )
+            if not bar.disable:
+                bar.set_postfix({task: _success(first, task) for task in tasks})  # as the lines write them
             if update % cfg.log_every == 0 and not quiet:
                 now, since = time.perf_counter(), log_mark
                 log_mark = (now, frames)
                 line_fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
+                eta = _eta(total - frames, (frames - start_mark[1]) / max(now - start_mark[0], 1e-9))
                 if n == 1:
-                    bar.write(_log_line(update, frames, line_fps, first, since_line))
+                    bar.write(_log_line(update, frames, line_fps, first, since_line, tasks=tasks, eta=eta))
                 else:
                     seeds = " ".join(
                         f"s{t.cfg.seed} sgn {np.mean(sampler.recent_by_run[r][0] or [np.nan]):.2f}"
                         for r, t in enumerate(trainers)
                     )
-                    bar.write(f"update {update:>5} frames {frames:>9,} x {n} runs, {fps:6.0f} frames/s all | {seeds}")
+                    bar.write(
+                        f"update {update:>5} frames {frames:>9,} x {n} runs, {fps:6.0f} frames/s all | {seeds} "
+                        f"| eta {eta}"
+                    )
                 since_line = dict.fromkeys(TIME_SPLIT, 0.0)
             if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
                 for r, t in enumerate(trainers):
@@ -403,16 +410,44 @@ def _dtype(space) -> torch.dtype:
     return {np.uint8: torch.uint8}.get(space.dtype.type, torch.int64)
 
 
-def _log_line(update: int, frames: int, fps: float, m: dict, seconds: dict) -> str:
+TASKS = ("sgn", "eqa")
+"""The tasks by id (0 SGN, 1 EQA), as metrics and log lines name them."""
+
+
+def _success(m: dict, task: str) -> str:
+    """A task's training success (last 100 episodes) as the log lines and the bar write it: 'nan' before its first
+    episode ends."""
+    return f"{m.get(f'train/success_{task}', float('nan')):.2f}"
+
+
+def _eta(frames_left: int, fps: float) -> str:
+    """The time left at ``fps`` frames/s, H:MM:SS."""
+    seconds = round(frames_left / fps) if fps > 0 else 0
+    return f"{seconds // 3600}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}"
+
+
+def _log_line(
+    update: int,
+    frames: int,
+    fps: float,
+    m: dict,
+    seconds: dict,
+    tasks: tuple[str, ...] = TASKS,
+    eta: str | None = None,
+) -> str:
+    """One line per `log_every` updates, space-separated 'name value' pairs (a file or a pipe reads it as well
+    as a terminal): frames, frames/s since the previous line, training success of each task the run plays, the
+    losses, then the time split and the time left."""
     split = "/".join(f"{100 * share:.0f}" for share in time_shares(seconds).values())
     return (
         f"update {update:>5} frames {frames:>9,} fps {fps:6.0f} "
-        f"sgn {m.get('train/success_sgn', float('nan')):.2f} eqa {m.get('train/success_eqa', float('nan')):.2f} "
-        f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
+        + "".join(f"{task} {_success(m, task)} " for task in tasks)
+        + f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
         f"ans {m['losses/answer']:.3f}"
         + (f" aux {m['losses/aux']:.3f}" if "losses/aux" in m else "")
         + (f" dropped {m['charts/dropped_episodes']}" if m.get("charts/dropped_episodes") else "")
         + f" | sim/infer/learn % {split}"
+        + (f" | eta {eta}" if eta is not None else "")
     )
 
 

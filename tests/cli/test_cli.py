@@ -229,3 +229,40 @@ def test_commands_that_train_nothing_yield_the_cpu_to_trainings(command):
     for name in command:
         group = group.commands[name]
     assert "_own_engines()" in inspect.getsource(group.callback)  # defer=True: the default
+
+
+def test_a_piped_train_log_has_lines_and_no_progress_bar(tracking, no_leftovers):
+    """stderr not a terminal: no tqdm frames ('\\r'), one parseable line per log_every instead, saying the tasks
+    the run plays (an SGN-only run: no 'eqa') and the time left."""
+    import os
+    import re
+    import subprocess
+    import sys
+
+    sets = {
+        "run_root": tracking["run_root"],
+        "results_root": tracking["results_root"],
+        "frames": 128,
+        "log_every": 1,
+        "eval_every": 0,
+        "eval_episodes": 1,
+        "final_eval_episodes": 1,
+        "diagnose_episodes": 0,
+        "env.tasks": "sgn",  # unquoted: a bare word is a string
+    }
+    args = [a for k, v in sets.items() for a in ("--set", f"{k}={v}")]
+    out = subprocess.run(
+        [sys.executable, "-m", "emml", "train", "--profile", "smoke", "--table", "test", *args],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "EMML_MALLOC": "glibc"},
+        timeout=600,
+    )
+    assert out.returncode == 0, out.stderr
+    log = out.stdout + out.stderr
+    assert "\r" not in log
+    lines = [x for x in log.splitlines() if x.startswith("update ")]
+    assert len(lines) == 2, log
+    for line in lines:
+        assert re.search(r"frames +\d[\d,]* fps +\d+ sgn (nan|\d\.\d\d) pg ", line), line
+        assert " eqa " not in line and re.search(r"\| eta \d+:\d\d:\d\d$", line), line
