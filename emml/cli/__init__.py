@@ -2,8 +2,9 @@
 
 The commands live by group: train.py (train, eval, rescore, transfer, demo), diagnose.py (diagnose, probe-eqa),
 tables.py (list, run, campaign), reports.py (report, reports, backfill-config, import-runs, video, visualize) and
-tools.py (tasks, models, oracle, bench); common.py holds what they share. They are registered here, in the order
-`emml --help` lists them."""
+tools.py (tasks, models, oracle, bench); common.py holds what they share. They are registered here under the groups
+(`rich_help_panel`) and in the order `emml --help` lists them; `emml --install-completion` completes commands,
+options and their choices in the shell."""
 
 from __future__ import annotations
 
@@ -12,17 +13,20 @@ import typer
 from emml.cli import diagnose, reports, tables, tools, train
 from emml.cli.common import _fail
 
+TRAIN, SCORE, REPORTS, TOOLS = "Train", "Evaluate & diagnose", "Tables & reports", "Tools"
+"""The groups `emml --help` lists the commands in."""
+
 app = typer.Typer(
-    add_completion=False,
+    add_completion=True,
     no_args_is_help=True,
     help="EMML: reproduce 'Embodied Multimodal Multitask Learning' (Chaplot et al., 2019) on ViZDoom.",
 )
-tasks_app = typer.Typer(no_args_is_help=True, help="The datasets: instructions and questions with their splits.")
-bench_app = typer.Typer(no_args_is_help=True, help="Throughput benchmarks (ratios measured in one run).")
-app.add_typer(tasks_app, name="tasks")
-app.add_typer(bench_app, name="bench")
-visualize_app = typer.Typer(no_args_is_help=True, help="The paper's figures on a checkpoint (emml/report/visualize.py)")
-app.add_typer(visualize_app, name="visualize")
+tasks_app = typer.Typer(no_args_is_help=True, help="The datasets: instructions and questions by split.")
+bench_app = typer.Typer(no_args_is_help=True, help="Throughput benchmarks, measured as ratios in one run.")
+visualize_app = typer.Typer(no_args_is_help=True, help="The paper's figures on a checkpoint.")
+app.add_typer(tasks_app, name="tasks", rich_help_panel=TOOLS)
+app.add_typer(bench_app, name="bench", rich_help_panel=TOOLS)
+app.add_typer(visualize_app, name="visualize", rich_help_panel=REPORTS)
 
 
 @app.callback()
@@ -31,12 +35,13 @@ def _check_project_files(
         [],
         "--plugin",
         help="A plugin registering models of your own: a .py file, a package folder or a dotted module (repeatable; "
-        "added to EMML_PLUGINS for the processes the command starts). README: 'Compare your own model'.",
+        "every process the command starts loads it too).",
     ),
 ) -> None:
-    """Every command reads reproduce/profiles.toml: a broken one is named in one line before anything runs; and
-    every command first ends the engines that killed emml processes left (emml/envs/engine.py, sweep_orphans).
-    Plugins (--plugin, EMML_PLUGINS) load first, so that a bad one is named in one line (emml/models/plugins.py)."""
+    """EMML: reproduce 'Embodied Multimodal Multitask Learning' (Chaplot et al., 2019) on ViZDoom.
+
+    Before any command: plugins load (a bad one is named in one line), the profiles file is read (a broken one is
+    named in one line), and the ViZDoom engines that killed emml processes left are ended."""
     import os
 
     from emml.models.plugins import ENV_VAR, PluginError, add_plugins
@@ -59,28 +64,29 @@ def _check_project_files(
         typer.secho(f"ended {len(ended)} ViZDoom engines left by killed emml processes: pids {ended}", err=True)
 
 
+# in the order `emml --help` lists them, group by group
+app.command(rich_help_panel=TRAIN)(train.train)
+app.command(rich_help_panel=TRAIN)(train.demo)
+app.command("run", rich_help_panel=TRAIN)(tables.run_table)
+app.command(rich_help_panel=TRAIN)(tables.campaign)
+app.command("list", rich_help_panel=TRAIN)(tables.list_experiments)
+app.command("eval", rich_help_panel=SCORE)(train.eval_checkpoint)
+app.command("rescore", rich_help_panel=SCORE)(train.rescore_runs)
+app.command(rich_help_panel=SCORE)(train.transfer)
+app.command(rich_help_panel=SCORE)(diagnose.diagnose)
+app.command("probe-eqa", rich_help_panel=SCORE)(diagnose.probe_eqa_cmd)
+app.command(rich_help_panel=REPORTS)(reports.report)
+app.command("reports", rich_help_panel=REPORTS)(reports.reports)
+app.command(rich_help_panel=REPORTS)(reports.video)
+app.command("import-runs", rich_help_panel=REPORTS)(reports.import_runs_cmd)
+app.command("backfill-config", rich_help_panel=REPORTS)(reports.backfill_config)
+visualize_app.command("channels")(reports.visualize_channels)
+visualize_app.command("attention")(reports.visualize_attention)
+visualize_app.command("house")(reports.visualize_house)
 tasks_app.command("show")(tools.tasks_show)
-app.command()(tools.oracle)
+app.command(rich_help_panel=TOOLS)(tools.models)
+app.command(rich_help_panel=TOOLS)(tools.oracle)
 bench_app.command("env")(tools.bench_env)
 bench_app.command("train")(tools.bench_train_cmd)
 bench_app.command("alloc")(tools.bench_alloc_cmd)
 bench_app.command("workers")(tools.bench_workers_cmd)
-app.command()(tools.models)
-app.command()(train.train)
-app.command("eval")(train.eval_checkpoint)
-app.command("rescore")(train.rescore_runs)
-app.command()(train.transfer)
-app.command()(diagnose.diagnose)
-app.command("probe-eqa")(diagnose.probe_eqa_cmd)
-visualize_app.command("channels")(reports.visualize_channels)
-visualize_app.command("attention")(reports.visualize_attention)
-visualize_app.command("house")(reports.visualize_house)
-app.command()(reports.video)
-app.command()(train.demo)
-app.command("list")(tables.list_experiments)
-app.command("run")(tables.run_table)
-app.command()(tables.campaign)
-app.command()(reports.report)
-app.command("reports")(reports.reports)
-app.command("backfill-config")(reports.backfill_config)
-app.command("import-runs")(reports.import_runs_cmd)

@@ -4,11 +4,109 @@ command runs (checkpoint, MLflow store), the engines a command owns, the allocat
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Literal
 
 import typer
 
 from emml.config.env_kinds import DOOM_ID, ENV_KINDS, GYM_ENVS, kinds_of
+from emml.config.schema import CONTROLS, DEVICES, EQ1_WORDS, SENTENCE_ACTIVATIONS
+
+# --- the choices of the options: metavar, validation before anything runs, shell completion -------------------------
+# Literal types, built from the data that declares each set (typer shows them as <a|b>, refuses another value naming
+# the allowed ones, completes them); the command receives a plain str, so configs and checkpoints never hold a
+# member of a CLI enum.
+Difficulty = Literal[tuple(ENV_KINDS)]
+"""Where a run trains: easy | hard | house (emml/config/env_kinds.py)."""
+DoomDifficulty = Literal[kinds_of(DOOM_ID)]
+"""The Doom room's difficulties: easy | hard."""
+EnvName = Literal[tuple(e.name for e in GYM_ENVS.values())]
+"""The environments by their command-line name: doom | house."""
+Tasks = Literal["sgn", "eqa", "both"]
+Task = Literal["sgn", "eqa"]
+Split = Literal["train", "test"]
+Splits = Literal["train", "test", "both"]
+Control = Literal[CONTROLS]
+Eq1Words = Literal[EQ1_WORDS]
+Activation = Literal[SENTENCE_ACTIVATIONS]
+Backend = Literal["local", "slurm"]
+Interpolation = Literal["linear", "area", "nearest"]
+BenchPart = Literal["both", "model", "e2e"]
+
+
+def _choice(values: Callable[[], Sequence[str]], accept: Callable[[str], bool] | None = None):
+    """(parser, completion) of an option whose allowed values are read when it is parsed, not when the command line
+    is built (the profiles file, a plugin's models): a bad value is refused naming the allowed ones."""
+
+    def parse(value: str) -> str:
+        allowed = tuple(values())
+        if value in allowed or (accept is not None and accept(value)):
+            return value
+        raise typer.BadParameter(f"{value!r} is not one of {', '.join(map(repr, allowed))}")
+
+    def complete(incomplete: str) -> list[str]:
+        return [v for v in values() if v.startswith(incomplete)]
+
+    return parse, complete
+
+
+def _profile_names() -> tuple[str, ...]:
+    from emml.config.profiles import load_profiles
+
+    return tuple(load_profiles())
+
+
+def _profile_metavar() -> str:
+    """<smoke|demo|quick|paper>, read from the profiles file for the help only (a broken file is named, in one line,
+    by every command before it runs)."""
+    import tomllib
+
+    from emml.config.profiles import profiles_file
+
+    try:
+        return "<" + "|".join(tomllib.loads(profiles_file().read_text())) + ">"
+    except (OSError, ValueError):
+        return "PROFILE"
+
+
+def profile_option(default: str = "quick", help: str = "Protocol and cost (reproduce/profiles.toml).") -> typer.Option:
+    """``--profile``: one of the profiles file's."""
+    parse, complete = _choice(_profile_names)
+    return typer.Option(default, parser=parse, autocompletion=complete, metavar=_profile_metavar(), help=help)
+
+
+def device_option(help: str = "Where the model runs.") -> typer.Option:
+    """``--device``: cpu or cuda (a GPU by index: cuda:1)."""
+    parse, complete = _choice(lambda: DEVICES, accept=lambda v: v.startswith("cuda:") and v[5:].isdigit())
+    return typer.Option("cpu", parser=parse, autocompletion=complete, metavar="<cpu|cuda|cuda:N>", help=help)
+
+
+def _model_names() -> list[str]:
+    from emml.models.registry import MODELS
+
+    return list(MODELS)
+
+
+def model_option(
+    default: str = "dual_attention", help: str = "The model to train (`emml models` lists them)."
+) -> typer.Option:
+    """``--model``: completed from the registry; an unknown name is refused before any compute, with the hint that
+    it may be a plugin's (emml/rl/hardware.py, check_runnable)."""
+    return typer.Option(
+        default,
+        autocompletion=lambda incomplete: [m for m in _model_names() if m.startswith(incomplete)],
+        metavar="MODEL",
+        help=help,
+    )
+
+
+RUN_ROOT_HELP = "Folder of the run dirs (default: the checkout's runs/; same as --set run_root=DIR)."
+RESULTS_ROOT_HELP = "Folder of the results CSVs (default: the checkout's results/; same as --set results_root=DIR)."
+SEED_HELP = "Seed of the first episode (episode i plays seed + i)."
+JSON_HELP = "Print the result as JSON on stdout."
+QUIET_HELP = "Print only the result: no log lines, no progress bar."
+SET_HELP = "Override a config field, FIELD=VALUE in TOML (a bare word is a string): --set env.tasks=sgn (repeatable)."
 
 
 def _fail(message: str) -> None:
@@ -48,15 +146,6 @@ def _out(path: Path) -> Path:
 
 def _echo(data, as_json: bool, text: str) -> None:
     typer.echo(json.dumps(data, indent=2) if as_json else text)
-
-
-_ENV_HELP = " | ".join(e.name for e in GYM_ENVS.values()) + " (house: the House domain, Appendix C)"
-
-
-_DOOM_DIFFICULTY_HELP = " | ".join(kinds_of(DOOM_ID)) + " (doom only)"
-
-
-_DIFFICULTY_HELP = " | ".join(ENV_KINDS) + " (house: the House domain, Appendix C)"
 
 
 def _gym_id(env_name: str) -> str:
@@ -108,7 +197,10 @@ def _use_tcmalloc() -> None:
 
 
 def _parse_sets(sets: list[str]) -> dict:
-    """'--set env.height=84 --set ppo.lr=1e-4' → {'env.height': 84, 'ppo.lr': 0.0001} (values parsed as TOML)."""
+    """'--set env.height=84 --set ppo.lr=1e-4 --set env.tasks=sgn' → {'env.height': 84, 'ppo.lr': 0.0001,
+    'env.tasks': 'sgn'}: each value parsed as TOML (numbers, booleans, quoted strings, lists, inline tables), a
+    value that is not TOML taken as the string it spells (so 'sgn' and '"sgn"' are the same). A list or table that
+    does not parse is refused, naming the TOML error: taken as a string, it would fail later and less clearly."""
     import tomllib
 
     out = {}
@@ -118,14 +210,16 @@ def _parse_sets(sets: list[str]) -> dict:
         key, value = item.split("=", 1)
         try:
             out[key.strip()] = tomllib.loads(f"v = {value}")["v"]
-        except tomllib.TOMLDecodeError:
-            out[key.strip()] = value
+        except tomllib.TOMLDecodeError as e:
+            if value.strip()[:1] in ("[", "{"):
+                _fail(f"--set {item!r}: {value.strip()!r} is not a TOML list or table ({e})")
+            out[key.strip()] = value.strip()
     return out
 
 
 _CONTROLS = (
-    "detectors (x_I := aux labels), target_mask (x_S := the referent's cells), type_gate (Eq. 4's gate from the "
-    "dataset's word types), none (emml/config/schema.py, ModelConfig.control)"
+    "detectors: x_I := the aux labels; target_mask: x_S := the referent's cells; type_gate: Eq. 4's gate from "
+    "the dataset's word types; none: the model's own"
 )
 
 

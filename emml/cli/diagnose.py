@@ -3,14 +3,26 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 import typer
 
-from emml.cli.common import _CONTROLS, _check_checkpoint, _echo, _fail, _own_engines
+from emml.cli.common import (
+    _CONTROLS,
+    JSON_HELP,
+    Activation,
+    Control,
+    Eq1Words,
+    Splits,
+    _check_checkpoint,
+    _echo,
+    _fail,
+    _own_engines,
+)
 
 
 def diagnose(
-    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt."),
     episodes: int = typer.Option(
         20, min=0, help="Sampled SGN episodes for the attention and detector figures (0: no SGN figures)."
     ),
@@ -19,15 +31,17 @@ def diagnose(
     sgn_outcomes: int = typer.Option(
         0, min=0, help="Greedy SGN episodes per split, seeded as `emml eval`: how each ends, per instruction (0: none)."
     ),
-    split: str = typer.Option("both", help="The SGN splits of --sgn-outcomes: train | test | both."),
-    control: str = typer.Option(None, help="Play under a diagnostic control instead of the run's: " + _CONTROLS),
-    seed: int = 20_000,
-    as_json: bool = typer.Option(False, "--json"),
+    split: Splits = typer.Option("both", help="The SGN splits of --sgn-outcomes."),
+    control: Control | None = typer.Option(None, help="Play under a diagnostic control: " + _CONTROLS + "."),
+    seed: int = typer.Option(20_000, help="Seed of the first episode (episode i plays seed + i)."),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Why a model does (not) follow instructions: attention on the target, per-word detector AP, and how much
-    the first move depends on where the target stands (emml/eval/diagnose.py); per EQA question its accuracy, answers,
-    where the attention sits and the GA2 gate per channel (emml/eval/diagnose_eqa.py); per SGN instruction its success
-    and how its episodes end: target, wrong object (which), time-out (emml/eval/diagnose_sgn.py)."""
+    """Why a model does or does not follow instructions.
+
+    SGN: how often the attention lands on the target, each word detector's average precision, how much the first
+    move depends on where the target stands, and whether x_I collapsed to a constant code. EQA, per question: its
+    accuracy, answers, where the attention sits and the GA2 gate per channel. With --sgn-outcomes, per SGN
+    instruction: its success and how its episodes end (target, which wrong object, time-out)."""
     from emml.eval.diagnose import diagnose_checkpoint, summary_line
     from emml.eval.diagnose_eqa import eqa_table
     from emml.eval.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
@@ -85,26 +99,27 @@ def _no_step0(step0_episodes: int) -> str:
 
 
 def probe_eqa_cmd(
-    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt (Dual-Attention with its GA2 gate, on EQA)"),
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt (Dual-Attention with its GA2 gate, on EQA)."),
     episodes: int = typer.Option(40, help="First frames per question (seeds 30,000+)."),
     readouts: str = typer.Option("last,mean", help="x_sent readouts to train, comma-separated: last | mean."),
     seeds: int = typer.Option(3, help="Encoders trained per readout (seeds 0, 1, ...)."),
     steps: int = typer.Option(600, help="Adam steps per encoder (minibatches of --batch frames)."),
     batch: int = typer.Option(128, help="Frames per minibatch."),
     lr: float = typer.Option(3e-3, help="Adam's learning rate."),
-    eq1_words: str = typer.Option(
-        "all", help="Words Eq. 1 sums the channels of: all (as the model) | content (function words left out)."
+    eq1_words: Eq1Words = typer.Option(
+        "all", help="Words Eq. 1 sums the channels of: all (as the model) or content (function words left out)."
     ),
-    init: str = typer.Option(
-        "checkpoint", help="Where the retrained GRU and Linear start: checkpoint (its weights) | fresh (a new draw)."
+    init: Literal["checkpoint", "fresh"] = typer.Option(
+        "checkpoint", help="Where the retrained GRU and Linear start: the checkpoint's weights or a fresh draw."
     ),
-    activation: str = typer.Option("relu", help="x_sent's activation on the retrained Linear: relu | softplus."),
-    as_json: bool = typer.Option(False, "--json"),
+    activation: Activation = typer.Option("relu", help="x_sent's activation on the retrained Linear."),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Would another question encoder answer the EQA test questions (issue 34)? On the first frames of EQA
-    episodes, conv and Dual-Attention frozen, x_sent's encoder (GRU + Linear; the embedding copied from the
-    checkpoint, frozen) retrained on the training questions' answers per readout and seed; answer accuracy on the
-    train and test questions beside the checkpoint's own encoder (emml/eval/probe_eqa.py)."""
+    """Would another question encoder answer the EQA test questions?
+
+    On the first frames of EQA episodes, with the conv and the Dual-Attention unit frozen, x_sent's encoder (GRU
+    and Linear; the embedding the checkpoint's, frozen) is retrained on the training questions' answers per readout
+    and seed; its answer accuracy on the train and test questions is shown beside the checkpoint's own encoder."""
     from emml.eval.probe_eqa import ProbeOptions, probe_checkpoint, probe_table
 
     chosen = tuple(r.strip() for r in readouts.split(",") if r.strip())

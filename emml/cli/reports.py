@@ -7,23 +7,22 @@ from pathlib import Path
 
 import typer
 
-from emml.cli.common import _check_store, _echo, _fail, _models, _out, _own_engines
+from emml.cli.common import JSON_HELP, Task, _check_store, _echo, _fail, _models, _out, _own_engines, profile_option
 
 
 def report(
-    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5, or a table file of your own (x.toml)"),
-    profile: str = typer.Option("quick", help="smoke | demo | quick | paper"),
+    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5, or a table file of your own (x.toml)."),
+    profile: str = profile_option(help="Whose results are reported."),
     curves: bool = typer.Option(True, "--curves/--no-curves", help="Also plot training curves (needs MLflow)."),
-    out: Path = typer.Option(None, help="Output folder (default: reports/)."),
-    as_json: bool = typer.Option(False, "--json"),
+    out: Path = typer.Option(None, help="Output folder (default: reports/; smoke: scratch/reports/)."),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Ours beside the paper: reports/TABLE-PROFILE.md/.tex (mean (each seed) | paper, the runs' deviations from the
-    paper, an rliable aggregate) and -curves.png/.pdf (smoke: under scratch/reports)."""
-    from emml.config.profiles import load_profiles
+    """One table, ours beside the paper's numbers.
+
+    Writes reports/TABLE-PROFILE.md and .tex (the mean over seeds with each seed's value beside the paper's, the
+    runs' deviations from the paper, an rliable aggregate) and TABLE-PROFILE-curves.png/.pdf."""
     from emml.report.tables import report_table
 
-    if profile not in load_profiles():
-        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
     if curves:  # they read MLflow
         _check_store()
     try:
@@ -46,7 +45,9 @@ def report(
 
 
 def reports(out: Path = typer.Option(None, help="Output folder (default: reports/).")):
-    """Every table, curve and figure for the profiles that have results, and reports/index.md linking them."""
+    """Every table, curve and figure, and reports/index.md linking them.
+
+    For every profile with results but smoke."""
     from emml.report.index import write_reports
 
     _check_store()  # the curves read MLflow
@@ -57,9 +58,10 @@ def reports(out: Path = typer.Option(None, help="Output folder (default: reports
 def backfill_config(
     paths: list[Path] = typer.Argument(..., help="Run dirs, or folders holding them (e.g. runs/table2)."),
 ):
-    """Copy each finished run's config from its checkpoint into its results.json (runs finished before the trainer
-    wrote it there), so reports read the deviations from the paper without loading checkpoints. A run still
-    training is skipped."""
+    """Copy finished runs' configs from their checkpoints into their results.json.
+
+    For runs finished before the trainer wrote it there: reports then read the deviations from the paper without
+    loading checkpoints. A run still training is skipped."""
     from emml.config.paths import project_path
     from emml.report.saved_config import backfill_config as backfill
     from emml.report.saved_config import run_dirs
@@ -73,12 +75,13 @@ def backfill_config(
 
 def import_runs_cmd(
     paths: list[Path] = typer.Argument(None, help="Run dirs, or folders holding them (default: runs/)."),
-    as_json: bool = typer.Option(False, "--json"),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Import finished run dirs (results.json, metrics.csv) into the MLflow store, one FINISHED run each in its
-    table's experiment with the trainer's tags, its config as params and its whole curve, so that `make ui` shows
-    the committed runs. Once: a run already in the store (trained or imported here) is skipped, and so is an
-    unfinished one (its trainer logs it)."""
+    """Import finished run dirs into the MLflow store (`make ui` shows them).
+
+    One FINISHED run each, in its table's experiment, with the trainer's tags, its config as params and its whole
+    curve. Once: a run already in the store (trained or imported here) is skipped, and so is an unfinished one
+    (its trainer logs it)."""
     from emml.config.paths import project_path
     from emml.runs.import_runs import import_runs
     from emml.runs.tracking import tracking_uri
@@ -97,10 +100,10 @@ def import_runs_cmd(
 
 
 def video(
-    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt."),
     episodes: int = typer.Option(3, min=1, help="Episodes per task (SGN, then EQA unless the run is SGN only)."),
     out: Path = typer.Option(Path("reports"), help="Folder for the GIFs."),
-    seed: int = 0,
+    seed: int = typer.Option(0, help="Seed of the first episode (episode i plays seed + i)."),
 ):
     """A captioned GIF per greedy episode: the sentence, each action, the outcome."""
     from emml.report.visualize import episode_gif, record_episode
@@ -117,10 +120,10 @@ def video(
 
 
 def visualize_channels(
-    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt."),
     compare: Path | None = typer.Option(None, help="A second checkpoint (e.g. the No-Aux run) for another column."),
     out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
-    seed: int = 0,
+    seed: int = typer.Option(0, help="Seed of the episode whose first frame is shown."),
 ):
     """The channel figure: per word, its aux label, each model's conv3 channel, and the frame."""
     from emml.report.visualize import channels_figure
@@ -134,10 +137,10 @@ def visualize_channels(
 
 
 def visualize_attention(
-    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
-    task: str = typer.Option("sgn", help="sgn | eqa"),
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt."),
+    task: Task = typer.Option("sgn", help="The episode's task."),
     out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
-    seed: int = 0,
+    seed: int = typer.Option(0, help="Seed of the episode."),
     rows: int = typer.Option(6, min=1, help="Steps shown, spread over the episode."),
 ):
     """The attention figure: one greedy episode, rows over time (frame, x_spat, x_Ans, action), x_sent on top."""
@@ -159,7 +162,7 @@ def visualize_attention(
 
 def visualize_house(
     out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
-    seed: int = 0,
+    seed: int = typer.Option(0, help="Seed of the furniture's colours."),
 ):
     """Three first-person views of the House with furniture in the episode's colours (Appendix C's example views)."""
     from emml.report.house_views import house_views

@@ -6,25 +6,34 @@ import shlex
 
 import typer
 
-from emml.cli.common import _echo, _fail, _use_tcmalloc
+from emml.cli.common import (
+    JSON_HELP,
+    RESULTS_ROOT_HELP,
+    RUN_ROOT_HELP,
+    Backend,
+    _echo,
+    _fail,
+    _use_tcmalloc,
+    device_option,
+    profile_option,
+)
 
 
 def list_experiments(
-    profile: str = typer.Option("quick", help="smoke | demo | quick | paper: which results count as finished."),
-    as_json: bool = typer.Option(False, "--json"),
+    profile: str = profile_option(help="Whose results count as finished."),
+    run_root: str = typer.Option(None, help=RUN_ROOT_HELP),
+    results_root: str = typer.Option(None, help=RESULTS_ROOT_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Every table in reproduce/ with its runs and how many are finished under the profile."""
-    from emml.config.profiles import load_profiles
+    """Every table with its runs, and which are finished under the profile."""
     from emml.experiments.launch import run_states
     from emml.experiments.tables import list_tables, load_table
 
-    if profile not in load_profiles():
-        _fail(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, load_profiles()))}")
     data, lines = [], []
     for name in list_tables():
         try:
             table = load_table(name)
-            states = run_states(name, profile)
+            states = run_states(name, profile, run_root, results_root)
         except ValueError as e:
             _fail(str(e))
         runs = [{"run_name": rname, "row": spec.row, "state": state} for rname, (spec, state) in states.items()]
@@ -49,12 +58,14 @@ def run_table(
     table: str = typer.Argument(
         ...,
         help="table2 | table3 | table4 | table5 (reproduce/<table>.toml), experiments/<name> "
-        "(reproduce/experiments/<name>.toml), or a table file of your own (x.toml)",
+        "(reproduce/experiments/<name>.toml), or a table file of your own (x.toml).",
     ),
-    profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
-    backend: str = typer.Option("local", help="local (process pool) | slurm (submitit)"),
+    profile: str = profile_option(),
+    backend: Backend = typer.Option("local", help="local: a process pool here; slurm: one submitit job per run."),
     jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores; cuda: and what GPU memory holds)."),
-    device: str = typer.Option("cpu", help="cpu | cuda"),
+    device: str = device_option(),
+    run_root: str = typer.Option(None, help=RUN_ROOT_HELP),
+    results_root: str = typer.Option(None, help=RESULTS_ROOT_HELP),
     partition: str = typer.Option(None, help="Slurm partition."),
     time_min: int = typer.Option(24 * 60, help="Slurm time limit per run, minutes."),
     gpus: int = typer.Option(0, help="GPUs per Slurm job."),
@@ -63,9 +74,11 @@ def run_table(
     only: list[str] = typer.Option(
         [], "--only", help="Only the runs whose FIELD=VALUE (row, model, difficulty, aux, seed), e.g. difficulty=easy."
     ),
-    as_json: bool = typer.Option(False, "--json"),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Train every run of a table (skips finished runs, resumes interrupted ones); a placeholder table exits 0."""
+    """Train every run of a table.
+
+    Finished runs are skipped, interrupted ones resume; a placeholder table (no runs declared yet) exits 0."""
     from dataclasses import asdict
 
     from emml.experiments.launch import run_table as launch
@@ -90,6 +103,8 @@ def run_table(
             profile,
             backend=backend,
             jobs=jobs or None,
+            run_root=run_root,
+            results_root=results_root,
             device=device,
             partition=partition,
             time_min=time_min,
@@ -108,7 +123,8 @@ def run_table(
         plugins = [arg for p in configured() for arg in ("--plugin", p)]  # a model of one's own needs its plugin
         only_args = [arg for o in only for arg in ("--only", o)]
         # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
-        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *only_args])
+        roots = [a for k, v in (("--run-root", run_root), ("--results-root", results_root)) if v for a in (k, v)]
+        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *roots, *only_args])
         _echo(data, as_json, stopped_line(report, again))
         raise typer.Exit(130)
     _echo(
@@ -130,15 +146,17 @@ def campaign(
         help="Train from a git worktree of this commit (.campaign/<sha>), so edits cannot reach it.",
     ),
     jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores)."),
-    device: str = typer.Option("cpu", help="cpu | cuda"),
-    run_root: str = typer.Option(None, help="Run dirs (default: the checkout's runs/)."),
-    results_root: str = typer.Option(None, help="Results CSVs (default: the checkout's results/)."),
+    device: str = device_option(),
+    run_root: str = typer.Option(None, help=RUN_ROOT_HELP),
+    results_root: str = typer.Option(None, help=RESULTS_ROOT_HELP),
     steps: list[str] = typer.Option(
         [], "--step", help="Only this step (by name, as --status shows it; repeatable); the campaign's order stays."
     ),
-    as_json: bool = typer.Option(False, "--json"),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Train a campaign's unfinished runs in its order (resuming interrupted ones), or show its status."""
+    """Train a campaign's unfinished runs in its order, or show its status.
+
+    Interrupted runs resume; with --pin (the default) it trains from a git worktree of this commit."""
     from dataclasses import asdict
 
     from emml.experiments.campaign import (

@@ -8,8 +8,14 @@ from pathlib import Path
 import typer
 
 from emml.cli.common import (
-    _DOOM_DIFFICULTY_HELP,
-    _ENV_HELP,
+    JSON_HELP,
+    SET_HELP,
+    BenchPart,
+    DoomDifficulty,
+    EnvName,
+    Interpolation,
+    Split,
+    Tasks,
     _echo,
     _env_config,
     _fail,
@@ -18,15 +24,23 @@ from emml.cli.common import (
     _own_engines,
     _parse_sets,
     _use_tcmalloc,
+    device_option,
+    model_option,
+    profile_option,
 )
 from emml.config.env_kinds import DOOM_ID
 
+_ENV_HELP = "The environment: the Doom room, or the House of Appendix C."
+_DIFFICULTY_HELP = "Doom's difficulty (the House has one)."
+_HEIGHT_HELP = "Observation height in pixels."
+_WIDTH_HELP = "Observation width in pixels."
+
 
 def tasks_show(
-    dataset: str = typer.Argument("doom", help="doom (Table 7) | house (Table 8)"),
-    as_json: bool = typer.Option(False, "--json"),
+    dataset: str = typer.Argument("doom", help="doom (Table 7) | house (Table 8)."),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """List a dataset's instructions and questions by task and split."""
+    """A dataset's instructions and questions by task and split, its vocabulary and objects."""
     from emml.tasks.language import KINDS, SPLITS, Vocabulary, load_dataset
 
     try:
@@ -49,18 +63,18 @@ def tasks_show(
 
 
 def oracle(
-    env_name: str = typer.Option("doom", "--env", help=_ENV_HELP),
-    difficulty: str = typer.Option("easy", help=_DOOM_DIFFICULTY_HELP),
-    task: str = typer.Option("sgn", help="sgn | eqa | both"),
-    split: str = typer.Option("train", help="train | test"),
-    episodes: int = typer.Option(100, min=1),
-    seed: int = 0,
-    height: int = 168,
-    width: int = 300,
-    as_json: bool = typer.Option(False, "--json"),
+    env_name: EnvName = typer.Option("doom", "--env", help=_ENV_HELP),
+    difficulty: DoomDifficulty = typer.Option("easy", help=_DIFFICULTY_HELP),
+    task: Tasks = typer.Option("sgn", help="The episodes' task (both: 50/50)."),
+    split: Split = typer.Option("train", help="The instructions' and questions' split."),
+    episodes: int = typer.Option(100, min=1, help="Episodes to play."),
+    seed: int = typer.Option(0, help="Seed of the first episode (episode i plays seed + i)."),
+    height: int = typer.Option(168, help=_HEIGHT_HELP),
+    width: int = typer.Option(300, help=_WIDTH_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
     video: Path = typer.Option(None, help="Also record a few Easy and Hard episodes as a GIF in this folder."),
 ):
-    """Accuracy of the scripted expert (privileged state): every episode must be solvable."""
+    """Accuracy of a scripted expert that sees the true state: proof every episode is solvable."""
     from emml.agents.oracle import run_oracle
     from emml.envs.vector import make_env
 
@@ -88,11 +102,13 @@ def oracle(
 
 
 def models(
-    height: int = 168,
-    width: int = 300,
-    as_json: bool = typer.Option(False, "--json"),
+    height: int = typer.Option(168, help=_HEIGHT_HELP),
+    width: int = typer.Option(300, help=_WIDTH_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """The model registry with parameter counts at an input size (vocabulary of the Doom dataset)."""
+    """The model registry with parameter counts at an input size.
+
+    The vocabulary is the Doom dataset's; each model's x_S formula as the code computes it."""
     from emml.models import model_table
     from emml.tasks.language import Vocabulary, load_dataset
 
@@ -110,13 +126,13 @@ def models(
 
 
 def bench_env(
-    env_name: str = typer.Option("doom", "--env", help=_ENV_HELP),
-    height: int = 168,
-    width: int = 300,
-    difficulty: str = typer.Option("easy", help=_DOOM_DIFFICULTY_HELP),
-    interpolation: str = typer.Option("linear", help="linear | area | nearest"),
-    steps: int = typer.Option(2000, min=100),
-    as_json: bool = typer.Option(False, "--json"),
+    env_name: EnvName = typer.Option("doom", "--env", help=_ENV_HELP),
+    height: int = typer.Option(168, help=_HEIGHT_HELP),
+    width: int = typer.Option(300, help=_WIDTH_HELP),
+    difficulty: DoomDifficulty = typer.Option("easy", help=_DIFFICULTY_HELP),
+    interpolation: Interpolation = typer.Option("linear", help="Resize filter from the render to the observation."),
+    steps: int = typer.Option(2000, min=100, help="Steps per measurement."),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """Raw ViZDoom vs our env (labels off/on), and the vector env with 1 and 2 workers."""
     from emml.rl.bench import bench_env as run
@@ -138,19 +154,21 @@ def bench_env(
 
 
 def bench_train_cmd(
-    model: str = "dual_attention",
-    aux: bool = typer.Option(True, "--aux/--no-aux"),
-    profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
-    updates: int = typer.Option(5, min=1),
-    device: str = "cpu",
+    model: str = model_option(help="The model to measure (`emml models` lists them)."),
+    aux: bool = typer.Option(True, "--aux/--no-aux", help="With the auxiliary task."),
+    profile: str = profile_option(help="Profile whose input size, actors and horizon are used."),
+    updates: int = typer.Option(5, min=1, help="Updates per measurement."),
+    device: str = device_option(),
     runs: int = typer.Option(0, min=0, help="Also pack N end-to-end runs side by side: aggregate vs simulator limit."),
-    sets: list[str] = typer.Option([], "--set", help="Override any config field."),
-    part: str = typer.Option("both", help="both (model-only, end-to-end and their ratio), model or e2e."),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
+    part: BenchPart = typer.Option("both", help="both: model-only, end-to-end and their ratio; or one of them."),
     stack: int = typer.Option(1, min=1, help="N seeds stacked in one model and process (vmap), vs one run."),
-    as_json: bool = typer.Option(False, "--json"),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Model-only (synthetic batches) vs end-to-end (real envs) training frames/s, in one run, with the time split;
-    with --runs N, the aggregate of N packed runs against the raw simulator limit of the machine's cores."""
+    """Training frames/s, model-only against end to end, in one run.
+
+    Model-only trains on synthetic batches, end to end on real envs; with the time split. With --runs N, the
+    aggregate of N packed runs against the raw simulator limit of the machine's cores."""
     from emml.config.profiles import profile_config
     from emml.rl.bench import PARTS, bench_train
     from emml.rl.hardware import check_runnable
@@ -213,14 +231,16 @@ def _child_bench_args(profile: str, updates: int, sets: list[str], variants: lis
 
 
 def bench_alloc_cmd(
-    profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
+    profile: str = profile_option(help="Profile whose input size, actors and horizon are used."),
     updates: int = typer.Option(2, min=1, help="Updates per measurement (after one warm-up update)."),
     rounds: int = typer.Option(3, min=1, help="Rounds; each runs every allocator once, interleaved."),
-    sets: list[str] = typer.Option([], "--set", help="Override any config field."),
-    as_json: bool = typer.Option(False, "--json"),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Training frames/s (model-only and end-to-end) under each allocator this machine has, interleaved in one
-    run: tcmalloc and mimalloc where installed, glibc tuned in-process (the default without them) and untuned."""
+    """Training frames/s under each memory allocator this machine has.
+
+    Model-only and end to end, interleaved in one run: tcmalloc and mimalloc where installed, glibc tuned
+    in-process (the default without them) and untuned."""
     from emml.rl.bench import bench_alloc
 
     r = bench_alloc(_child_bench_args(profile, updates, sets), rounds)
@@ -235,12 +255,12 @@ def bench_alloc_cmd(
 
 
 def bench_workers_cmd(
-    profile: str = typer.Option("quick", help="Profile whose input size, actors and horizon are used."),
+    profile: str = profile_option(help="Profile whose input size, actors and horizon are used."),
     per_worker: list[int] = typer.Option([1, 4], "--per-worker", help="Envs per worker process to compare."),
     updates: int = typer.Option(2, min=1, help="Updates per measurement (after one warm-up update)."),
     rounds: int = typer.Option(3, min=1, help="Rounds; each runs every setting once, interleaved."),
-    sets: list[str] = typer.Option([], "--set", help="Override any config field."),
-    as_json: bool = typer.Option(False, "--json"),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """End-to-end training frames/s with each number of envs per worker process, interleaved in one run."""
     from emml.rl.bench import bench_workers

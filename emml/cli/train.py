@@ -8,7 +8,14 @@ import typer
 
 from emml.cli.common import (
     _CONTROLS,
-    _DIFFICULTY_HELP,
+    JSON_HELP,
+    QUIET_HELP,
+    RESULTS_ROOT_HELP,
+    RUN_ROOT_HELP,
+    SEED_HELP,
+    SET_HELP,
+    Control,
+    Difficulty,
     _check_checkpoint,
     _echo,
     _fail,
@@ -16,34 +23,43 @@ from emml.cli.common import (
     _own_engines,
     _parse_sets,
     _use_tcmalloc,
+    device_option,
+    model_option,
+    profile_option,
 )
 from emml.runs.rundir import run_name
 
 
 def train(
-    model: str = typer.Option("dual_attention", help="Model registry name (emml models)."),
-    difficulty: str = typer.Option("easy", help=_DIFFICULTY_HELP),
-    aux: bool = typer.Option(False, "--aux/--no-aux", help="Train with the auxiliary task."),
-    profile: str = typer.Option("quick", help="smoke | demo | quick | paper (reproduce/profiles.toml)"),
-    seed: int = 0,
-    table: str = typer.Option("adhoc", help="MLflow experiment / results table."),
-    device: str = typer.Option("cpu", help="cpu | cuda"),
-    frames: int = typer.Option(0, help="Override the profile's frames (0: keep)."),
-    sets: list[str] = typer.Option([], "--set", help="Override any config field: --set env.shaping=false"),
+    model: str = model_option(),
+    difficulty: Difficulty = typer.Option("easy", help="Where it trains: Doom Easy, Doom Hard or the House."),
+    aux: bool = typer.Option(False, "--aux/--no-aux", help="Train with the auxiliary task (§3.2)."),
+    profile: str = profile_option(),
+    seed: int = typer.Option(0, help="The run's seed (model init, episodes)."),
+    table: str = typer.Option("adhoc", help="Table the run belongs to: its run dir folder and MLflow experiment."),
+    device: str = device_option(),
+    frames: int = typer.Option(0, help="Frames to train (0: the profile's)."),
+    sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     pack_seeds: str = typer.Option(
-        "", help="Seeds to train packed in this process, e.g. 0,1,2: one stacked model (emml/rl/packed.py)."
+        "", help="Train these seeds in one process as one stacked model, e.g. 0,1,2 (each written as its own run)."
     ),
-    quiet: bool = False,
-    as_json: bool = typer.Option(False, "--json"),
+    run_root: str = typer.Option(None, help=RUN_ROOT_HELP),
+    results_root: str = typer.Option(None, help=RESULTS_ROOT_HELP),
+    quiet: bool = typer.Option(False, help=QUIET_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Train one run (resumes it if interrupted; a finished run is not retrained); with --pack-seeds, several
-    seeds of it in one process, each written as its own run."""
+    """Train one run, or resume it.
+
+    An interrupted run resumes from its checkpoint; a finished one is not trained again. With no option it trains
+    Dual-Attention without aux on Doom Easy under the quick profile (1.5M frames), and says so first. With
+    --pack-seeds, several seeds train in one process, each written as its own run."""
     from emml.config.profiles import profile_config
     from emml.rl.hardware import check_runnable
 
     overrides = _parse_sets(sets)
     if frames:
         overrides["frames"] = frames
+    overrides.update({k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None})
     try:
         seeds = [int(s) for s in pack_seeds.split(",")] if pack_seeds else [seed]
     except ValueError:
@@ -114,13 +130,15 @@ def train(
 
 
 def eval_checkpoint(
-    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt"),
+    checkpoint: Path = typer.Argument(..., help="A run's checkpoint.pt."),
     episodes: int = typer.Option(100, min=1, help="Episodes per (task, split)."),
-    seed: int = 10_000,
-    control: str = typer.Option(None, help="Play under a diagnostic control instead of the run's: " + _CONTROLS),
-    as_json: bool = typer.Option(False, "--json"),
+    seed: int = typer.Option(10_000, help=SEED_HELP),
+    control: Control | None = typer.Option(None, help="Play under a diagnostic control: " + _CONTROLS + "."),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Greedy accuracy of a checkpoint on SGN/EQA train/test (reproducible under --seed)."""
+    """Greedy accuracy of a checkpoint on SGN and EQA, train and test.
+
+    Reproducible: episode i of each (task, split) plays seed + i."""
     from emml.eval.evaluate import evaluate_checkpoint
 
     _check_checkpoint(checkpoint)
@@ -135,17 +153,21 @@ def eval_checkpoint(
 
 
 def rescore_runs(
-    runs: list[Path] = typer.Argument(..., help="Finished run directories (or their checkpoint.pt)."),
+    runs: list[Path] = typer.Argument(..., help="Finished run dirs (or their checkpoint.pt)."),
     episodes: int = typer.Option(0, min=0, help="Episodes per (task, split); 0: the run's final_eval_episodes."),
     seed: int = typer.Option(10_000, help="First episode seed (the trainer's evaluations use 10,000)."),
     record: bool = typer.Option(True, "--record/--no-record", help="Also upsert the run's results-table row."),
     force: bool = typer.Option(False, "--force", help="Play again a run already scored with this protocol."),
-    results_root: str = typer.Option(None, help="Results root of the rows (default: the run's, from its checkpoint)."),
-    device: str = typer.Option("cpu", help="cpu | cuda"),
-    as_json: bool = typer.Option(False, "--json"),
+    results_root: str = typer.Option(
+        None, help="Folder of the results CSVs whose rows are rewritten (default: the run's, from its checkpoint)."
+    ),
+    device: str = device_option(),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Re-score finished runs with the final-evaluation protocol (issue 33): results.json's metrics and the
-    results-table row rewritten, training provenance kept, scored_sha / eval_episodes / eval_seed recorded."""
+    """Score finished runs again with the final-evaluation protocol.
+
+    Each run's results.json and results row are rewritten with the new score; its training provenance is kept,
+    and scored_sha, eval_episodes and eval_seed are recorded. A run already scored so is only re-recorded."""
     from emml.config.schema import TrainConfig
     from emml.eval.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
     from emml.runs.checkpoint import load_checkpoint
@@ -188,16 +210,18 @@ def _score(value) -> str:
 
 def transfer(
     checkpoint: Path = typer.Argument(
-        ..., help="A checkpoint of an SGN Dual-Attention run that does not know the words"
+        ..., help="A checkpoint of an SGN Dual-Attention run that does not know the words."
     ),
     words: str = typer.Option("red,pillar", help="New words, comma-separated, in channel order."),
     episodes: int = typer.Option(100, min=1, help="Greedy episodes per test instruction."),
     detector: str = typer.Option("labels", help="Detector kind: labels (the engine's label buffer)."),
-    seed: int = 10_000,
-    as_json: bool = typer.Option(False, "--json"),
+    seed: int = typer.Option(10_000, help=SEED_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Table 4 on one checkpoint (§5.4): append detectors for new words, score every SGN test instruction that
-    holds one, without fine-tuning; rows as in reproduce/table4.toml."""
+    """Table 4 on one checkpoint: new words without fine-tuning.
+
+    Detectors for the new words are appended (§5.4) and every SGN test instruction holding one is scored; rows as
+    in reproduce/table4.toml."""
     from emml.eval.transfer import transfer_checkpoint
     from emml.experiments.tables import load_table
 
@@ -222,15 +246,20 @@ def transfer(
 
 
 def demo(
-    out: Path = typer.Option(Path("reports"), help="Where the report goes."),
-    profile: str = typer.Option("demo", help="Profile of the demo run."),
+    out: Path = typer.Option(Path("reports"), help="Folder of the report."),
+    profile: str = profile_option("demo", help="Profile of the demo run (reproduce/profiles.toml)."),
+    run_root: str = typer.Option(None, help=RUN_ROOT_HELP),
+    results_root: str = typer.Option(None, help=RESULTS_ROOT_HELP),
 ):
-    """The main job: a short Dual-Attention training (aux on) on Doom Easy instruction following (SGN), evaluated,
-    logged to MLflow, with a report (accuracies, training curve, diagnostics) in reports/."""
+    """A short training with its report: the demo of `make demo`.
+
+    Dual-Attention with aux on Doom Easy instructions (SGN), evaluated and logged to MLflow, with a report
+    (accuracies, training curve, diagnostics) in reports/."""
     from emml.config.profiles import profile_config
 
     # SGN only: within the demo's minutes the agent leaves chance on instructions (both tasks need more frames)
     over = {"env.tasks": "sgn"}
+    over.update({k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None})
     try:
         cfg = profile_config(profile, "easy", over, model="dual_attention", aux=True, seed=0, table="demo").validate()
         from emml.runs.preflight import check_train

@@ -169,10 +169,13 @@ class Trainer:
             run_id=saved["run_id"] if saved else None,
             parent_run_id=self.parent_run_id,
         )
-        if saved is not None:
-            if not self.quiet:
-                tqdm.write(f"resuming {self.name} from frame {frames:,} (update {update}), MLflow run {run_id}")
-        else:  # at once, so that a run killed before its first update resumes this MLflow run, not a second one
+        if not self.quiet:  # what it starts, before minutes of it (a bare `emml train` trains 1.5M frames)
+            total = cfg.num_updates * cfg.frames_per_update
+            if saved is not None:
+                _say(f"resuming {self.name} from frame {frames:,} (update {update}) to {total:,}, MLflow run {run_id}")
+            else:
+                _say(f"training {self.name}: {total:,} frames ({cfg.profile} profile, {cfg.device}) in {self.dir}")
+        if saved is None:  # at once, so that a run killed before its first update resumes this MLflow run, not a second
             try:
                 self._checkpoint(model, optimizer or make_optimizer(model.parameters(), cfg.ppo), update, frames, False)
             except BaseException as e:  # a full disk, a run dir gone read-only: the run ends FAILED, not RUNNING
@@ -346,16 +349,14 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                 line_fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
                 eta = _eta(total - frames, (frames - start_mark[1]) / max(now - start_mark[0], 1e-9))
                 if n == 1:
-                    bar.write(_log_line(update, frames, line_fps, first, since_line, tasks=tasks, eta=eta))
+                    _say(_log_line(update, frames, line_fps, first, since_line, tasks=tasks, eta=eta))
                 else:
                     seeds = " ".join(
                         f"s{t.cfg.seed} sgn {np.mean(sampler.recent_by_run[r][0] or [np.nan]):.2f}"
                         for r, t in enumerate(trainers)
                     )
-                    bar.write(
-                        f"update {update:>5} frames {frames:>9,} x {n} runs, {fps:6.0f} frames/s all | {seeds} "
-                        f"| eta {eta}"
-                    )
+                    head = f"update {update:>5} frames {frames:>9,} x {n} runs, {fps:6.0f} frames/s all"
+                    _say(f"{head} | {seeds} | eta {eta}")
                 since_line = dict.fromkeys(TIME_SPLIT, 0.0)
             if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
                 for r, t in enumerate(trainers):
@@ -408,6 +409,13 @@ def time_shares(seconds: dict[str, float]) -> dict[str, float]:
 
 def _dtype(space) -> torch.dtype:
     return {np.uint8: torch.uint8}.get(space.dtype.type, torch.int64)
+
+
+def _say(line: str) -> None:
+    """A log line on stdout, above the progress bar when there is one, flushed: piped to a file, each line is there
+    when written (and before a failure's line on stderr)."""
+    tqdm.write(line)
+    sys.stdout.flush()
 
 
 TASKS = ("sgn", "eqa")

@@ -41,9 +41,9 @@ def test_oracle_json(no_leftovers):
 
 
 def test_bad_input_is_named_before_compute(no_leftovers):
-    result = runner.invoke(app, ["oracle", "--difficulty", "medium"])
+    result = runner.invoke(app, ["oracle", "--difficulty", "medium"], env={"COLUMNS": "200"})
     assert result.exit_code == 2
-    assert "difficulty='medium'" in result.output and "'easy', 'hard'" in result.output
+    assert "'--difficulty'" in result.output and "'medium' is not one of 'easy', 'hard'" in result.output
     result = runner.invoke(app, ["tasks", "show", "house3d"])
     assert result.exit_code == 2 and "dataset='house3d'" in result.output
 
@@ -80,8 +80,8 @@ def test_diagnose_a_checkpoint(tracking, no_leftovers):
     assert gated.exit_code == 0, gated.output
     data = json.loads(gated.output)
     assert data["control"] == "type_gate" and len(data["eqa"]["questions"]) == 29 and "detector_ap" not in data
-    bad = runner.invoke(app, [*eqa, "--control", "oracle"])
-    assert bad.exit_code == 2 and "control='oracle'" in bad.output
+    bad = runner.invoke(app, [*eqa, "--control", "oracle"], env={"COLUMNS": "200"})
+    assert bad.exit_code == 2 and "'oracle' is not one of" in bad.output
     scores = runner.invoke(app, ["eval", str(path), "--episodes", "1", "--control", "type_gate", "--json"])
     assert scores.exit_code == 0, scores.output
     assert set(json.loads(scores.output)) == {"sgn_train", "sgn_test", "eqa_train", "eqa_test"}
@@ -152,8 +152,8 @@ def test_house_tasks_and_oracle_json(no_leftovers):
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert data["env"] == "house" and data["accuracy"] == 1.0
-    result = runner.invoke(app, ["oracle", "--env", "attic"])
-    assert result.exit_code == 2 and "--env='attic'" in result.output
+    result = runner.invoke(app, ["oracle", "--env", "attic"], env={"COLUMNS": "200"})
+    assert result.exit_code == 2 and "'attic' is not one of 'doom', 'house'" in result.output
 
 
 def test_train_on_a_full_disk_fails_in_one_line_and_its_mlflow_run_ends_failed(tracking, monkeypatch, no_leftovers):
@@ -261,8 +261,130 @@ def test_a_piped_train_log_has_lines_and_no_progress_bar(tracking, no_leftovers)
     assert out.returncode == 0, out.stderr
     log = out.stdout + out.stderr
     assert "\r" not in log
+    started = [x for x in log.splitlines() if x.startswith("training ")]  # said first: a bare `emml train` runs long
+    root = re.escape(tracking["run_root"])
+    assert len(started) == 1 and re.fullmatch(
+        rf"training (\S+): 128 frames \(smoke profile, cpu\) in {root}/test/\1", started[0]
+    )
     lines = [x for x in log.splitlines() if x.startswith("update ")]
     assert len(lines) == 2, log
     for line in lines:
         assert re.search(r"frames +\d[\d,]* fps +\d+ sgn (nan|\d\.\d\d) pg ", line), line
         assert " eqa " not in line and re.search(r"\| eta \d+:\d\d:\d\d$", line), line
+
+
+def _commands(group, path=()):
+    """(command path, click command) of every command of the app, sub-apps' included."""
+    for name, cmd in group.commands.items():
+        if hasattr(cmd, "commands"):
+            yield from _commands(cmd, (*path, name))
+        else:
+            yield (*path, name), cmd
+
+
+def test_help_groups_the_commands_and_says_what_every_option_does():
+    import re
+
+    from typer.main import get_command
+
+    result = runner.invoke(app, ["--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0
+    for panel in ("Train", "Evaluate & diagnose", "Tables & reports", "Tools", "--install-completion"):
+        assert panel in result.output, panel
+    internal = re.compile(r"issue \d|emml/|\.py\b|README")  # help speaks to the user, not of the code's history
+    commands = dict(_commands(get_command(app)))
+    assert len(commands) >= 25
+    for path, cmd in commands.items():
+        summary = (cmd.help or "").split("\n\n")[0]
+        assert summary and "\n" not in summary.strip(), f"{path}: its summary is not one line: {summary!r}"
+        assert not internal.search(cmd.help), f"{path}: {cmd.help!r}"
+        for param in cmd.params:
+            if param.name == "help":
+                continue
+            assert getattr(param, "help", None), f"emml {' '.join(path)}: {param.name} has no help"
+            assert not internal.search(param.help), f"emml {' '.join(path)} {param.name}: {param.help!r}"
+
+
+@pytest.mark.parametrize(
+    ("args", "option", "allowed"),
+    [
+        (["train", "--difficulty", "medium"], "--difficulty", ("'easy'", "'hard'", "'house'")),
+        (["train", "--profile", "huge"], "--profile", ("'smoke'", "'demo'", "'quick'", "'paper'")),
+        (["train", "--device", "tpu"], "--device", ("'cpu'", "'cuda'")),
+        (["run", "table2", "--backend", "pbs"], "--backend", ("'local'", "'slurm'")),
+        (["oracle", "--task", "vqa"], "--task", ("'sgn'", "'eqa'", "'both'")),
+    ],
+)
+def test_a_value_outside_the_choices_is_refused_naming_them(args, option, allowed, monkeypatch):
+    import emml.rl.trainer
+
+    monkeypatch.setattr(emml.rl.trainer, "train", lambda *a, **k: pytest.fail("trained"))
+    result = runner.invoke(app, args, env={"COLUMNS": "200"})
+    assert result.exit_code == 2, result.output
+    assert f"Invalid value for '{option}'" in result.output and all(a in result.output for a in allowed)
+
+
+def test_the_shell_completes_commands_and_choices():
+    import os
+    import subprocess
+    import sys
+
+    def complete(words: str) -> list[str]:
+        env = {**os.environ, "_EMML_COMPLETE": "complete_bash", "COMP_WORDS": words, "COMP_CWORD": "3"}
+        code = "from emml.cli import app; app(prog_name='emml')"
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+        return out.stdout.split()
+
+    assert complete("emml train --difficulty ") == ["easy", "hard", "house"]
+    assert complete("emml train --profile q") == ["quick"]
+    assert "dual_attention" in complete("emml train --model d")
+
+
+def test_set_takes_a_bare_word_as_a_string_and_toml_otherwise():
+    from emml.cli.common import _parse_sets
+
+    parsed = _parse_sets(
+        [
+            "env.tasks=sgn",
+            "precision='bf16'",
+            'env.split="test"',
+            "ppo.lr=1e-4",
+            "env.height=84",
+            "env.shaping=false",
+            'model_options={control="target_mask"}',
+            "env.aux_words=['red', 'pillar']",
+            "run_root=/tmp/my runs",
+        ]
+    )
+    assert parsed == {
+        "env.tasks": "sgn",
+        "precision": "bf16",
+        "env.split": "test",
+        "ppo.lr": 1e-4,
+        "env.height": 84,
+        "env.shaping": False,
+        "model_options": {"control": "target_mask"},
+        "env.aux_words": ["red", "pillar"],
+        "run_root": "/tmp/my runs",
+    }
+    with pytest.raises(typer.Exit):  # a table that is not TOML: refused, not taken as a string
+        _parse_sets(["model_options={control=target_mask}"])
+
+
+def test_train_takes_the_roots_as_options(tracking, monkeypatch):
+    """--run-root and --results-root set the roots as --set run_root=... does."""
+    import emml.rl.trainer
+    from emml.runs.rundir import RunResult
+
+    seen = {}
+
+    def fake_train(cfg, quiet=False):
+        seen["cfg"] = cfg
+        return RunResult(run_dir=tracking["run_root"], run_id="x", frames=0, metrics={}, skipped=True)
+
+    monkeypatch.setattr(emml.rl.trainer, "train", fake_train)
+    monkeypatch.setattr("emml.cli.train._use_tcmalloc", lambda: None)
+    roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
+    result = runner.invoke(app, ["train", *roots])
+    assert result.exit_code == 0, result.output
+    assert seen["cfg"].run_root == tracking["run_root"] and seen["cfg"].results_root == tracking["results_root"]

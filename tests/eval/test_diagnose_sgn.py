@@ -163,5 +163,7 @@ def test_a_checkpoints_outcomes_match_its_evaluation(tracking, no_leftovers):
                 assert r["reached"] != r["target"] and r["reached_words"] and r["reached_slot"] != r["target_slot"]
     text = CliRunner().invoke(app, ["diagnose", str(path), *quiet, "--sgn-outcomes", "2", "--split", "test"])
     assert text.exit_code == 0 and "test: success" in text.output and "train: success" not in text.output
-    bad = CliRunner().invoke(app, ["diagnose", str(path), *quiet, "--sgn-outcomes", "2", "--split", "val"])
-    assert bad.exit_code == 2 and "split='val'" in bad.output
+    bad = CliRunner().invoke(
+        app, ["diagnose", str(path), *quiet, "--sgn-outcomes", "2", "--split", "val"], env={"COLUMNS": "200"}
+    )
+    assert bad.exit_code == 2 and "'val' is not one of 'train', 'test', 'both'" in bad.output

@@ -192,11 +192,12 @@ def _no_engine(cfg):
         (["--episodes", "0"], "episodes=0"),
         (["--seeds", "0"], "seeds=0"),
         (["--lr", "0"], "lr=0.0"),
-        (["--activation", "tanh"], "activation='tanh'"),
+        (["--activation", "tanh"], "'tanh' is not one of 'relu', 'softplus'"),
     ],
 )
 def test_the_cli_names_a_bad_option_before_loading(args, named, tmp_path):
-    result = runner.invoke(app, ["probe-eqa", str(tmp_path / "nope.pt"), *args])  # no checkpoint read: no such file
+    # no checkpoint read: no such file
+    result = runner.invoke(app, ["probe-eqa", str(tmp_path / "nope.pt"), *args], env={"COLUMNS": "200"})
     assert result.exit_code == 2 and named in result.output and "no such file" not in result.output, result.output
     if "readouts='max'" in named:
         assert "'last', 'mean'" in result.output

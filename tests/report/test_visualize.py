@@ -110,8 +110,8 @@ def test_cli_figures_and_videos(checkpoints, tmp_path, no_leftovers):
     assert [g.name.split("-")[-2] for g in gifs] == ["eqa", "sgn"]
     assert Image.open(gifs[0]).n_frames >= 6
     assert len(list(tmp_path.glob("channels-*.png"))) == 1 and len(list(tmp_path.glob("attention-sgn-*.png"))) == 1
-    bad = runner.invoke(app, ["visualize", "attention", ck, "--task", "nav"])
-    assert bad.exit_code == 2 and "task='nav'" in bad.output
+    bad = runner.invoke(app, ["visualize", "attention", ck, "--task", "nav"], env={"COLUMNS": "200"})
+    assert bad.exit_code == 2 and "'nav' is not one of 'sgn', 'eqa'" in bad.output
 
 
 def test_a_gif_per_episode(checkpoints, tmp_path, no_leftovers):
