@@ -9,5 +9,10 @@ __version__ = "0.1.0"
 
 for _env in GYM_ENVS.values():  # declared with the env kinds (emml/config/env_kinds.py)
     if _env.gym_id not in gym.registry:
-        gym.register(id=_env.gym_id, entry_point=_env.entry_point, disable_env_checker=True)
+        gym.register(
+            id=_env.gym_id,
+            entry_point=_env.entry_point,
+            max_episode_steps=_env.max_episode_steps,
+            disable_env_checker=True,
+        )
 del _env

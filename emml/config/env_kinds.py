@@ -27,13 +27,16 @@ class GymEnv:
     """'module:Class' of its env class, imported only when an env is made (emml/envs sits above this layer)."""
     name: str
     """How the command line names it (``--env``)."""
+    max_episode_steps: int
+    """Its registered spec's episode limit (`gym.make` wraps it in TimeLimit): its config's default `max_steps`,
+    where the env truncates too (§5.1: 210; Appendix C: 420)."""
 
 
 GYM_ENVS = {
     e.gym_id: e
     for e in (
-        GymEnv(DOOM_ID, "emml.envs.doom:DoomEnv", "doom"),
-        GymEnv(HOUSE_ID, "emml.envs.house:HouseEnv", "house"),
+        GymEnv(DOOM_ID, "emml.envs.doom:DoomEnv", "doom", 210),
+        GymEnv(HOUSE_ID, "emml.envs.house:HouseEnv", "house", 420),
     )
 }
 """The environments `import emml` registers, by gym id."""

@@ -72,7 +72,11 @@ class DoomConfig:
     width: int = 300
     """Observation width in pixels (Appendix A)."""
     aux_labels: bool = False
-    """Add the V×h×w auxiliary detection labels ('aux') to the observation (§3.2 'Auxiliary Task')."""
+    """Add the V×h×w auxiliary detection labels ('aux') to the observation (§3.2 'Auxiliary Task'); with them
+    ``info['target_mask']`` gives the h×w cells showing the episode's referent (privileged: no model reads it)."""
+    target_in_obs: bool = False
+    """With `aux_labels`, put the referent's cells in the observation too ('target'): for the 'target_mask'
+    diagnostic control, the one model that reads them (the trainer and the evaluations turn it on for it)."""
     max_steps: int = 210
     """Episode limit in agent steps (§5.1: 'maximum length of 210 time steps')."""
     frame_skip: int = 5
@@ -139,6 +143,8 @@ class DoomConfig:
 
         conv_output_size(self.height, self.width)  # raises naming height/width when too small
         check_at_least(self, ("max_steps", "frame_skip", "max_words"), 1)
+        if self.target_in_obs and not self.aux_labels:
+            raise ValueError("target_in_obs=True needs aux_labels=True: the referent's cells come from the labels")
         if self.render != "auto":
             allowed = [f"{w}x{h}" for w, h in RESOLUTIONS_16_9]
             check_choice("render", self.render, ["auto", *allowed])

@@ -109,8 +109,10 @@ class DoomEnv(gym.Env):
         }
         if cfg.aux_labels:
             obs["aux"] = spaces.Box(0, 1, (V, *self.grid_hw), np.uint8)
+        if cfg.target_in_obs:
             # the cells showing the episode's referent: privileged, read only by the diagnostics and the
-            # 'target_mask' control (emml/eval/diagnose.py), never by a model under the paper's protocol
+            # 'target_mask' control (emml/eval/diagnose.py), never by a model under the paper's protocol; else
+            # they are info['target_mask']
             obs["target"] = spaces.Box(0, 1, self.grid_hw, np.uint8)
         self.observation_space = spaces.Dict(obs)
         self.action_space = spaces.MultiDiscrete([len(MOVES), V])
@@ -339,17 +341,21 @@ class DoomEnv(gym.Env):
         }
         if self.aux is not None:
             obs["aux"] = self.aux
-            obs["target"] = self.target_grid
+            if self.cfg.target_in_obs:
+                obs["target"] = self.target_grid
         return obs
 
     def _info(self, success: bool) -> dict:
-        return {
+        info = {
             "task": self.task_id,
             "answer": self.answer_id,
             "success": bool(success),
             "text": self.episode.sentence.text,
             "target": self.episode.scene[self.episode.target],
         }
+        if self.aux is not None:
+            info["target_mask"] = self.target_grid
+        return info
 
     def render(self):
         return None if self.render_mode is None else np.ascontiguousarray(self.frame.transpose(1, 2, 0))

@@ -152,7 +152,9 @@ def diagnose(
     ``step0_episodes`` resets give the actor's sensitivity (Easy and House, where the spawn is fixed; None in Hard)."""
     # a run restricted to some instructions is diagnosed on its SGN training ones (all of them if it has none)
     chosen = {(task, split): sents for task, split, sents in eval_settings(env_cfg)}.get(("sgn", "train"))
-    cfg = dataclasses.replace(env_cfg, tasks="sgn", split="train", aux_labels=True, instructions=chosen)
+    cfg = dataclasses.replace(
+        env_cfg, tasks="sgn", split="train", aux_labels=True, target_in_obs=True, instructions=chosen
+    )
     gen = torch.Generator().manual_seed(seed)
     logits, labels, attn, target = [], [], [], []
     with playing(model, cfg) as (env,):  # eval mode; on the way out the engine ended and the mode restored

@@ -205,7 +205,9 @@ def diagnose_eqa(
     with playing(model, env_cfg, 0):  # eval mode for the gates read below too; restored on the way out
         for split, chosen in settings:
             questions = chosen or tuple(s.text for s in dataset.select("eqa", split))
-            cfg = dataclasses.replace(env_cfg, tasks="eqa", split=split, aux_labels=True, instructions=chosen)
+            cfg = dataclasses.replace(
+                env_cfg, tasks="eqa", split=split, aux_labels=True, target_in_obs=True, instructions=chosen
+            )
             # every episode its own seed: the same seeds under every question would tie their scenes together
             plan = [(seed + k, {"sentence": questions[k // episodes]}) for k in range(len(questions) * episodes)]
             records, outcomes = _play(model, cfg, plan, device, batch)

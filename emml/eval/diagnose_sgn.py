@@ -217,7 +217,9 @@ def diagnose_sgn(
     for task, split, instructions in eval_settings(env_cfg):
         if task != "sgn" or split not in splits:
             continue
-        cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
+        cfg = dataclasses.replace(
+            env_cfg, tasks=task, split=split, aux_labels=labels, target_in_obs=labels, instructions=instructions
+        )
         log: dict[int, dict] = {}
 
         def make(c, log=log):

@@ -77,7 +77,9 @@ def evaluate(
     # the diagnostic controls (and label-fed detectors) read the privileged labels; a real model plays without them
     labels = bool(getattr(model, "reads_labels", False))
     for task, split, instructions in eval_settings(env_cfg):
-        cfg = dataclasses.replace(env_cfg, tasks=task, split=split, aux_labels=labels, instructions=instructions)
+        cfg = dataclasses.replace(
+            env_cfg, tasks=task, split=split, aux_labels=labels, target_in_obs=labels, instructions=instructions
+        )
         with playing(model, cfg, min(batch, episodes)) as envs:
             results[f"{task}_{split}"] = _run(model, envs, episodes, seed, device)
     return results

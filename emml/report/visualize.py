@@ -61,7 +61,9 @@ class Episode:
 @torch.no_grad()
 def record_episode(model, env_cfg: DoomConfig, task: str = "sgn", seed: int = 0, device="cpu") -> Episode:
     """Play one greedy episode of ``task`` (train split) and record the model's outputs at every step."""
-    cfg = dataclasses.replace(env_cfg, tasks=task, split="train", aux_labels=True, instructions=None)
+    cfg = dataclasses.replace(
+        env_cfg, tasks=task, split="train", aux_labels=True, target_in_obs=True, instructions=None
+    )
     with playing(model, cfg) as (env,):
         obs, _ = env.reset(seed=seed)
         x_sent = model.sentence_gate(torch.as_tensor(obs["tokens"])[None].to(device))  # what Eq. 4 reads

@@ -17,6 +17,7 @@ counted); `max_engine_restarts` such deaths in a row, less than `engine_restart_
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections import deque
@@ -70,8 +71,11 @@ class Sampler:
 
     def _make_group(self):
         cfg = self.cfg
+        env_cfg = cfg.env
+        if cfg.model_options.get("control") == "target_mask":  # the diagnostic control reads the referent's cells
+            env_cfg = dataclasses.replace(env_cfg, target_in_obs=True)
         return make_vector_env(
-            cfg.env,
+            env_cfg,
             self.num_envs // self.groups,
             asynchronous=cfg.asynchronous,
             copy=False,

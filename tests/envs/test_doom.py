@@ -32,11 +32,41 @@ def test_registered_id_and_check_env(make, no_leftovers):
     env = gym.make("emml/Doom-v0", difficulty="hard", aux_labels=True, **SMOKE)
     try:
         check_env(env.unwrapped, skip_render_check=True)
-        obs, _ = env.reset(seed=0)
+        obs, info = env.reset(seed=0)
         assert obs["image"].dtype == np.uint8 and obs["image"].shape == (3, 60, 108)
         assert obs["aux"].dtype == np.uint8 and obs["aux"].shape == (22, 2, 5)
-        assert obs["target"].dtype == np.uint8 and obs["target"].shape == (2, 5)
+        assert "target" not in obs  # privileged: in info unless asked for
+        assert info["target_mask"].dtype == np.uint8 and info["target_mask"].shape == (2, 5)
         assert env.action_space.nvec.tolist() == [4, 22]
+    finally:
+        env.close()
+    env = gym.make("emml/Doom-v0", aux_labels=True, target_in_obs=True, **SMOKE)  # the 'target_mask' control's
+    try:
+        check_env(env.unwrapped, skip_render_check=True)
+        obs, info = env.reset(seed=0)
+        assert obs["target"].shape == (2, 5) and np.array_equal(obs["target"], info["target_mask"])
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="target_in_obs=True needs aux_labels=True"):
+        gym.make("emml/Doom-v0", target_in_obs=True, **SMOKE)
+
+
+@pytest.mark.parametrize("env_id", ["emml/Doom-v0", "emml/House-v0"])
+def test_the_spec_limits_episodes_where_the_env_does_and_truncates_once(env_id, no_leftovers):
+    """gym.make wraps the env in TimeLimit(spec.max_episode_steps), the env's own max_steps: the episode is
+    truncated at that step, by both at once, never earlier (the two counts agree)."""
+    from emml.config.env_kinds import GYM_ENVS
+    from emml.config.schema import ENV_CONFIGS
+
+    limit = ENV_CONFIGS[env_id]().max_steps
+    assert gym.spec(env_id).max_episode_steps == limit and GYM_ENVS[env_id].max_episode_steps == limit
+    env = gym.make(env_id, tasks="sgn", **SMOKE)
+    try:
+        env.reset(seed=0)
+        for t in range(1, limit + 1):
+            obs, _, terminated, truncated, _ = env.step(np.array([ANSWER, 0]))  # SGN: 'answer' is a no-op step
+            assert not terminated and truncated == (t == limit), t
+        assert obs["time"] == limit and env.unwrapped.t == limit
     finally:
         env.close()
 
@@ -143,7 +173,7 @@ def test_sgn_answer_action_is_a_noop_step(make):
 
 def test_aux_labels_line_up_with_bounding_boxes(make):
     env = make(difficulty="easy", aux_labels=True, height=168, width=300)
-    obs, _ = env.reset(seed=4)
+    obs, info = env.reset(seed=4)
     vocab, state = env.vocab, env.state
     gh, gw = obs["aux"].shape[1:]
     assert (gh, gw) == (9, 17)
@@ -161,7 +191,7 @@ def test_aux_labels_line_up_with_bounding_boxes(make):
         if name == env.episode.scene[env.episode.target]:
             target[rows[ys], cols[xs]] = 1
     assert np.array_equal(obs["aux"], expected)
-    assert np.array_equal(obs["target"], target) and target.sum() > 0
+    assert np.array_equal(info["target_mask"], target) and target.sum() > 0
     assert obs["aux"].sum() > 0
     for w in ("smallest", "largest"):
         assert not env.aux_mask[vocab.index(w)]
@@ -173,16 +203,16 @@ def test_aux_labels_line_up_with_bounding_boxes(make):
 
 def test_scene_grids_give_each_actors_cells_in_scene_order(make):
     """Easy: the five objects stand side by side, all in view: five non-empty grids, the referent's being
-    the 'target' observation; a word's aux channel is the union of the grids of the actors it describes."""
+    info's 'target_mask'; a word's aux channel is the union of the grids of the actors it describes."""
     env = make(difficulty="easy", aux_labels=True)
-    obs, _ = env.reset(seed=4)
+    obs, info = env.reset(seed=4)
     grids = env.scene_grids()
-    assert grids.shape == (5, *obs["target"].shape) and grids.dtype == np.uint8
-    assert np.array_equal(grids[env.episode.target], obs["target"])
+    assert grids.shape == (5, *info["target_mask"].shape) and grids.dtype == np.uint8
+    assert np.array_equal(grids[env.episode.target], info["target_mask"])
     assert all(g.sum() > 0 for g in grids)
     for w in ("torch", "red", "armor"):
         having = [i for i, name in enumerate(env.episode.scene) if w in env.dataset.actors[name].words()]
-        union = grids[having].max(axis=0) if having else np.zeros_like(obs["target"])
+        union = grids[having].max(axis=0) if having else np.zeros_like(info["target_mask"])
         assert np.array_equal(obs["aux"][env.vocab.index(w)], union)
     no_labels = make(difficulty="easy")
     no_labels.reset(seed=4)

@@ -35,9 +35,9 @@ def test_registered_id_and_check_env(no_leftovers):
     env = gym.make("emml/House-v0", aux_labels=True, **SMOKE)
     try:
         check_env(env.unwrapped, skip_render_check=True)
-        obs, _ = env.reset(seed=0)
+        obs, info = env.reset(seed=0)
         assert obs["image"].dtype == np.uint8 and obs["image"].shape == (3, 60, 108)
-        assert obs["aux"].shape == (18, 2, 5) and obs["target"].shape == (2, 5)
+        assert obs["aux"].shape == (18, 2, 5) and info["target_mask"].shape == (2, 5) and "target" not in obs
         assert env.action_space.nvec.tolist() == [4, 18]
         assert env.unwrapped.cfg.max_steps == 420
     finally:
@@ -130,9 +130,9 @@ def test_eqa_shapes_too_and_ends_at_any_answer(make):
 
 def test_aux_labels_see_the_furniture_in_view(make):
     env = make(aux_labels=True, tasks="sgn")
-    obs, _ = env.reset(seed=0, options={"sentence": "go to the office_chair"})  # seen through the study door
+    obs, info = env.reset(seed=0, options={"sentence": "go to the office_chair"})  # seen through the study door
     chair = env.vocab.index("office_chair")
-    assert obs["aux"][chair].any() and obs["target"].any()
+    assert obs["aux"][chair].any() and info["target_mask"].any()
     assert not obs["aux"][env.vocab.index("bed")].any()  # the bedroom is behind two walls
     colour = env.dataset.actors[env.episode.scene[env.targets[0]]].color
     assert obs["aux"][env.vocab.index(colour)].any()

@@ -14,7 +14,7 @@ def test_each_view_shows_its_referent_and_the_figure_is_written(tmp_path, no_lef
         for i, question in enumerate(QUESTIONS):
             frame, answer = answer_view(env, question, seed=i)
             assert frame.ndim == 3 and frame.shape[2] == 3 and answer in ("red", "green", "blue", "yellow")
-            assert env._obs()["target"].any(), f"{question!r}: the referent is not in the view"
+            assert env._info(False)["target_mask"].any(), f"{question!r}: the referent is not in the view"
     finally:
         env.close()
     path = house_views(tmp_path / "house-views.png")

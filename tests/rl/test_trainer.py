@@ -67,6 +67,17 @@ def test_each_update_logs_where_its_time_went(tracking, no_leftovers):
         assert 0.75 * 64 / f <= spent <= 64 / f * (1 + 1e-9), (u, spent, 64 / f)  # slack: loop code, preemption
 
 
+def test_the_target_mask_control_trains_and_scores_on_the_referents_cells(tracking, no_leftovers):
+    """The referent's cells are privileged (the env gives them in info): the trainer and the evaluation ask the env
+    for them in the observation for the one model that reads them, the 'target_mask' control."""
+    cfg = smoke(
+        tracking, aux=True, frames=64, eval_episodes=1, final_eval_episodes=1, model_options={"control": "target_mask"}
+    )
+    assert not cfg.env.target_in_obs  # the run's config is unchanged: asked for where the envs are made
+    result = train(cfg, quiet=True)
+    assert result.frames == 64 and set(result.metrics) >= {"sgn_train", "eqa_train"}
+
+
 def test_a_log_line_splits_the_time_since_the_previous_line(tracking, monkeypatch, no_leftovers):
     import emml.rl.trainer as trainer
 
