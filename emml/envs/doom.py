@@ -61,8 +61,90 @@ def sample_positions(rng: np.random.Generator, n: int) -> list[tuple[int, int]]:
                     return points
 
 
+OBSERVATION_KEYS = {
+    "image": "the agent's view, RGB, channels first",
+    "tokens": "the instruction or question, word indices (0 pads), `max_words` long",
+    "task": "0: SGN (go to the object named), 1: EQA (answer the question)",
+    "time": "steps taken in the episode",
+    "aux": "with `aux_labels`: per word, the conv3 cells showing an object it describes",
+    "target": "with `target_in_obs`: the cells showing the referent (privileged; else `info['target_mask']`)",
+}
+"""What each observation key holds (the class docstring, README's env section: `space_rows`)."""
+
+
+def space_rows(env: DoomEnv) -> list[str]:
+    """README's table of ``env``'s spaces, one markdown row per observation key, then the action: checked against
+    README by the tests, so the two cannot drift."""
+
+    def spelled(space) -> str:
+        if isinstance(space, spaces.MultiDiscrete):
+            return f"MultiDiscrete({space.nvec.tolist()})"
+        return repr(space)
+
+    rows = [f"| `{k}` | `{spelled(v)}` | {OBSERVATION_KEYS[k]} |" for k, v in env.observation_space.spaces.items()]
+    moves = ", ".join(f"{i} {m}" for i, m in enumerate(MOVES))
+    rows.append(f"| action | `{spelled(env.action_space)}` | [move ({moves}), answer word (read on answer)] |")
+    return rows
+
+
 class DoomEnv(gym.Env):
-    """The EMML Doom environment. Construct with keyword arguments of `DoomConfig` (or ``config=``)."""
+    """The EMML Doom environment, `emml/Doom-v0`: the ViZDoom tasks of Chaplot et al. (2019), Easy and Hard.
+
+    ## Description
+
+    One room with 5 objects; each episode is an instruction to follow (SGN: "go to the smallest blue object") or a
+    question to answer (EQA: "what color is the torch"), drawn from the split's sentences (Table 7). Easy: the
+    agent starts at one pose and the objects stand side by side in view; Hard: the agent and the objects at random
+    points, the agent facing one of four directions.
+
+    ## Action Space
+
+    `MultiDiscrete([4, V])` (V: the vocabulary's size): a move, 0 forward, 1 turn left, 2 turn right, 3 answer, and
+    the answer word (a vocabulary index), read only when the move is 'answer' in an EQA episode. In SGN, 'answer'
+    is a step that does not move.
+
+    ## Observation Space
+
+    A `Dict`: `image` `Box(0, 255, (3, height, width), uint8)`, the agent's view, RGB, channels first; `tokens`
+    `Box(0, V, (max_words,), int64)`, the sentence's word indices (0 pads); `task` `Discrete(2)`, 0 SGN, 1 EQA;
+    `time` `Discrete(max_steps + 1)`, the steps taken. With `aux_labels`: `aux` `Box(0, 1, (V, h, w), uint8)`, per
+    word the conv3 cells (h × w) showing an object it describes (the auxiliary task's labels, §3.2). With
+    `target_in_obs` (and `aux_labels`): `target` `Box(0, 1, (h, w), uint8)`, the cells showing the referent:
+    privileged, for the 'target_mask' diagnostic control; otherwise it is `info['target_mask']`.
+
+    ## Rewards
+
+    +1 (`success_reward`) for reaching the object named (SGN) or answering right (EQA), `wrong_reward` (0) for
+    reaching another object or answering wrongly, -0.001 (`step_reward`) every step, and in SGN, with `shaping`,
+    `shaping_coef` per map unit of decrease in the distance to the referent (§5.1).
+
+    ## Starting State
+
+    Easy: the agent at (128, 512) facing east, the objects at x = 256, y ∈ {384, 448, 512, 576, 640}. Hard: the
+    agent and the objects at points drawn in the room at least `HARD_SPACING` apart, the agent facing one of four
+    directions. The sentence is drawn uniformly in the split (SGN or EQA 50/50 when `tasks` is 'both'), or given by
+    ``reset(options={"sentence": text})``.
+
+    ## Episode End
+
+    Terminated: SGN, when the agent comes within `reach_distance` of any object (success if it is the referent);
+    EQA, at the first 'answer'. Truncated: after `max_steps` steps (210, §5.1). `gym.make` also wraps the env in
+    `TimeLimit` with the spec's `max_episode_steps`, the same 210: both end the episode at the same step; a run
+    with a longer `max_steps` passes `max_episode_steps` too.
+
+    ## Arguments
+
+    The keyword arguments of `DoomConfig` (emml/config/schema.py), or ``config=DoomConfig(...)``; e.g.
+    ``gym.make("emml/Doom-v0", difficulty="hard", split="test", tasks="sgn", aux_labels=True)``. The main ones:
+    `difficulty` ('easy', 'hard'), `split` ('train', 'test'), `tasks` ('both', 'sgn', 'eqa'), `height` and `width`
+    (168 × 300), `aux_labels`, `target_in_obs`, `max_steps`, `shaping`. ``render_mode='rgb_array'`` renders the
+    observed frame.
+
+    ## Info
+
+    `task`, `answer` (the answer word's index, -1 in SGN), `success`, `text` (the sentence), `target` (the
+    referent's name) and, with `aux_labels`, `target_mask`.
+    """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 35 / 5}
     objects_info = False

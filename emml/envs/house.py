@@ -26,7 +26,44 @@ __all__ = ["ANSWER", "FORWARD", "LEFT", "MOVES", "RIGHT", "HouseEnv"]
 
 
 class HouseEnv(DoomEnv):
-    """The EMML House environment. Construct with keyword arguments of `HouseConfig` (or ``config=``)."""
+    """The EMML House environment, `emml/House-v0`: Appendix C's House domain, rebuilt in ViZDoom.
+
+    ## Description
+
+    One fixed house of four rooms joined by doorways (kitchen, study, living room, bedroom) with 7 pieces of
+    furniture of the 6 classes of Table 8, their colours drawn every episode so that the sentence has one referent
+    (SGN) or one answer (EQA). Instructions and questions are Table 8's.
+
+    ## Action Space
+
+    As `emml/Doom-v0`: `MultiDiscrete([4, V])`, a move (forward, turn left, turn right, answer) and the answer word.
+
+    ## Observation Space
+
+    As `emml/Doom-v0` (the House's vocabulary: V = 18): `image`, `tokens`, `task`, `time` (`Discrete(421)`), with
+    `aux_labels` `aux`, and with `target_in_obs` `target` (else `info['target_mask']`).
+
+    ## Rewards
+
+    +1 for reaching the referent (SGN) or answering right (EQA), -0.001 every step, and in both tasks, with
+    `shaping`, `shaping_coef` per map unit of decrease in the *path* distance (through the doorways) to the
+    referent (Appendix C).
+
+    ## Starting State
+
+    The agent at the house's fixed spawn; the furniture at its slots in colours drawn for the sentence.
+
+    ## Episode End
+
+    Terminated: SGN, when the agent's collision box comes within `reach_distance` of a piece's (success if it is a
+    referent); EQA, at the first 'answer'. Truncated: after `max_steps` steps (420, Appendix C), the spec's
+    `max_episode_steps` too.
+
+    ## Arguments
+
+    The keyword arguments of `HouseConfig` (or ``config=HouseConfig(...)``): those of `emml/Doom-v0` but
+    `difficulty`, which is 'house'.
+    """
 
     house = HOUSE
     """The fixed house (rooms, doorways, furniture slots, spawn)."""

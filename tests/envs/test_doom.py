@@ -311,3 +311,27 @@ def test_no_step_after_the_episode_ended_or_after_close(make):
     env.close()
     with pytest.raises(RuntimeError, match=r"after close\(\)"):
         env.step([FORWARD, 0])
+
+
+def test_the_docstrings_have_gymnasiums_sections_and_readme_shows_the_spaces():
+    """The env documented the Gymnasium way: the sections of Gymnasium's env docs, and README's table of the spaces
+    as the env builds them (no engine starts: one is made at the first reset)."""
+    from pathlib import Path
+
+    from emml.envs.doom import OBSERVATION_KEYS, space_rows
+    from emml.envs.house import HouseEnv
+
+    sections = ("Description", "Action Space", "Observation Space", "Rewards", "Starting State", "Episode End")
+    for cls in (DoomEnv, HouseEnv):
+        for section in (*sections, "Arguments"):
+            assert f"## {section}\n" in cls.__doc__, (cls.__name__, section)
+    for key in OBSERVATION_KEYS:
+        assert f"`{key}`" in DoomEnv.__doc__
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    env = DoomEnv(aux_labels=True, target_in_obs=True)
+    assert set(env.observation_space.spaces) == set(OBSERVATION_KEYS)
+    for row in space_rows(env):
+        assert row in readme, row
+    house = HouseEnv(aux_labels=True)
+    assert house.observation_space["time"].n == 421 and house.action_space.nvec.tolist() == [4, 18]
+    assert "the House: V = 18, `time` up to 420" in " ".join(readme.split())
