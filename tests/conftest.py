@@ -83,7 +83,10 @@ def engine_pids() -> set[int]:
 
 
 def shm_files() -> list[str]:
-    """Every engine's shared-memory file, except those of live engines that are not this session's (`engine_pids`)."""
+    """Every engine's shared-memory file, except those of live engines that are not this session's (`engine_pids`).
+    The files are listed before the engines, so that an engine another session starts in between (its file listed,
+    its process not yet) cannot pass for one of ours."""
+    files = glob.glob("/dev/shm/ViZDoom*")
     foreign = set()
     for pid, ours in _engines().items():
         if ours:
@@ -95,7 +98,7 @@ def shm_files() -> list[str]:
             continue
         if "+viz_instance_id" in argv[:-1]:
             foreign.add(argv[argv.index("+viz_instance_id") + 1])
-    return [p for p in glob.glob("/dev/shm/ViZDoom*") if not any(i in p for i in foreign)]
+    return [p for p in files if not any(i in p for i in foreign)]
 
 
 @pytest.fixture
@@ -106,10 +109,13 @@ def no_leftovers():
     import time
 
     deadline = time.monotonic() + 5
-    while time.monotonic() < deadline and (engine_pids() - before_pids or set(shm_files()) - before_shm):
+    while True:  # the last look decides: a foreign engine's file that came and went in between is no leftover
+        engines, files = engine_pids() - before_pids, set(shm_files()) - before_shm
+        if not (engines or files) or time.monotonic() > deadline:
+            break
         time.sleep(0.05)
-    assert engine_pids() - before_pids == set(), "ViZDoom engine processes left behind"
-    assert set(shm_files()) - before_shm == set(), "ViZDoom shm files left behind"
+    assert engines == set(), f"ViZDoom engine processes left behind: {sorted(engines)}"
+    assert files == set(), f"ViZDoom shm files left behind: {sorted(files)}"
 
 
 def pytest_configure(config):
