@@ -1,6 +1,7 @@
 """emml.runs.import_runs (`emml import-runs`): finished run dirs into a throwaway sqlite store, once."""
 
 import json
+import os
 import warnings
 
 import pytest
@@ -188,3 +189,24 @@ def test_import_runs_command(tmp_path):
     (run / "results.json").write_text("[]")
     bad = CliRunner().invoke(app, ["import-runs", str(run)])
     assert bad.exit_code == 2 and f"{run / 'results.json'}: not a JSON object" in bad.output
+
+
+def test_a_sqlite_store_gets_in_one_transaction_what_log_batch_writes(tmp_path):
+    """The bulk path (emml.runs.tracking._bulk_points: MLflow's own tables, one transaction) stores the same points,
+    timestamps and latest values as MlflowClient.log_batch, NaN and infinities included."""
+    curve = CURVE + [(256, "train/loss", float("nan")), (256, "charts/fps", float("inf")), (64, "charts/fps", 32.0)]
+    fast, slow = (
+        write_run(tmp_path / root, "imp-g", "b", rid, curve=curve) for root, rid in (("x", "b" * 32), ("y", "c" * 32))
+    )
+    for run in (fast, slow):
+        os.utime(run / "metrics.csv", (1_700_000_000, 1_700_000_000))  # the same end (no ended_at: estimated)
+    stored = {}
+    for run, bulk in ((fast, True), (slow, False)):
+        rid = import_run_dir(run, bulk=bulk).mlflow_run_id
+        client = tracking._client()
+        data = client.get_run(rid).data
+        keys = sorted(data.metrics)
+        history = {k: sorted((m.step, m.timestamp, m.value) for m in client.get_metric_history(rid, k)) for k in keys}
+        stored[bulk] = (data.metrics, history, {k: v for k, v in data.tags.items() if "import" not in k})
+    assert repr(stored[True]) == repr(stored[False])  # repr: nan == nan
+    assert stored[True][0]["train/loss"] != stored[True][0]["train/loss"]  # the latest point: NaN, at 256
