@@ -372,7 +372,7 @@ def import_runs(
         open_store(uri)
     committed = commit_times(dirs)
     out = []
-    with tqdm(total=len(dirs), unit="run", disable=None if progress else True, dynamic_ncols=True) as bar:
+    with tqdm(total=len(dirs), unit="run", disable=None if progress else True) as bar:
         for run_dir in dirs:
             bar.set_postfix_str(run_dir.name[:40], refresh=False)
             try:
