@@ -86,14 +86,18 @@ def _sqlite_path(uri: str) -> Path | None:
     return Path(path).resolve()
 
 
+PIN_DIR = ".campaign"
+"""Where a campaign pins its worktrees inside the checkout (emml.experiments.campaign.PIN_DIR)."""
+
+
 def checkout_root() -> Path:
     """The checkout whose folders runs, results and the store live in: the project root, or the checkout that holds
-    it when the project root is a pinned worktree inside one (a campaign's ``.campaign/<sha>``, which writes into
-    its checkout's runs/)."""
+    it when the project root is a campaign's pinned worktree (``<checkout>/.campaign/<sha>``, which writes into its
+    checkout's runs/)."""
     root = project_root()
     for parent in root.parents:
-        if (parent / "pyproject.toml").is_file() and (parent / ".git").exists():
-            return parent
+        if parent.name == PIN_DIR and (parent.parent / "pyproject.toml").is_file():
+            return parent.parent
     return root
 
 

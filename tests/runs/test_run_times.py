@@ -97,3 +97,15 @@ def test_paths_and_names_in_the_store_hold_no_path_of_the_machine():
     assert display_name(root / "elsewhere" / "t" / "x", "x") == "x [elsewhere]"
     assert tracking.experiment_note("eqa_gate").endswith("(`emml run experiments/eqa_gate`).")
     assert "no table file" in tracking.experiment_note("my-own")
+
+
+def test_a_campaign_worktree_writes_paths_relative_to_its_checkout(tmp_path, monkeypatch):
+    """A campaign trains from <checkout>/.campaign/<sha> into the checkout's runs/: its paths read 'runs/...'."""
+    (tmp_path / "pyproject.toml").write_text("")
+    pinned = tmp_path / ".campaign" / "abc1234"
+    pinned.mkdir(parents=True)
+    (pinned / "pyproject.toml").write_text("")
+    monkeypatch.setattr(tracking, "project_root", lambda: pinned)
+    assert tracking.checkout_root() == tmp_path
+    assert tracking.portable(str(tmp_path / "runs" / "table2")) == "runs/table2"
+    assert display_name(tmp_path / "runs" / "table2" / "x", "x") == "x"
