@@ -79,9 +79,10 @@ def import_runs_cmd(
 ):
     """Import finished run dirs into the MLflow store (`make ui` shows them).
 
-    One FINISHED run each, in its table's experiment, with the trainer's tags, its config as params and its whole
-    curve. Once: a run already in the store (trained or imported here) is skipped, and so is an unfinished one
-    (its trainer logs it)."""
+    One FINISHED run each, in its table's experiment, with the trainer's tags, its config as params, its whole
+    curve and its score (final/*), dated when it trained (a progress bar on a terminal). Once, even with two
+    imports at once or after one was killed: a run already in the store (trained or imported here) is skipped, and
+    so is an unfinished one (its trainer logs it)."""
     from emml.config.paths import project_path
     from emml.runs.import_runs import import_runs
     from emml.runs.tracking import tracking_uri
@@ -91,7 +92,7 @@ def import_runs_cmd(
     if missing:
         _fail(f"no such run dir or folder: {', '.join(missing)}")
     _check_store()
-    results = import_runs(roots, log=None if as_json else lambda r: typer.echo(r.line()))
+    results = import_runs(roots, log=None if as_json else lambda r: typer.echo(r.line()), progress=not as_json)
     counts = {k: sum(r.outcome == k for r in results) for k in ("imported", "skipped", "failed")}
     text = ", ".join(f"{n} {k}" for k, n in counts.items()) + f" (MLflow store {tracking_uri()})"
     _echo({"uri": tracking_uri(), **counts, "runs": [vars(r) for r in results]}, as_json, text)

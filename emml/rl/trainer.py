@@ -14,6 +14,7 @@ import logging
 import random
 import sys
 import time
+from datetime import datetime, timezone
 
 import numpy as np
 import torch
@@ -34,6 +35,7 @@ from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+from emml.runs.import_runs import FINAL, display_name, score_tags, utc_ms
 from emml.runs.rundir import (
     CHECKPOINT,
     EVAL_SEED,
@@ -82,6 +84,8 @@ class Trainer:
             cfg.env.aux_words = default_aux_words(self.vocab, dataset)
         self.device = torch.device(cfg.device)
         self.git_sha = git_sha()  # the code this process runs: read once, before the tree can change under it
+        self.started_at: str | None = None
+        """When the run first started (UTC ISO; its checkpoint's, kept on resume; None for a checkpoint from before)."""
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
@@ -153,6 +157,7 @@ class Trainer:
                 optimizer = saved["optimizer"]
             set_rng_state(saved["rng"])
             update, frames = saved["update"], saved["frames"]
+        self.started_at = saved.get("started_at") if saved is not None else utc_now()
         if build and wants_compile(cfg.compile, self.device):
             compile_model(model)
         tags = run_tags(cfg, self.git_sha, alloc.loaded())
@@ -163,11 +168,12 @@ class Trainer:
             self.tracker.resume_after(frames)  # before start: a replay into a new store reads the mirror
         run_id = self.tracker.start(
             cfg.table,
-            self.name,
+            display_name(self.dir, self.name),
             tags,
             cfg.to_dict(),
             run_id=saved["run_id"] if saved else None,
             parent_run_id=self.parent_run_id,
+            start_time=utc_ms(self.started_at) if self.started_at else None,  # a run dir resumed in another store
         )
         if not self.quiet:  # what it starts, before minutes of it (a bare `emml train` trains 1.5M frames)
             total = cfg.num_updates * cfg.frames_per_update
@@ -204,6 +210,8 @@ class Trainer:
         episodes = self.cfg.final_eval_episodes if final else self.cfg.eval_episodes
         acc = evaluate(model, self.cfg.env, episodes, seed=EVAL_SEED, device=self.device)
         metrics = {f"eval/{k}": v for k, v in acc.items()}
+        if final:  # the score, apart from the periodic evaluations' curve (whose last point it also is)
+            metrics.update({f"{FINAL}{k}": v for k, v in acc.items()})
         if self.cfg.diagnose_episodes and self.cfg.env.tasks != "eqa":
             n = self.cfg.diagnose_episodes
             diag = diagnose(model, self.cfg.env, n, step0_episodes=5 * n, device=self.device)
@@ -239,12 +247,21 @@ class Trainer:
                 "config": self.cfg.to_dict(),
                 "run_id": self.tracker.run_id,
                 "finished": finished,
+                "started_at": self.started_at,
             },
         )
         self._saved_update = update
 
     def _write_results(self, metrics: dict, frames: int) -> None:
-        save_results(self.dir, results_payload(self.cfg, metrics, frames, self.git_sha, self.tracker.run_id), self.cfg)
+        times = {"started_at": self.started_at, "ended_at": utc_now()} if self.started_at else {"ended_at": utc_now()}
+        payload = results_payload(self.cfg, metrics, frames, self.git_sha, self.tracker.run_id, times)
+        save_results(self.dir, payload, self.cfg)
+        self.tracker.set_tags(score_tags(payload))  # as an imported run has them (emml/runs/import_runs.py)
+
+
+def utc_now() -> str:
+    """Now, UTC, ISO 8601 to the second: a run's ``started_at`` and ``ended_at``."""
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
 class PlainLearner:

@@ -1,6 +1,7 @@
 """Committed run dirs made browsable in the MLflow store (`emml import-runs`, run by `make ui`): each finished run dir
 (runs/<table>/<run>/ with results.json and metrics.csv) becomes one FINISHED run of the experiment named by its
-table, with the tags the trainer sets, its saved config as params, its whole curve and its final score
+table (described by the table's caption), with the tags the trainer sets, its saved config as params, its whole
+curve and its final score (``final/<key>``, apart from the periodic ``eval/<key>`` curve), dated when it trained
 (emml/runs/tracking.py, `import_run`).
 
 Once and idempotently: a run dir whose run is already in the store (trained here, imported or resumed here before:
@@ -9,12 +10,28 @@ An unfinished run dir (no results.json) is skipped: it may be training right now
 its trainer, resuming here, replays its curve into a run of its own (Tracker.start); importing it as well would
 make a second run of it. A finished run dir imported here and then trained further (more frames) resumes its
 imported run (`stored_run` in Tracker.start): no second run either.
+
+Under concurrency and interruption too: each run dir is imported under a lock on the store's import
+(`import_lock`), taken again for every run dir, so that two imports at once take turns and each finds the run the
+other made; the run is created tagged with its run dir (``emml.imported_from``) and ``emml.import_key`` (the run dir
+and a digest of its files) and marked done last (``emml.imported_run_id``), so that a run an import killed midway
+left behind (RUNNING, not done) is deleted by the next import before it imports that run dir again.
+
+When it trained: results.json's ``started_at`` and ``ended_at`` (UTC, written by the trainer since issue 53). A run
+dir from before has neither: its end is the earliest of its files' modification times and the commit that added its
+results.json (each is at or after the end), its duration its curve's frames over its frames/s plus its evaluations'
+seconds; the tag ``emml.times`` says which (`run_times`).
 """
 
 from __future__ import annotations
 
+import bisect
+import hashlib
+import subprocess
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 
 from emml.runs.rundir import CHECKPOINT, METRICS, RESULTS, RUN_FILES, RunDirError, read_results
@@ -23,9 +40,22 @@ MARKERS = RUN_FILES
 """Files any of which makes a folder a run dir (emml/runs/rundir.py)."""
 HEADER = "step,key,value"
 IMPORTED_FROM = "emml.imported_from"
-"""Tag of an imported run: its run dir, relative to the project root when under it."""
-NOT_TAGS = ("run_name", "run_id", "metrics", "config")
-"""results.json keys that are not tags: the run name, the id (tag ``IMPORTED_RUN_ID``), the score and config."""
+"""Tag of an imported run: its run dir, relative to the checkout (emml.runs.tracking.portable)."""
+TIMES = "emml.times"
+"""Tag of an imported run: where its start and end times come from (`run_times`)."""
+NOT_TAGS = ("run_name", "run_id", "metrics", "config", "started_at", "ended_at")
+"""results.json keys that are not tags: the run name, the id (tag ``IMPORTED_RUN_ID``), the score and config, and
+when it trained (the MLflow run's own start and end)."""
+RENAMED = {"frames": "trained_frames", "eval_episodes": "score_eval_episodes", "eval_seed": "score_eval_seed"}
+"""results.json keys tagged under another name, apart from the params of the same name: ``frames`` is the frames
+trained (whole updates: 1,500,160) where the param ``frames`` is the config's target (1,500,000); ``eval_episodes``
+and ``eval_seed`` are the final score's (500 episodes, `final_eval_episodes`) where the param ``eval_episodes`` is
+the periodic evaluations' (100)."""
+FINAL = "final/"
+"""Prefix of the final score's metrics (results.json "metrics"): ``final/sgn_test``…, apart from the periodic
+evaluations' ``eval/sgn_test`` curve."""
+DEFAULT_ROOT = "runs"
+"""The run root whose run dirs are named by their run name alone in the store (`display_name`)."""
 
 
 @dataclass
@@ -48,19 +78,43 @@ class ImportResult:
     def line(self) -> str:
         """One line for the terminal."""
         if self.outcome == "imported":
-            return f"imported {self.run_dir}: MLflow run {self.mlflow_run_id}, {self.points:,} metric points"
+            extra = f" ({self.reason})" if self.reason else ""
+            return f"imported {self.run_dir}: MLflow run {self.mlflow_run_id}, {self.points:,} metric points{extra}"
         return f"{self.outcome} {self.run_dir}: {self.reason}"
 
 
 def relative(path: Path) -> str:
-    """``path`` relative to the project root when under it, else absolute."""
-    from emml.config.paths import project_root
+    """``path`` relative to the checkout (emml.runs.tracking.portable: '../..' where it is outside)."""
+    from emml.runs.tracking import portable
 
-    path = Path(path).resolve()
+    return portable(str(Path(path).resolve()))
+
+
+def display_name(run_dir: Path, name: str) -> str:
+    """A run's name in the store, unique in its experiment for the run dirs of a checkout: its run name, followed by
+    its run root when that is not a folder named runs/: a root inside the checkout's runs/ by its path from there
+    (``dual_attention-easy-aux-s1-quick [extended]`` for runs/extended/table2, beside the run of the same name in
+    runs/table2), another by its folder's name (never a path of the machine)."""
+    from emml.runs.tracking import checkout_root
+
+    root = Path(run_dir).resolve().parent.parent
+    if root.name == DEFAULT_ROOT and root.parent.resolve() != (checkout_root() / DEFAULT_ROOT).resolve():
+        return name
     try:
-        return str(path.relative_to(project_root()))
+        return f"{name} [{root.relative_to((checkout_root() / DEFAULT_ROOT).resolve())}]"
     except ValueError:
-        return str(path)
+        return f"{name} [{root.name}]"
+
+
+def import_key(run_dir: Path) -> str:
+    """The run dir (relative to the checkout) and a digest of its results.json and metrics.csv: tag
+    ``emml.import_key`` of its imported run (emml.runs.tracking.IMPORT_KEY)."""
+    digest = hashlib.sha256()
+    for name in (RESULTS, METRICS):
+        path = Path(run_dir) / name
+        if path.is_file():
+            digest.update(path.read_bytes())
+    return f"{relative(run_dir)}@{digest.hexdigest()[:16]}"
 
 
 def run_dirs(paths: Iterable[Path]) -> list[Path]:
@@ -96,7 +150,9 @@ def read_points(path: Path) -> list[tuple[int, str, float]]:
 def run_tags(results: dict, run_dir: Path) -> dict:
     """The tags of an imported run: the trainer's (emml/rl/trainer.py, Trainer.open) where the run dir records them
     (results.json's provenance, the config's tasks, shaping and precision, the checkpoint), and where it came from."""
-    tags = {k: v for k, v in results.items() if k not in NOT_TAGS and isinstance(v, (str, int, float, bool))}
+    tags = {
+        RENAMED.get(k, k): v for k, v in results.items() if k not in NOT_TAGS and isinstance(v, (str, int, float, bool))
+    }
     config = results.get("config") or {}
     env = config.get("env") or {}
     known = {"tasks": env.get("tasks"), "shaping": env.get("shaping"), "precision": config.get("precision")}
@@ -104,9 +160,15 @@ def run_tags(results: dict, run_dir: Path) -> dict:
         if value is not None:
             tags.setdefault(key, value)
     if (run_dir / CHECKPOINT).is_file():
-        tags["checkpoint"] = str(run_dir.resolve() / CHECKPOINT)
+        tags["checkpoint"] = relative(run_dir / CHECKPOINT)
     tags[IMPORTED_FROM] = relative(run_dir)
     return tags
+
+
+def score_tags(results: dict) -> dict:
+    """How the final score was measured, as tags (`RENAMED`): the trainer sets them on its run when it writes
+    results.json, so that a run trained in the store and one imported read alike."""
+    return {RENAMED[k]: results[k] for k in RENAMED if results.get(k) is not None}
 
 
 def as_trained(value):
@@ -120,26 +182,136 @@ def as_trained(value):
 
 
 def final_points(results: dict, path: Path) -> list[tuple[int, str, float]]:
-    """The run's score (results.json "metrics") as eval/<key> at its last frame, as the trainer logs its final
-    evaluation; logged after the curve, it replaces the curve's point there (a score measured again by `emml
-    rescore`, a transfer score the curve lacks)."""
+    """The run's score (results.json "metrics") as final/<key> at its last frame, as the trainer logs its final
+    evaluation: apart from the periodic evaluations' eval/<key> curve (whose last point, in a run dir from before
+    final/, is that same evaluation); logged after the curve, it replaces a final/ point the curve has there (a
+    score measured again by `emml rescore`, a transfer score the curve lacks)."""
     metrics = results.get("metrics") or {}
     if not isinstance(metrics, dict):
         raise RunDirError(f"{path}: 'metrics' is not an object")
     try:
         frames = int(results.get("frames", 0))
-        return [(frames, f"eval/{k}", float(v)) for k, v in metrics.items() if v is not None]
+        return [(frames, f"{FINAL}{k}", float(v)) for k, v in metrics.items() if v is not None]
     except (TypeError, ValueError):
         raise RunDirError(f"{path}: 'frames' or a metric is not a number") from None
 
 
-def import_run_dir(run_dir: Path, uri: str | None = None) -> ImportResult:
-    """Import one run dir into the store at ``uri`` (default: tracking_uri()) unless it is unfinished, being
-    trained, or already in the store. RunDirError names a file that cannot be read."""
-    from emml.runs.runlock import holder
-    from emml.runs.tracking import import_run, stored_run
+def utc_ms(text: str) -> int:
+    """An ISO 8601 time (results.json ``started_at``) as ms since the epoch; naive times are UTC."""
+    when = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=timezone.utc)
+    return int(when.timestamp() * 1000)
 
-    run_dir = Path(run_dir)
+
+def curve_seconds(points: list[tuple[int, str, float]]) -> list[tuple[int, float]]:
+    """(step, seconds of training up to it) from the curve: each update's frames over its ``charts/fps`` (frames/s
+    of the run), plus each evaluation's ``perf/eval_s``; [] when the curve has no frames/s."""
+    fps = sorted((st, v) for st, k, v in points if k == "charts/fps" and v > 0)
+    evals = dict((st, v) for st, k, v in points if k == "perf/eval_s")
+    out, total, previous = [], 0.0, 0
+    for step, value in fps:
+        total += (step - previous) / value + evals.get(step, 0.0)
+        previous = step
+        out.append((step, total))
+    return out
+
+
+def run_times(results: dict, run_dir: Path, points: list, committed: dict[Path, float]) -> tuple:
+    """(start, end in ms, where they come from, a step's time in ms) of a run dir: results.json's ``started_at`` and
+    ``ended_at`` when the trainer wrote them, else estimated (module docstring): the end from the earliest of the
+    modification times of metrics.csv and checkpoint.pt and ``committed`` (the time of the commit that added its
+    results.json), the start that end less the curve's seconds (`curve_seconds`). A step's time follows the curve's
+    seconds, stretched over start to end (a run resumed after a pause spreads the pause)."""
+    seconds = curve_seconds(points)
+    lasted = seconds[-1][1] if seconds else 0.0
+    try:
+        start = utc_ms(results["started_at"]) if results.get("started_at") else None
+        end = utc_ms(results["ended_at"]) if results.get("ended_at") else None
+    except ValueError:
+        raise RunDirError(f"{run_dir / RESULTS}: 'started_at' or 'ended_at' is not an ISO time") from None
+    if start is not None and end is not None:
+        how = RESULTS
+    else:
+        if end is None:
+            files = [n for n in (METRICS, CHECKPOINT) if (run_dir / n).is_file()]
+            bounds = {f"modified {n}": (run_dir / n).stat().st_mtime for n in files}
+            if run_dir / RESULTS in committed:
+                bounds[f"committed {RESULTS}"] = committed[run_dir / RESULTS]
+            source, last = min(bounds.items(), key=lambda x: x[1]) if bounds else ("imported", time.time())
+            end, ended = int(last * 1000), f"ended when {source}"
+        else:
+            ended = f"ended at {RESULTS}'s ended_at"
+        start = end - int(lasted * 1000)
+        how = f"estimated: {ended}, lasted the curve's frames over its frames/s ({lasted / 3600:.2f} h)"
+    steps = [st for st, _ in seconds]
+    frames = max((st for st, _, _ in points), default=0)
+
+    def when(step: int) -> int:
+        if lasted > 0:  # the time at the first update at or after the step
+            share = seconds[min(bisect.bisect_left(steps, step), len(steps) - 1)][1] / lasted
+        else:
+            share = step / frames if frames else 1.0
+        return start + int(min(max(share, 0.0), 1.0) * (end - start))
+
+    return start, end, how, when
+
+
+def commit_times(run_dirs: list[Path]) -> dict[Path, float]:
+    """The time of the commit that added each run dir's results.json, where git knows it (one git call): the end
+    of a committed run from before ``ended_at``, in a clone whose files are all as old as the clone."""
+    files = [d.resolve() / RESULTS for d in run_dirs if (d / RESULTS).is_file()]
+    if not files:
+        return {}
+    try:
+        top = subprocess.run(
+            ["git", "rev-parse", "--show-toplevel"], cwd=files[0].parent, capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        if not top:
+            return {}
+        out = subprocess.run(
+            ["git", "log", "--diff-filter=A", "--format=%x00%ct", "--name-only", "--", *map(str, files)],
+            cwd=top,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        ).stdout
+    except (OSError, subprocess.SubprocessError):
+        return {}
+    found: dict[Path, float] = {}
+    when = None
+    for line in out.splitlines():
+        if line.startswith("\0"):
+            when = float(line[1:])
+        elif line and when is not None:
+            path = Path(top, line)
+            found[path] = min(found.get(path, when), when)  # the first time it was added
+    return found
+
+
+def import_run_dir(
+    run_dir: Path, uri: str | None = None, committed: dict[Path, float] | None = None, bulk: bool = True
+) -> ImportResult:
+    """Import one run dir into the store at ``uri`` (default: tracking_uri()) unless it is unfinished, being
+    trained, or already in the store; under the store's import lock, after deleting what an import cut short
+    left of it. ``committed``: `commit_times` (read here when None). RunDirError names a file that cannot be read."""
+    from emml.runs.tracking import import_lock
+
+    with import_lock(uri):
+        return _import_run_dir(Path(run_dir), uri, committed, bulk)
+
+
+def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float] | None, bulk: bool) -> ImportResult:
+    from emml.runs.runlock import holder
+    from emml.runs.tracking import (
+        IMPORT_KEY,
+        delete_runs,
+        import_run,
+        leftover_imports,
+        set_experiment_note,
+        stored_run,
+    )
+
     name = relative(run_dir)
     if not (run_dir / RESULTS).is_file():
         return ImportResult(name, "skipped", f"unfinished (no {RESULTS}): its trainer logs it")
@@ -149,36 +321,67 @@ def import_run_dir(run_dir: Path, uri: str | None = None) -> ImportResult:
     run_id, experiment = str(results["run_id"]), str(results["table"])
     stored = stored_run(experiment, run_id, uri)
     if stored is not None:
+        set_experiment_note(experiment, uri)
         return ImportResult(name, "skipped", f"in the store as MLflow run {stored}", run_id, stored)
+    left = leftover_imports(experiment, IMPORTED_FROM, name, uri)
+    if left:  # an import killed midway: its half-made run goes, the run dir is imported whole below
+        delete_runs(left, uri)
     curve = read_points(run_dir / METRICS) if (run_dir / METRICS).is_file() else []
     points = curve + final_points(results, run_dir / RESULTS)
+    if committed is None:
+        committed = commit_times([run_dir])
+    start, end, how, when = run_times(results, run_dir.resolve(), curve, committed)
+    tags = {**run_tags(results, run_dir), TIMES: how, IMPORT_KEY: import_key(run_dir)}
     try:
         new = import_run(
             experiment,
-            str(results.get("run_name") or run_dir.name),
+            display_name(run_dir, str(results.get("run_name") or run_dir.name)),
             run_id,
-            run_tags(results, run_dir),
+            tags,
             as_trained(results.get("config") or {}),
             points,
             uri,
+            start_time=start,
+            end_time=end,
+            when=when,
+            bulk=bulk,
         )
     except ValueError as e:  # data the store refuses (a metric name it does not take)
         raise RunDirError(f"{run_dir}: {e}") from None
-    return ImportResult(name, "imported", "", run_id, new, len({(k, st) for st, k, _ in points}))
+    set_experiment_note(experiment, uri)
+    reason = f"removed {len(left)} run(s) an interrupted import left" if left else ""
+    return ImportResult(name, "imported", reason, run_id, new, len({(k, st) for st, k, _ in points}))
 
 
 def import_runs(
-    paths: Iterable[Path], uri: str | None = None, log: Callable[[ImportResult], None] | None = None
+    paths: Iterable[Path],
+    uri: str | None = None,
+    log: Callable[[ImportResult], None] | None = None,
+    progress: bool = False,
+    bulk: bool = True,
 ) -> list[ImportResult]:
     """Import every run dir at or under ``paths`` (emml import-runs); a run dir that cannot be read is 'failed'
-    (its error named) and the others are imported all the same. ``log`` sees each result as it comes."""
+    (its error named) and the others are imported all the same. ``log`` sees each result as it comes;
+    ``progress``: a progress bar over the run dirs with its ETA on stderr (a terminal only)."""
+    from tqdm import tqdm
+
+    from emml.runs.tracking import import_lock, open_store
+
+    dirs = run_dirs(paths)
+    with import_lock(uri):  # a new store is made by one process at a time
+        open_store(uri)
+    committed = commit_times(dirs)
     out = []
-    for run_dir in run_dirs(paths):
-        try:
-            result = import_run_dir(run_dir, uri)
-        except RunDirError as e:
-            result = ImportResult(relative(run_dir), "failed", str(e))
-        if log is not None:
-            log(result)
-        out.append(result)
+    with tqdm(total=len(dirs), unit="run", disable=None if progress else True) as bar:
+        for run_dir in dirs:
+            bar.set_postfix_str(run_dir.name[:40], refresh=False)
+            try:
+                result = import_run_dir(run_dir, uri, committed, bulk)
+            except RunDirError as e:
+                result = ImportResult(relative(run_dir), "failed", str(e))
+            if log is not None:
+                with bar.external_write_mode():
+                    log(result)
+            out.append(result)
+            bar.update()
     return out

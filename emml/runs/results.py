@@ -14,7 +14,8 @@ import pandas as pd
 
 from emml.runs.diskspace import no_space_names
 
-# identity and provenance columns (read as written); every other column is a metric (float)
+# identity and provenance columns (read as written); every other column is a metric (float). started_at and ended_at
+# are results.json's (emml.runs.rundir.TIMES), not written to rows: declared so that a row that has them reads
 TEXT = (
     "run_name",
     "table",
@@ -28,6 +29,8 @@ TEXT = (
     "precision",
     "transfer_words",
     "transfer_detector",
+    "started_at",
+    "ended_at",
 )
 INTEGER = ("seed", "frames", "eval_episodes")
 LATE_INTEGER = ("eval_seed",)

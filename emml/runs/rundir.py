@@ -276,14 +276,17 @@ def write_json(path: Path, payload: dict) -> None:
         os.replace(tmp, path)
 
 
-def results_payload(cfg: TrainConfig, metrics: dict, frames: int, git_sha: str, run_id: str) -> dict:
-    """What results.json holds: the run's identity, its provenance, how its score was measured, the score and the
-    config it trained with (reports state its deviations from the paper)."""
+def results_payload(
+    cfg: TrainConfig, metrics: dict, frames: int, git_sha: str, run_id: str, times: dict | None = None
+) -> dict:
+    """What results.json holds: the run's identity, its provenance, when it trained (``times``: `TIMES`), how its
+    score was measured, the score and the config it trained with (reports state its deviations from the paper)."""
     return {
         **run_identity(cfg),
         "frames": frames,
         "git_sha": git_sha,
         "run_id": run_id,
+        **(times or {}),
         "eval_episodes": cfg.final_eval_episodes,  # the score's: the final evaluation's
         "eval_seed": EVAL_SEED,
         "metrics": metrics,
@@ -305,6 +308,11 @@ def results_csv(cfg: TrainConfig) -> Path:
 
 ROW_ONLY = ("tasks", "shaping", "precision")
 """Columns `record_result` adds to a results row that are not keys of results.json."""
+TIMES = ("started_at", "ended_at")
+"""When the run trained, UTC ISO 8601 (results.json, from its checkpoint's ``started_at``): the start of its first
+session and the end of its final evaluation; the MLflow run's own start and end where it is imported
+(emml/runs/import_runs.py). Not columns of the results row: a reader from before them (a pinned campaign) reads an
+unknown column as a metric."""
 
 
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
@@ -314,7 +322,7 @@ def record_result(payload: dict, cfg: TrainConfig) -> Path:
     from emml.runs.results import upsert_result
 
     refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results
-    row = {k: v for k, v in payload.items() if k not in ("metrics", "config")}
+    row = {k: v for k, v in payload.items() if k not in ("metrics", "config", *TIMES)}
     row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, precision=cfg.precision, **payload["metrics"])
     return upsert_result(results_csv(cfg), row)
 

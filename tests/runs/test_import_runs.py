@@ -1,6 +1,7 @@
 """emml.runs.import_runs (`emml import-runs`): finished run dirs into a throwaway sqlite store, once."""
 
 import json
+import os
 import warnings
 
 import pytest
@@ -32,8 +33,8 @@ def _env(uri, monkeypatch):
 
 
 def write_run(root, table, name, run_id, curve=CURVE, score=None, config=CONFIG):
-    """A finished run dir as the trainer leaves it (no checkpoint: the import does not read it)."""
-    run = root / table / name
+    """A finished run dir as the trainer leaves it (no checkpoint: the import does not read it), under root/runs."""
+    run = root / "runs" / table / name
     run.mkdir(parents=True)
     (run / "metrics.csv").write_text("step,key,value\n" + "".join(f"{s},{k},{v!r}\n" for s, k, v in curve))
     results = {
@@ -67,15 +68,17 @@ def test_a_finished_run_dir_is_imported_with_its_tags_params_curve_and_score(tmp
     score = {"sgn_test": 0.75, "sgn_transfer:go to the red pillar": 0.4}  # rescored; a score the curve lacks
     run = write_run(tmp_path, "imp-a", "da-s3-quick", "0" * 32, score=score)
     result = import_run_dir(run)
-    assert (result.outcome, result.run_id, result.points) == ("imported", "0" * 32, len(CURVE) + 1)
+    assert (result.outcome, result.run_id, result.points) == ("imported", "0" * 32, len(CURVE) + 2)
     [stored] = tracking.find_runs("imp-a")
     assert stored["run_id"] == result.mlflow_run_id and stored["status"] == "FINISHED"
     assert stored["run_name"] == "da-s3-quick"
     tags = stored["tags"]
     expected = {"table": "imp-a", "model": "dual_attention", "aux": "True", "seed": "3", "profile": "quick"}
     expected |= {"git_sha": "abc1234", "tasks": "both", "shaping": "True", "precision": "fp32"}
-    expected |= {IMPORTED_FROM: str(run.resolve()), tracking.IMPORTED_RUN_ID: "0" * 32}
+    expected |= {IMPORTED_FROM: tracking.portable(str(run.resolve())), tracking.IMPORTED_RUN_ID: "0" * 32}
+    expected |= {"trained_frames": "192", "score_eval_episodes": "500", tracking.GIT_COMMIT: "abc1234"}
     assert expected.items() <= tags.items()
+    assert not {"frames", "eval_episodes"} & set(tags)  # the params' names: the target frames, the periodic episodes
     assert stored["params"] == {
         "model": "dual_attention",
         "seed": "3",
@@ -89,8 +92,9 @@ def test_a_finished_run_dir_is_imported_with_its_tags_params_curve_and_score(tmp
     rid = stored["run_id"]
     for key in ("train/loss", "train/success_sgn"):
         assert tracking.metric_history(rid, key) == [(s, v) for s, k, v in CURVE if k == key]
-    assert tracking.metric_history(rid, "eval/sgn_test") == [(128, 0.25), (192, 0.75)]  # the score at the end
-    assert tracking.metric_history(rid, "eval/sgn_transfer:go to the red pillar") == [(192, 0.4)]
+    assert tracking.metric_history(rid, "eval/sgn_test") == [(128, 0.25), (192, 0.5)]  # the periodic curve
+    assert tracking.metric_history(rid, "final/sgn_test") == [(192, 0.75)]  # the score, apart
+    assert tracking.metric_history(rid, "final/sgn_transfer:go to the red pillar") == [(192, 0.4)]
 
 
 def test_a_second_import_changes_nothing(tmp_path):
@@ -98,7 +102,7 @@ def test_a_second_import_changes_nothing(tmp_path):
         write_run(tmp_path, "imp-b", f"run-s{seed}", f"{seed + 1}" * 32)
     first = import_runs([tmp_path])
     before = points_in_store("imp-b")
-    assert [r.outcome for r in first] == ["imported", "imported"] and len(before) == 2 * len(CURVE)
+    assert [r.outcome for r in first] == ["imported", "imported"] and len(before) == 2 * (len(CURVE) + 1)
     second = import_runs([tmp_path])
     assert [r.outcome for r in second] == ["skipped", "skipped"]
     assert [r.mlflow_run_id for r in second] == [r.mlflow_run_id for r in first]
@@ -141,7 +145,7 @@ def test_bad_files_fail_by_name_and_the_other_run_dirs_import(tmp_path):
     with open(bad_line / "metrics.csv", "a") as f:
         f.write("256,train/loss\n320,train/loss,0.1\n")
     refused = write_run(tmp_path, "imp-e", "refused", "8" * 32, curve=[(64, "train/../loss", 1.0)])
-    unfinished = tmp_path / "imp-e" / "unfinished"
+    unfinished = tmp_path / "runs" / "imp-e" / "unfinished"
     unfinished.mkdir()
     (unfinished / "metrics.csv").write_text("step,key,value\n64,train/loss,1.0\n")
     results = {r.run_dir.rsplit("/", 1)[-1]: r for r in import_runs([tmp_path])}
@@ -185,3 +189,24 @@ def test_import_runs_command(tmp_path):
     (run / "results.json").write_text("[]")
     bad = CliRunner().invoke(app, ["import-runs", str(run)])
     assert bad.exit_code == 2 and f"{run / 'results.json'}: not a JSON object" in bad.output
+
+
+def test_a_sqlite_store_gets_in_one_transaction_what_log_batch_writes(tmp_path):
+    """The bulk path (emml.runs.tracking._bulk_points: MLflow's own tables, one transaction) stores the same points,
+    timestamps and latest values as MlflowClient.log_batch, NaN and infinities included."""
+    curve = CURVE + [(256, "train/loss", float("nan")), (256, "charts/fps", float("inf")), (64, "charts/fps", 32.0)]
+    fast, slow = (
+        write_run(tmp_path / root, "imp-g", "b", rid, curve=curve) for root, rid in (("x", "b" * 32), ("y", "c" * 32))
+    )
+    for run in (fast, slow):
+        os.utime(run / "metrics.csv", (1_700_000_000, 1_700_000_000))  # the same end (no ended_at: estimated)
+    stored = {}
+    for run, bulk in ((fast, True), (slow, False)):
+        rid = import_run_dir(run, bulk=bulk).mlflow_run_id
+        client = tracking._client()
+        data = client.get_run(rid).data
+        keys = sorted(data.metrics)
+        history = {k: sorted((m.step, m.timestamp, m.value) for m in client.get_metric_history(rid, k)) for k in keys}
+        stored[bulk] = (data.metrics, history, {k: v for k, v in data.tags.items() if "import" not in k})
+    assert repr(stored[True]) == repr(stored[False])  # repr: nan == nan
+    assert stored[True][0]["train/loss"] != stored[True][0]["train/loss"]  # the latest point: NaN, at 256

@@ -1,0 +1,77 @@
+"""Issue 54, item 7: `emml import-runs` gives one MLflow run per run dir whatever happens: two imports at once into
+one (new) sqlite store, an import killed midway (``kill -9``) and run again."""
+
+import json
+import subprocess
+import sys
+import textwrap
+
+from emml.runs import tracking
+from emml.runs.import_runs import IMPORTED_FROM, import_runs, relative
+from tests.runs.test_import_runs import write_run
+
+IMPORT = textwrap.dedent(
+    """
+    import json, sys
+    from pathlib import Path
+    from emml.runs.import_runs import import_runs
+    print(json.dumps({r.run_dir: r.outcome for r in import_runs([Path(sys.argv[1])], uri=sys.argv[2])}))
+    """
+)
+KILLED = textwrap.dedent(
+    """
+    import os, signal, sys
+    from pathlib import Path
+    from emml.runs import tracking
+    from emml.runs.import_runs import import_runs
+    real, calls = tracking._bulk_points, []
+    def dying(*args, **kwargs):  # the second run dir's run is made, then the process is killed before its points
+        calls.append(1)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(*args, **kwargs)
+    tracking._bulk_points = dying
+    import_runs([Path(sys.argv[1])], uri=sys.argv[2])
+    """
+)
+
+
+def runs_by_dir(experiment: str, uri: str) -> dict[str, list[dict]]:
+    """The store's live runs of ``experiment`` by the run dir they were imported from."""
+    out: dict[str, list[dict]] = {}
+    for run in tracking.find_runs(experiment, uri=uri):
+        out.setdefault(run["tags"].get(IMPORTED_FROM), []).append(run)
+    return out
+
+
+def test_two_imports_at_once_into_a_new_store_make_one_run_per_run_dir(tmp_path):
+    dirs = [relative(write_run(tmp_path, "twice", f"run-s{i}", f"{i + 1:x}" * 32)) for i in range(4)]
+    uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"  # not there yet: both would create its tables
+    args = [sys.executable, "-c", IMPORT, str(tmp_path / "runs"), uri]
+    procs = [subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [err[-2000:] for _, err in outs]
+    outcomes = [json.loads(out.strip().splitlines()[-1]) for out, _ in outs]
+    for d in dirs:  # each run dir imported by one of them, found in the store by the other
+        assert sorted(o[d] for o in outcomes) == ["imported", "skipped"]
+    stored = runs_by_dir("twice", uri)
+    assert sorted(stored) == sorted(dirs)
+    assert all(len(runs) == 1 and runs[0]["status"] == "FINISHED" for runs in stored.values())
+
+
+def test_an_import_killed_midway_and_run_again_leaves_one_finished_run_per_run_dir(tmp_path):
+    dirs = [relative(write_run(tmp_path, "killed", f"run-s{i}", f"{i + 5:x}" * 32)) for i in range(3)]
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    killed = subprocess.run([sys.executable, "-c", KILLED, str(tmp_path / "runs"), uri], capture_output=True)
+    assert killed.returncode == -9, killed.stderr[-2000:]
+    left = runs_by_dir("killed", uri)
+    assert [left[d][0]["status"] for d in dirs[:2]] == ["FINISHED", "RUNNING"] and dirs[2] not in left
+    results = {r.run_dir: r for r in import_runs([tmp_path / "runs"], uri=uri)}
+    assert [results[d].outcome for d in dirs] == ["skipped", "imported", "imported"]
+    assert "interrupted import" in results[dirs[1]].reason
+    stored = runs_by_dir("killed", uri)
+    assert sorted(stored) == sorted(dirs)
+    assert all(len(runs) == 1 and runs[0]["status"] == "FINISHED" for runs in stored.values())
+    assert stored[dirs[1]][0]["run_id"] != left[dirs[1]][0]["run_id"]  # the half-made run went; a whole one came
+    again = import_runs([tmp_path / "runs"], uri=uri)
+    assert {r.outcome for r in again} == {"skipped"} and runs_by_dir("killed", uri).keys() == stored.keys()
