@@ -12,6 +12,8 @@ import textwrap
 import time
 from pathlib import Path
 
+import pytest
+
 from emml.experiments.campaign import load_campaign, run_campaign
 from emml.runs.checkpoint import load_checkpoint
 from emml.runs.records import read_points
@@ -66,6 +68,7 @@ def _updates(run: Path) -> int:
     return sum(k == "charts/update" for _, k, _ in read_points(path)) if path.exists() else 0
 
 
+@pytest.mark.slow  # ~2.5 min on 2 busy cores: two smoke runs started, killed, resumed and finished
 def test_kill_9_of_a_campaign_leaves_no_process_and_the_rerun_resumes(tracking, tmp_path, no_leftovers):
     folder = tmp_path / "campaigns"
     folder.mkdir()
