@@ -108,7 +108,8 @@ def run_table(
         plugins = [arg for p in configured() for arg in ("--plugin", p)]  # a model of one's own needs its plugin
         only_args = [arg for o in only for arg in ("--only", o)]
         # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
-        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *only_args])
+        how = (["--jobs", str(jobs)] if jobs else []) + (["--device", device] if device != "cpu" else [])
+        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *only_args, *how])
         _echo(data, as_json, stopped_line(report, again))
         raise typer.Exit(130)
     _echo(

@@ -273,11 +273,12 @@ launcher was killed outright saves and ends within `STOP_GRACE_S` of noticing (`
 then resumes it instead of failing it as locked."""
 
 
-def _await_left_behind(cfgs: list, log, wait_s: float = LEFT_BEHIND_WAIT_S) -> None:
-    """Wait up to ``wait_s`` for the runs of ``cfgs`` that a live process holds to be released (saying so once);
-    a run still held after that is left to `_collect`, which reports it busy."""
+def _await_left_behind(cfgs: list, log, wait_s: float | None = None) -> None:
+    """Wait up to ``wait_s`` (default `LEFT_BEHIND_WAIT_S`) for the runs of ``cfgs`` that another live process holds
+    to be released (saying so once); a run still held after that is left to `_collect`, which reports it busy."""
     import time
 
+    wait_s = LEFT_BEHIND_WAIT_S if wait_s is None else wait_s
     from emml.runs.rundir import run_dir
     from emml.runs.runlock import describe, holder
 

@@ -7,9 +7,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
-from emml.runs.checkpoint import CheckpointError
-from emml.runs.records import RecordError
-from emml.runs.results import ResultsError
 from emml.runs.rundir import CHECKPOINT, RunDirError, config_of, finished_run, path_of, variant_dir
 
 READING_ORDER = ("quick", "paper")
@@ -137,6 +134,9 @@ def write_reports(
     """Regenerate every table and curve per profile with results, the figures of each profile's best
     Dual-Attention checkpoint (when its run dir is here), and reports/index.md. Returns the index path."""
     from emml.experiments.tables import load_table
+    from emml.runs.checkpoint import CheckpointError  # torch: imported when reports are written, not with the module
+    from emml.runs.records import RecordError
+    from emml.runs.results import ResultsError
 
     out = Path(out) if out is not None else project_root() / "reports"
     out.mkdir(parents=True, exist_ok=True)
@@ -177,6 +177,7 @@ def _table_lines(table: str, profile: str, out: Path, results_root, run_root, dr
     from emml.experiments.tables import load_table
     from emml.report.curves import plot_table
     from emml.report.tables import _run_names, report_table, table_results
+    from emml.runs.checkpoint import CheckpointError
 
     lines: list[str] = []
     df = table_results(load_table(table), profile, results_root)

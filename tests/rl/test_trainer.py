@@ -629,7 +629,7 @@ def test_a_torn_metrics_line_is_cut_back_on_resume_and_the_run_dir_still_imports
     assert [s for s, _ in metric_history(imported.mlflow_run_id, "losses/policy")] == [64, 128, 192, 256]
 
 
-def test_a_garbage_metrics_line_fails_naming_file_and_line_before_the_run_starts(tracking, no_leftovers):
+def test_a_garbage_metrics_line_or_results_json_fails_naming_file_and_line(tracking, no_leftovers):
     from emml.runs.records import RecordError
 
     train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
@@ -637,3 +637,7 @@ def test_a_garbage_metrics_line_fails_naming_file_and_line_before_the_run_starts
     mirror.write_text(mirror.read_text().replace("\n", "\nnot a point\n", 1))
     with pytest.raises(RecordError, match=rf"^{mirror}: line 2: not a metric point"):
         train(smoke(tracking, frames=128, eval_episodes=1), quiet=True)
+    results = run_dir(smoke(tracking)) / RESULTS  # issue 54: a garbage results.json crashed `emml train` naming none
+    results.write_text('{"run_id": "x", ')
+    with pytest.raises(ValueError, match=rf"^{results}: not JSON \(.*line 1 column"):
+        train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
