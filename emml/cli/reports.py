@@ -52,7 +52,11 @@ def reports(out: Path = typer.Option(None, help="Output folder (default: reports
 
     _check_store()  # the curves read MLflow
     _own_engines()
-    typer.echo(f"wrote {write_reports(_out(out) if out else None, log=typer.echo)}")
+    try:  # a damaged run dir is named and skipped inside; what is left (a results CSV, the claims) fails in one line
+        index = write_reports(_out(out) if out else None, log=typer.echo)
+    except ValueError as e:
+        _fail(str(e))
+    typer.echo(f"wrote {index}")
 
 
 def backfill_config(

@@ -124,14 +124,17 @@ def run_table(
         only_args = [arg for o in only for arg in ("--only", o)]
         # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
         roots = [a for k, v in (("--run-root", run_root), ("--results-root", results_root)) if v for a in (k, v)]
-        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *roots, *only_args])
+        how = (["--jobs", str(jobs)] if jobs else []) + (["--device", device] if device != "cpu" else [])
+        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *roots, *only_args, *how])
         _echo(data, as_json, stopped_line(report, again))
         raise typer.Exit(130)
     _echo(
         data,
         as_json,
         f"{table} [{profile}]: {len(report.done)} trained, {len(report.skipped)} already finished, "
-        f"{len(report.failed)} failed" + (f", {len(report.submitted)} jobs submitted" if report.submitted else ""),
+        f"{len(report.failed)} failed"
+        + (f", {len(report.busy)} trained by another process" if report.busy else "")
+        + (f", {len(report.submitted)} jobs submitted" if report.submitted else ""),
     )
     if report.failed:
         raise typer.Exit(1)
@@ -160,7 +163,10 @@ def campaign(
     from dataclasses import asdict
 
     from emml.experiments.campaign import (
+        check_no_campaign,
+        hold_campaign,
         load_campaign,
+        resume_command,
         run_campaign,
         run_pinned,
         runs_at_once,
@@ -170,7 +176,6 @@ def campaign(
     )
     from emml.experiments.launch import stopped_line
 
-    step_args = [x for n in steps for x in ("--step", n)]
     try:
         plan = select_steps(load_campaign(name), steps)
     except ValueError as e:
@@ -185,24 +190,29 @@ def campaign(
         return
     if pin:  # re-exec from a worktree of HEAD, writing into this checkout's runs, results and MLflow store
         try:
+            check_no_campaign(name)  # before a worktree is made: the lock is taken where it trains, below
             run_pinned(name, steps, jobs, device, run_root, results_root, as_json, log=typer.echo)
         except ValueError as e:
             _fail(str(e))
     _use_tcmalloc()
     try:
-        reports = run_campaign(plan, run_root, results_root, device=device, jobs=jobs or None, log=typer.echo)
+        with hold_campaign(name):  # one campaign per checkout (issue 54: two doubled every run's MLflow entries)
+            reports = run_campaign(plan, run_root, results_root, device=device, jobs=jobs or None, log=typer.echo)
     except ValueError as e:
         _fail(str(e))
     failed = {k: v for r in reports for k, v in r.failed.items()}
     if reports and reports[-1].stopped:
-        again = shlex.join(["emml", "campaign", name, *step_args])
+        from emml.models.plugins import configured
+
+        again = shlex.join(resume_command(name, steps, jobs, device, run_root, results_root, configured()))
         _echo([asdict(r) for r in reports], as_json, stopped_line(reports[-1], again))
         raise typer.Exit(130)
     _echo(
         [asdict(r) for r in reports],
         as_json,
         f"{name}: {sum(len(r.done) for r in reports)} trained, {sum(len(r.skipped) for r in reports)} already "
-        f"finished, {len(failed)} failed",
+        f"finished, {len(failed)} failed"
+        + (f", {busy} trained by another process" if (busy := sum(len(r.busy) for r in reports)) else ""),
     )
     if failed:
         raise typer.Exit(1)

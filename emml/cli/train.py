@@ -90,7 +90,8 @@ def train(
     from emml.rl.trainer import train as run
     from emml.runs.checkpoint import CheckpointError
     from emml.runs.diskspace import NoSpaceError
-    from emml.runs.rundir import ConfigMismatch
+    from emml.runs.records import RecordError
+    from emml.runs.rundir import ConfigMismatch, RunDirError
     from emml.runs.runlock import RunLocked
 
     if pack_seeds:
@@ -109,7 +110,7 @@ def train(
         return
     try:  # raised before any engine starts or anything is written, but a full disk (the run then ends FAILED)
         result = run(cfg, quiet=quiet or as_json)
-    except (CheckpointError, ConfigMismatch, RunLocked, NoSpaceError) as e:
+    except (CheckpointError, ConfigMismatch, RunLocked, NoSpaceError, RunDirError, RecordError) as e:
         _fail(str(e))
     data = {
         "run_dir": str(result.run_dir),

@@ -18,7 +18,24 @@ def project_root() -> Path:
     return Path.cwd()
 
 
+PIN_DIR = ".campaign"
+"""Under a checkout (git-ignored): the git worktrees campaigns run from, one per commit (`<checkout>/.campaign/<sha>/`,
+emml.experiments.campaign.pin_worktree), and the lock that lets one campaign run per checkout."""
+
+
+def checkout_root() -> Path:
+    """The checkout whose folders (runs/, results/, scratch/, reports/) are written: the project root, or, for a
+    campaign's pinned worktree (`<checkout>/.campaign/<sha>/`), the checkout it was made from. A pinned campaign
+    runs the worktree's code but writes the checkout's files; a smoke step resolved under the worktree would slip
+    past the guard that keeps smoke numbers out of the checkout's committed results/ (issue 54)."""
+    root = project_root()
+    if root.parent.name == PIN_DIR and (root.parent.parent / "pyproject.toml").is_file():
+        return root.parent.parent
+    return root
+
+
 def project_path(path: str | Path) -> Path:
-    """``path`` as given when absolute, else under the project root (run and results roots are set this way)."""
+    """``path`` as given when absolute, else under the checkout (`checkout_root`: run and results roots are set this
+    way)."""
     path = Path(path)
-    return path if path.is_absolute() else project_root() / path
+    return path if path.is_absolute() else checkout_root() / path

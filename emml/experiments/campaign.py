@@ -20,17 +20,21 @@ checkout's.
 
 from __future__ import annotations
 
+import fcntl
 import os
+import shutil
 import statistics
 import subprocess
 from collections.abc import Callable
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import tomllib
 
-from emml.config.paths import REPRODUCE_DIR
+from emml.config.paths import PIN_DIR, REPRODUCE_DIR, checkout_root, project_path, project_root
 from emml.experiments.tables import RunSpec
+from emml.runs.records import RecordError, mirror_point, note, read_points, torn_tail
 from emml.runs.rundir import run_name
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
@@ -147,12 +151,19 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     steps, profiles = [], load_profiles()
     tables = table_names()
     known_claims = load_claims()
+    names: dict[str, int] = {}
     for i, raw in enumerate(raw_steps):
         where = f"steps[{i}]"
         _check_keys(path, where, raw, STEP_KEYS)
         for key in ("name", "table", "profile"):
             if not isinstance(raw.get(key), str) or not raw[key]:
                 raise ValueError(f"{path}: {where}.{key} is required (a non-empty string)")
+        if raw["name"] in names:  # --step and --status name steps: two of one name would be merged silently
+            raise ValueError(
+                f"{path}: {where}.name={raw['name']!r} is already the name of steps[{names[raw['name']]}]; step names "
+                "must be unique"
+            )
+        names[raw["name"]] = i
         if raw["table"] not in tables:
             raise ValueError(f"{path}: {where}.table={raw['table']!r} is unknown; allowed: {', '.join(tables)}")
         if raw["profile"] not in profiles:
@@ -174,11 +185,24 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
             _settings(path, where, raw),
         )
         try:  # the selection names runs the table has (the values present are named otherwise)
-            select_runs(_declared(step.table, step.profile), step.only)
+            selected = select_runs(_declared(step.table, step.profile), step.only)
         except ValueError as e:
             raise ValueError(f"{path}: {where}.only: {e}") from None
+        _check_runs(path, where, step, selected)
         steps.append(step)
     return Campaign(name, path, str(data.get("title", name)), tuple(steps))
+
+
+def _check_runs(path: Path, where: str, step: Step, selected: dict) -> None:
+    """Each run of the step as it would train, validated before anything starts (its frames at least one update,
+    `TrainConfig.validate`): a bad step otherwise fails when the campaign reaches it, hours in."""
+    from emml.experiments.launch import with_overrides
+
+    for spec, _ in selected.values():
+        try:
+            with_overrides(spec, step.overrides(), step.profile).to_config(step.profile).validate()
+        except ValueError as e:
+            raise ValueError(f"{path}: {where} ({spec.run_name(step.profile)}): {e}") from None
 
 
 def _claims(path: Path, where: str, raw: dict, known: dict) -> tuple[str, ...]:
@@ -256,7 +280,13 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
     for step in campaign.steps:
         key = (step.table, step.profile)
         if key not in read:  # run_states reads every run dir's checkpoint: once per table and profile
-            read[key] = run_states(step.table, step.profile, run_root, results_root)
+            try:
+                read[key] = run_states(step.table, step.profile, run_root, results_root)
+            except ValueError as e:  # a damaged results CSV (ResultsError names it): the other steps are shown
+                note(f"step {step.name}: not shown: {e}")
+                read[key] = None
+        if read[key] is None:
+            continue
         for spec, launch_state in step_runs(step, run_root, results_root, read[key]):
             cfg = spec.to_config(step.profile, **fields)
             directory = run_dir(cfg)
@@ -302,14 +332,24 @@ def wall_seconds(rows: list[RunStatus], at_once: int, node: bool = False) -> flo
 
 
 def _frames_logged(metrics: Path) -> int:
-    """The last frame a run's metrics mirror holds (0 without one): read from its tail, cheaply."""
+    """The last frame a run's metrics mirror holds (0 without one): read from its tail, cheaply. A torn last line
+    (a live run writing it, or a kill) is left out; a line that is no metric point is named and skipped (issue 54:
+    one damaged run dir does not stop --status)."""
     if not metrics.exists():
         return 0
     with open(metrics, "rb") as f:
         f.seek(0, os.SEEK_END)
-        f.seek(max(0, f.tell() - 4096))
-        lines = f.read().decode(errors="replace").splitlines()[1:]
-    steps = [int(line.split(",", 1)[0]) for line in lines if line[:1].isdigit()]
+        start = max(0, f.tell() - 4096)
+        f.seek(start)
+        data = f.read()
+    lines = data[: torn_tail(data)].decode(errors="replace").split("\n")[1:-1]  # the first: the header or cut
+    steps = []
+    for line in lines:
+        point = mirror_point(line)
+        if point is None:
+            note(f"{metrics}: a line near its end is not a metric point (step,key,value): {line[:60]!r}; skipped")
+            continue
+        steps.append(point[0])
     return max(steps, default=0)
 
 
@@ -322,7 +362,6 @@ class _Speed:
         self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
 
     def measured(self, cfg) -> tuple[float | None, float | None]:
-        from emml.config.paths import project_path
         from emml.runs.rundir import METRICS
 
         difficulty = cfg.env.difficulty
@@ -339,12 +378,16 @@ class _Speed:
                     break
             fps, evals = [], []
             for path in files[-6:]:  # the most recent few: enough for a median, cheap to read
-                for line in path.read_text().splitlines()[1:]:
-                    _, name, value = line.split(",", 2)
+                try:
+                    points = read_points(path)
+                except RecordError as e:  # one damaged mirror: named, the others measure
+                    note(f"{e}; not used to estimate the time left")
+                    continue
+                for _, name, value in points:
                     if name == "charts/fps":
-                        fps.append(float(value))
+                        fps.append(value)
                     elif name == "perf/eval_s":
-                        evals.append(float(value))
+                        evals.append(value)
             self._cache[key] = (
                 statistics.median(fps) if fps else None,
                 statistics.median(evals) if evals else None,
@@ -396,13 +439,61 @@ def run_campaign(
     return reports
 
 
-PIN_DIR = ".campaign"
-"""Under the project root (git-ignored): the worktrees campaigns run from, one per commit."""
+LOCK = "campaign.lock"
+"""Under <checkout>/.campaign/: held (flock) by the one campaign training into the checkout (`hold_campaign`)."""
 
 
-def pin_worktree(root: Path, log: Callable[[str], None] = print) -> Path:
+class CampaignRunning(ValueError):
+    """Another campaign trains into this checkout (the message names its pid)."""
+
+
+def campaign_lock_path() -> Path:
+    """The checkout's campaign lock: one per checkout, whichever worktree the campaign runs from."""
+    return checkout_root() / PIN_DIR / LOCK
+
+
+def _refusal(name: str, info: dict) -> CampaignRunning:
+    from emml.runs.runlock import describe
+
+    return CampaignRunning(
+        f"campaign {info.get('campaign', '?')!r} is already training into {checkout_root()}: {describe(info)}; one "
+        f"campaign per checkout at a time (two would share its runs, results and MLflow store): wait for it to end "
+        f"or stop it (kill {info.get('pid', '?')}), then run `emml campaign {name}` again"
+    )
+
+
+def check_no_campaign(name: str) -> None:
+    """CampaignRunning when a live campaign holds the checkout's lock: said before a worktree is made or anything
+    starts (the lock itself is taken by `hold_campaign`, in the process that trains)."""
+    from emml.runs.runlock import lock_holder
+
+    info = lock_holder(campaign_lock_path())
+    if info is not None:
+        raise _refusal(name, info)
+
+
+@contextmanager
+def hold_campaign(name: str):
+    """Hold the checkout's campaign lock while the block runs; CampaignRunning (before anything starts) when another
+    live campaign holds it. flock: the kernel releases it however the holder ends (`kill -9` included)."""
+    from emml.runs.runlock import lock_holder, take_lock
+
+    path = campaign_lock_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = take_lock(path, campaign=name)
+    if fd is None:
+        raise _refusal(name, lock_holder(path) or {})
+    try:
+        yield
+    finally:
+        os.close(fd)
+
+
+def pin_worktree(root: Path, log: Callable[[str], None] = print, need: Path | None = None) -> Path:
     """A git worktree of `root`'s HEAD at <root>/.campaign/<sha>/ (made once per commit); uncommitted changes are not
-    in it, and a warning says so."""
+    in it, and a warning says so. ``need``: a file (under ``root``) the campaign reads, which must be committed
+    (a ValueError says to commit it). Concurrent starts make the worktree once (a lock around `git worktree add`),
+    and one left half-made by a kill is made again."""
 
     def git(*args: str) -> str:
         return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, check=True).stdout.strip()
@@ -411,12 +502,27 @@ def pin_worktree(root: Path, log: Callable[[str], None] = print) -> Path:
         sha = git("rev-parse", "HEAD")
     except (OSError, subprocess.CalledProcessError) as e:
         raise ValueError(f"{root} is not a git checkout ({e}); run the campaign with --no-pin") from None
+    if need is not None:
+        relative = Path(need).resolve().relative_to(Path(root).resolve()).as_posix()
+        try:
+            git("cat-file", "-e", f"HEAD:{relative}")
+        except subprocess.CalledProcessError:
+            raise ValueError(
+                f"{relative} is not committed: the campaign trains commit {sha[:7]} from a worktree of it "
+                f"({PIN_DIR}/{sha[:12]}), which does not have it; commit it (git add {relative}; git commit), or run "
+                "with --no-pin"
+            ) from None
     if git("status", "--porcelain", "--untracked-files=no"):
         log(f"warning: uncommitted changes in {root} are not in the campaign's code (it runs commit {sha[:7]})")
     tree = root / PIN_DIR / sha[:12]
-    if not (tree / "pyproject.toml").exists():
-        subprocess.run(["git", "worktree", "prune"], cwd=root, capture_output=True)
-        git("worktree", "add", "--detach", str(tree), sha)
+    (root / PIN_DIR).mkdir(exist_ok=True)
+    with open(root / PIN_DIR / "pin.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # a second start waits for the first's `git worktree add`, then uses it
+        if not (tree / "pyproject.toml").exists():
+            if tree.exists():  # half-made by a killed start: git refuses to add over it
+                shutil.rmtree(tree)
+            subprocess.run(["git", "worktree", "prune"], cwd=root, capture_output=True)
+            git("worktree", "add", "--detach", str(tree), sha)
     return tree
 
 
@@ -491,14 +597,13 @@ def run_pinned(
     ValueError."""
     import sys
 
-    from emml.config.paths import project_path, project_root
     from emml.runs.tracking import tracking_uri
 
-    tree = pin_worktree(project_root(), log=log)
-    roots = {
-        "--run-root": str(project_path(run_root or "runs")),
-        "--results-root": str(project_path(results_root or "results")),
-    }
+    root = project_root()
+    tree = pin_worktree(root, log=log, need=CAMPAIGNS_DIR / f"{name}.toml")
+    # roots given are passed as absolute paths; the others resolve under this checkout there too
+    # (emml.config.paths.checkout_root), each step's profile choosing its own (smoke: scratch/)
+    roots = {k: str(project_path(v)) for k, v in (("--run-root", run_root), ("--results-root", results_root)) if v}
     args = [sys.executable, "-m", "emml.cli", "campaign", name, "--no-pin", "--jobs", str(jobs), "--device", device]
     args += [x for kv in roots.items() for x in kv] + [x for n in steps for x in ("--step", n)]
     args += ["--json"] if as_json else []
@@ -506,3 +611,25 @@ def run_pinned(
     log(f"{name}: training from {tree} (commit {tree.name})")
     os.chdir(tree)  # `python -m` puts the working directory first on sys.path: the tree's emml, not this one's
     os.execve(sys.executable, args, env)
+
+
+def resume_command(
+    name: str,
+    steps: list[str],
+    jobs: int = 0,
+    device: str = "cpu",
+    run_root: str | None = None,
+    results_root: str | None = None,
+    plugins: list[str] = (),
+) -> list[str]:
+    """The command that resumes a stopped campaign: every option that changes what is resumed (the steps, the
+    roots, where and how many runs at a time, the plugins its models need), and --no-pin when it did not run from
+    a pinned worktree (issue 54: a resume line without the roots started new runs instead)."""
+    pinned = checkout_root() != project_root()  # a pinned campaign runs from <checkout>/.campaign/<sha>
+    args = ["emml", *[a for p in plugins for a in ("--plugin", p)], "campaign", name]
+    args += [a for n in steps for a in ("--step", n)]
+    args += ["--jobs", str(jobs)] if jobs else []
+    args += ["--device", device] if device != "cpu" else []
+    args += ["--run-root", str(project_path(run_root))] if run_root else []
+    args += ["--results-root", str(project_path(results_root))] if results_root else []
+    return args + ([] if pinned else ["--no-pin"])

@@ -68,6 +68,8 @@ class LaunchReport:
     None when it ran to the end."""
     unfinished: list[str] = field(default_factory=list)
     """After a stop: the runs it left unfinished, stopped or never started (the next launch trains them)."""
+    busy: dict[str, str] = field(default_factory=dict)
+    """Run name → who trains it: held by another live process (its run lock), so not trained here, nor failed."""
 
 
 def run_states(name: str, profile: str, run_root: str | None = None, results_root: str | None = None) -> dict:
@@ -227,6 +229,9 @@ def run_table(
     log(f"{name} [{profile}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
     if not todo:
         return report
+    from emml.runs.preflight import ensure_store
+
+    ensure_store()  # a new store's tables made once, under a lock, whoever starts beside this launch
     report.parent_run_id = parent_run(name, f"{name}-{profile}", {"table": name, "profile": profile})
     fields = {**_roots(run_root, results_root), "device": device}
     if backend == "local" and jobs > 1:
@@ -240,6 +245,7 @@ def run_table(
 
     install_signal_handlers()  # SIGTERM/SIGHUP raise SystemExit here as Ctrl-C raises KeyboardInterrupt
     try:
+        _await_left_behind([spec.to_config(profile, **fields) for spec in todo], log)
         if jobs == 1:
             for a in args:
                 _collect(report, a[0], a[1], lambda a=a: _train_one(*a), log)
@@ -261,6 +267,31 @@ def run_table(
 STOP_GRACE_S = 8.0
 """Seconds the pool's workers get to end their runs (checkpoint, MLflow run KILLED, engines) after a stop, before
 they are killed; a second Ctrl-C kills them at once."""
+LEFT_BEHIND_WAIT_S = STOP_GRACE_S + 12.0
+"""Seconds a launch waits for the runs it is to train that another process still holds: a run process whose
+launcher was killed outright saves and ends within `STOP_GRACE_S` of noticing (`_watch_launcher`), and the rerun
+then resumes it instead of failing it as locked."""
+
+
+def _await_left_behind(cfgs: list, log, wait_s: float | None = None) -> None:
+    """Wait up to ``wait_s`` (default `LEFT_BEHIND_WAIT_S`) for the runs of ``cfgs`` that another live process holds
+    to be released (saying so once); a run still held after that is left to `_collect`, which reports it busy."""
+    import time
+
+    wait_s = LEFT_BEHIND_WAIT_S if wait_s is None else wait_s
+    from emml.runs.rundir import run_dir
+    from emml.runs.runlock import describe, holder
+
+    held = {run_dir(c): holder(run_dir(c)) for c in cfgs}
+    held = {d: who for d, who in held.items() if who is not None and who.get("pid") != os.getpid()}
+    if not held:
+        return
+    first = next(iter(held.values()))
+    log(f"waiting up to {wait_s:.0f} s for {len(held)} runs still held (e.g. by {describe(first)}) to be saved")
+    deadline = time.monotonic() + wait_s
+    while held and time.monotonic() < deadline:
+        time.sleep(0.25)
+        held = {d: who for d, who in held.items() if holder(d) is not None}
 
 
 def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
@@ -275,12 +306,15 @@ def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
     private_mp_tempdir()
     ctx = multiprocessing.get_context("forkserver")
     queue, running = list(args), {}
+    # the lifeline: only this process holds its writing end, so every child sees it close however this process
+    # ends, `kill -9` included, and ends its run (`_watch_launcher`) instead of training on without a launcher
+    lifeline, alive = ctx.Pipe(duplex=False)
     try:
         while queue or running:
             while queue and len(running) < jobs:
                 a = queue.pop(0)
                 receive, send = ctx.Pipe(duplex=False)
-                child = ctx.Process(target=_child, args=(send, a), name=f"emml-{a[0].run_name(a[1])}")
+                child = ctx.Process(target=_child, args=(send, a, lifeline), name=f"emml-{a[0].run_name(a[1])}")
                 child.start()
                 send.close()
                 running[child.sentinel] = (child, a, receive)
@@ -292,20 +326,55 @@ def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
     except BaseException:
         _end_workers([child for child, _, _ in running.values()])
         raise
+    finally:
+        alive.close()
+        lifeline.close()
 
 
-def _child(send, a) -> None:
-    """A run's process: Ctrl-C is left to the launcher (which stops children by SIGTERM); the outcome goes back as
-    ('done', run name), ('stopped', why) or ('failed', error and traceback)."""
+def _child(send, a, lifeline=None) -> None:
+    """A run's process: Ctrl-C is left to the launcher (which stops children by SIGTERM), and so is its life (the
+    run ends when the launcher does, `_watch_launcher`); the outcome goes back as ('done', run name), ('stopped',
+    why), ('busy', who holds the run) or ('failed', error and traceback)."""
     import signal
 
+    from emml.runs.runlock import RunLocked
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if lifeline is not None:
+        _watch_launcher(lifeline)
     try:
-        send.send(("done", _train_one(*a)))
+        outcome = ("done", _train_one(*a))
     except (KeyboardInterrupt, SystemExit) as e:
-        send.send(("stopped", type(e).__name__))
+        outcome = ("stopped", type(e).__name__)
+    except RunLocked as e:
+        outcome = ("busy", str(e))
     except BaseException as e:  # noqa: BLE001 - reported to the launcher, which goes on with the table
-        send.send(("failed", f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=3)}"))
+        outcome = ("failed", f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=3)}")
+    try:
+        send.send(outcome)
+    except OSError:  # the launcher is gone (killed): nobody to tell, the run dir says it all
+        pass
+
+
+def _watch_launcher(lifeline) -> None:
+    """A daemon thread that waits for the launcher's end (the lifeline's writing end closed: its process ended,
+    however), then stops this run as a stop from the launcher would: SIGTERM to itself (the run saves its finished
+    updates, ends KILLED in MLflow, its engines and workers end), and SIGKILL after `STOP_GRACE_S` if it has not
+    ended by then. Its run lock goes with it, and a rerun of the launch resumes the run."""
+    import signal
+    import threading
+    import time
+
+    def watch() -> None:
+        try:
+            lifeline.recv()  # nothing is ever sent: returns only by EOF
+        except (EOFError, OSError):
+            pass
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(STOP_GRACE_S)
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    threading.Thread(target=watch, name="emml-launcher-watch", daemon=True).start()
 
 
 def _received(receive, child) -> tuple[str, str]:
@@ -320,8 +389,12 @@ def _received(receive, child) -> tuple[str, str]:
 
 
 def _outcome(kind: str, detail: str) -> str:
+    from emml.runs.runlock import RunLocked
+
     if kind == "stopped":
         raise KeyboardInterrupt
+    if kind == "busy":
+        raise RunLocked(detail)
     if kind == "failed":
         raise RuntimeError(detail)
     return detail
@@ -358,9 +431,15 @@ def _signal_name(e: SystemExit) -> str:
 
 def _collect(report: LaunchReport, spec: RunSpec, profile: str, result: Callable[[], str], log) -> None:
     """Record one run's outcome; a failure is kept and the launch goes on."""
+    from emml.runs.runlock import RunLocked
+
     rname = spec.run_name(profile)
     try:
         result()
+    except RunLocked as e:  # another live process trains it: not this launch's run to train, nor a failure
+        report.busy[rname] = str(e)
+        log(f"  not trained here: {e}")
+        return
     except Exception as e:  # noqa: BLE001 - one failed run must not stop the table
         report.failed[rname] = f"{type(e).__name__}: {e}"
         log(f"  FAILED {rname}: {e}\n{traceback.format_exc(limit=3)}")

@@ -38,11 +38,16 @@ def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None,
     """A run of the registry with its config: from runs/<table>/<run>/results.json when there, else the config its
     RunSpec gives under ``profile`` (saying why). ``row``: its results CSV row, whose `eval_episodes` is the size
     of the evaluation its score came from (a re-scored run's differs from its config's)."""
-    from emml.runs.rundir import path_of, saved_config
+    from emml.runs.records import note
+    from emml.runs.rundir import RunDirError, path_of, saved_config
 
     name = spec.run_name(profile)
     run_dir = path_of(run_root, spec.table, name)
-    saved = saved_config(run_dir)
+    try:
+        saved = saved_config(run_dir)
+    except RunDirError as e:  # one damaged run dir does not stop a report: named, then shown as declared
+        note(f"{e}; {name} is shown with the config its table declares")
+        saved = None
     if saved is not None:
         source = SAVED
     else:

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
-from emml.runs.rundir import CHECKPOINT, config_of, finished_run, path_of, variant_dir
+from emml.runs.rundir import CHECKPOINT, RunDirError, config_of, finished_run, path_of, variant_dir
 
 READING_ORDER = ("quick", "paper")
 """The profiles a reader should read first, in this order; any other (demo…) follows."""
@@ -133,11 +133,10 @@ def write_reports(
 ) -> Path:
     """Regenerate every table and curve per profile with results, the figures of each profile's best
     Dual-Attention checkpoint (when its run dir is here), and reports/index.md. Returns the index path."""
-    import matplotlib.pyplot as plt
-
     from emml.experiments.tables import load_table
-    from emml.report.curves import plot_table
-    from emml.report.tables import _run_names, report_table, table_results
+    from emml.runs.checkpoint import CheckpointError  # torch: imported when reports are written, not with the module
+    from emml.runs.records import RecordError
+    from emml.runs.results import ResultsError
 
     out = Path(out) if out is not None else project_root() / "reports"
     out.mkdir(parents=True, exist_ok=True)
@@ -156,34 +155,11 @@ def write_reports(
         for table in tables:
             if load_table(table).placeholder:
                 continue
-            df = table_results(load_table(table), profile, results_root)
-            df = df[df["run_name"].isin(_run_names(load_table(table), profile))] if not df.empty else df
-            frames = sorted(set(df["frames"])) if "frames" in df else []
-            data = report_table(table, profile, results_root, out, run_root)
-            paths = [Path(p) for p in data["paths"]]
-            curve_paths, notes = plot_table(table, profile, results_root, out, run_root)
-            plt.close("all")
-            paths += [Path(p) for p in curve_paths]
-            runs = f"{len(df)} run{'s' if len(df) != 1 else ''}, frames {', '.join(f'{f:,}' for f in frames)}"
-            lines.append(f"- **{table}** ({runs}): " + ", ".join(f"[{p.name}]({p.name})" for p in paths))
-            missing = [n for n in notes if ": no curve (" in n]
-            if missing:
-                lines.append(
-                    f"  - note: {len(missing)} of {len(df)} runs have no curve here (their MLflow runs and "
-                    "run dirs are on the machine that trained them)"
-                )
-            lines += [f"  - note: {n}" for n in notes if n not in missing]
-            log(f"{table} [{profile}]: {len(paths)} files")
-            best = best_checkpoint(table, profile, results_root=results_root, run_root=run_root)
-            if best is not None and best[1] not in drawn:
-                ckpt, name = best
-                drawn.add(name)
-                figs = figures(ckpt, out, finished_no_aux(ckpt, run_root))
-                plt.close("all")
-                lines.append(
-                    f"  - figures of the best Dual-Attention run `{name}`: "
-                    + ", ".join(f"[{p.name}]({p.name})" for p in figs)
-                )
+            try:
+                lines += _table_lines(table, profile, out, results_root, run_root, drawn, log)
+            except (RunDirError, CheckpointError, RecordError, ResultsError) as e:  # one bad file: named; on
+                log(f"{table} [{profile}]: not reported: {e}")
+                lines.append(f"- **{table}**: not reported here: {e}")
         lines.append("")
     demo = sorted(out.glob("*-demo.md"))
     if demo:
@@ -191,3 +167,49 @@ def write_reports(
     index = out / "index.md"
     index.write_text("\n".join(lines))
     return index
+
+
+def _table_lines(table: str, profile: str, out: Path, results_root, run_root, drawn: set[str], log) -> list[str]:
+    """Write one table's report, curves and best run's figures; returns its lines of the index. A run dir whose
+    files cannot be read is named and its figures left out, never the table's report."""
+    import matplotlib.pyplot as plt
+
+    from emml.experiments.tables import load_table
+    from emml.report.curves import plot_table
+    from emml.report.tables import _run_names, report_table, table_results
+    from emml.runs.checkpoint import CheckpointError
+
+    lines: list[str] = []
+    df = table_results(load_table(table), profile, results_root)
+    df = df[df["run_name"].isin(_run_names(load_table(table), profile))] if not df.empty else df
+    frames = sorted(set(df["frames"])) if "frames" in df else []
+    data = report_table(table, profile, results_root, out, run_root)
+    paths = [Path(p) for p in data["paths"]]
+    curve_paths, notes = plot_table(table, profile, results_root, out, run_root)
+    plt.close("all")
+    paths += [Path(p) for p in curve_paths]
+    runs = f"{len(df)} run{'s' if len(df) != 1 else ''}, frames {', '.join(f'{f:,}' for f in frames)}"
+    lines.append(f"- **{table}** ({runs}): " + ", ".join(f"[{p.name}]({p.name})" for p in paths))
+    missing = [n for n in notes if ": no curve (" in n]
+    if missing:
+        lines.append(
+            f"  - note: {len(missing)} of {len(df)} runs have no curve here (their MLflow runs and "
+            "run dirs are on the machine that trained them)"
+        )
+    lines += [f"  - note: {n}" for n in notes if n not in missing]
+    log(f"{table} [{profile}]: {len(paths)} files")
+    best = best_checkpoint(table, profile, results_root=results_root, run_root=run_root)
+    if best is not None and best[1] not in drawn:
+        ckpt, name = best
+        drawn.add(name)
+        try:
+            figs = figures(ckpt, out, finished_no_aux(ckpt, run_root))
+        except (RunDirError, CheckpointError) as e:
+            log(f"{table} [{profile}]: no figures of {name}: {e}")
+            return [*lines, f"  - note: no figures of `{name}` here: {e}"]
+        finally:
+            plt.close("all")
+        lines.append(
+            f"  - figures of the best Dual-Attention run `{name}`: " + ", ".join(f"[{p.name}]({p.name})" for p in figs)
+        )
+    return lines

@@ -9,7 +9,6 @@ the same config resumes from it in the same MLflow run; a finished run is not re
 
 from __future__ import annotations
 
-import json
 import logging
 import random
 import sys
@@ -36,6 +35,8 @@ from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
 from emml.runs.import_runs import FINAL, display_name, score_tags, utc_ms
+from emml.runs.preflight import ensure_store
+from emml.runs.records import cut_torn_tail, read_points
 from emml.runs.rundir import (
     CHECKPOINT,
     EVAL_SEED,
@@ -45,6 +46,7 @@ from emml.runs.rundir import (
     check_resumable,
     git_sha,
     path_of,
+    read_results,
     record_result,
     results_payload,
     run_name,
@@ -132,7 +134,7 @@ class Trainer:
         cfg = self.cfg
         saved = self.saved()
         if self.finished(saved):
-            results = json.loads((self.dir / RESULTS).read_text())
+            results = read_results(self.dir / RESULTS)  # RunDirError names the file and the line
             record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
             return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
         alloc.tune_glibc()  # PPO reuses its large buffers from the heap (no-op under tcmalloc): docs/throughput.md
@@ -161,11 +163,16 @@ class Trainer:
         if build and wants_compile(cfg.compile, self.device):
             compile_model(model)
         tags = run_tags(cfg, self.git_sha, alloc.loaded())
+        # a kill mid-write leaves a torn last line: cut back first, or the resumed run's first point lands on it and
+        # both are lost (issue 54); any other line that is no point fails naming it, before the MLflow run starts
+        cut_torn_tail(self.dir / METRICS)
+        read_points(self.dir / METRICS)
         self.tracker.mirror_to(self.dir / METRICS)
         if saved is not None and not (self.dir / METRICS).exists() and self.tracker.has_run(saved["run_id"]):
             self.tracker.export_to_mirror(saved["run_id"])  # a run dir from before the mirror existed
         if saved is not None:
             self.tracker.resume_after(frames)  # before start: a replay into a new store reads the mirror
+        ensure_store(getattr(self.tracker, "_uri", None))  # a new store: its tables made once, under a lock
         run_id = self.tracker.start(
             cfg.table,
             display_name(self.dir, self.name),

@@ -33,7 +33,13 @@ def save_checkpoint(path: str | os.PathLike, payload: dict[str, Any]) -> Path:
         fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         try:
             with os.fdopen(fd, "wb") as fh:
-                torch.save(payload, fh)
+                sink = _Sink(fh)
+                try:
+                    torch.save(payload, sink)
+                except RuntimeError:  # torch's writer wraps the OSError of a full disk: the cause, unwrapped
+                    if sink.error is not None:
+                        raise sink.error from None
+                    raise
                 fh.flush()
                 os.fsync(fh.fileno())
             os.replace(tmp_name, path)
@@ -47,6 +53,25 @@ def save_checkpoint(path: str | os.PathLike, payload: dict[str, Any]) -> Path:
             raise
     _fsync_dir(path.parent)
     return path
+
+
+class _Sink:
+    """The file torch.save writes to, remembering the OSError of a failed write: torch's zip writer turns it into a
+    RuntimeError ("file write failed") that hides the cause, so a full disk read as a traceback instead of the one
+    line `no_space_names` says (issue 54)."""
+
+    def __init__(self, fh):
+        self._fh, self.error = fh, None
+
+    def write(self, data) -> int:
+        try:
+            return self._fh.write(data)
+        except OSError as e:
+            self.error = e
+            raise
+
+    def flush(self) -> None:
+        self._fh.flush()
 
 
 def _fsync_dir(directory: Path) -> None:

@@ -34,11 +34,11 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+from emml.runs import records
 from emml.runs.rundir import CHECKPOINT, METRICS, RESULTS, RUN_FILES, RunDirError, read_results
 
 MARKERS = RUN_FILES
 """Files any of which makes a folder a run dir (emml/runs/rundir.py)."""
-HEADER = "step,key,value"
 IMPORTED_FROM = "emml.imported_from"
 """Tag of an imported run: its run dir, relative to the checkout (emml.runs.tracking.portable)."""
 TIMES = "emml.times"
@@ -129,22 +129,12 @@ def run_dirs(paths: Iterable[Path]) -> list[Path]:
 
 
 def read_points(path: Path) -> list[tuple[int, str, float]]:
-    """A run's metrics.csv (step,key,value; emml.runs.tracking.Tracker.mirror_to) as (step, key, value), strictly: a
-    wrong header or a line that is not step,key,value is a RunDirError naming the file and line."""
-    lines = Path(path).read_text().splitlines()
-    if not lines or lines[0] != HEADER:
-        raise RunDirError(f"{path}:1: header {lines[0] if lines else ''!r} is not {HEADER!r}")
-    out = []
-    for number, line in enumerate(lines[1:], start=2):
-        try:
-            step, rest = line.split(",", 1)
-            key, value = rest.rsplit(",", 1)
-            if not key:
-                raise ValueError
-            out.append((int(step), key, float(value)))
-        except ValueError:
-            raise RunDirError(f"{path}:{number}: not a step,key,value line: {line[:80]!r}") from None
-    return out
+    """A run's metrics.csv as (step, key, value), read by its one reader (`emml.runs.records.read_points`: a torn
+    last line left out); any other line that is not a point is a RunDirError naming the file and line."""
+    try:
+        return records.read_points(path)
+    except records.RecordError as e:
+        raise RunDirError(str(e)) from None
 
 
 def run_tags(results: dict, run_dir: Path) -> dict:

@@ -2,16 +2,20 @@
 the tracking store reachable and writable, the run and results folders writable, the results CSV readable. Without
 it, an unreachable store failed after ~100 s of MLflow's connection retries with a traceback that never named it,
 and a read-only results folder after the whole training. Each failure is one line naming the URI or the path
-(PreflightError, a ValueError: the CLI prints it and exits 2). Nothing is created: probes are removed at once."""
+(PreflightError, a ValueError: the CLI prints it and exits 2). Nothing is created: probes are removed at once. A new
+sqlite store is created by `ensure_store`, once, under a lock, where the first MLflow run is about to be made."""
 
 from __future__ import annotations
 
+import fcntl
+import json
 import os
 import socket
 import sqlite3
 import tempfile
 import urllib.error
 import urllib.request
+from contextlib import closing
 from pathlib import Path
 from urllib.parse import urlparse
 
@@ -113,17 +117,72 @@ def _check_sqlite(where: str, db: Path, timeout: float) -> None:
             con.close()
 
 
+MLFLOW_PROBE = "/api/2.0/mlflow/experiments/get-by-name?experiment_name=Default"
+"""A read of MLflow's REST API that every tracking server answers with JSON: the experiment, or an MLflow error
+(`error_code`) when it has none of that name. Any other web server answers it otherwise (issue 54: a server that
+was not MLflow passed a check of the port alone, and training failed 12 s later in a ~200-line traceback)."""
+
+
 def _check_server(where: str, uri: str, timeout: float) -> None:
-    """An MLflow server answers its health endpoint (what it does with writes cannot be told without a run)."""
+    """An MLflow tracking server answers its REST API (`MLFLOW_PROBE`); one behind authentication (401, 403) is
+    left to MLflow and its credentials. What it does with writes cannot be told without a run."""
+    url = f"{uri.rstrip('/')}{MLFLOW_PROBE}"
     try:
-        with urllib.request.urlopen(f"{uri.rstrip('/')}/health", timeout=timeout):
-            pass
+        with urllib.request.urlopen(url, timeout=timeout) as answer:
+            status, body = answer.status, answer.read(65536)
     except urllib.error.HTTPError as e:
-        if e.code >= 500:
+        if e.code in (401, 403):
+            return
+        status, body = e.code, e.read(65536)
+        if e.code >= 500 and not _mlflow_answer(body):
             raise PreflightError(f"{where}: the server answers with an error ({e.code} {e.reason})") from None
     except (urllib.error.URLError, OSError) as e:
         reason = getattr(e, "reason", e)
         raise PreflightError(f"{where}: cannot be reached ({reason}; waited up to {timeout:g} s)") from None
+    if not _mlflow_answer(body):
+        raise PreflightError(
+            f"{where}: answers, but is not an MLflow tracking server (GET {MLFLOW_PROBE.split('?')[0]} gave HTTP "
+            f"{status} without MLflow's JSON); point MLFLOW_TRACKING_URI at the URL `mlflow server` serves"
+        )
+
+
+def _mlflow_answer(body: bytes) -> bool:
+    """Whether ``body`` is what MLflow's REST API answers: a JSON object with the experiment or an `error_code`."""
+    try:
+        data = json.loads(body.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(data, dict) and ("experiment" in data or "error_code" in data)
+
+
+def ensure_store(uri: str | None = None) -> None:
+    """Create a new sqlite store's tables once, under a lock on its file, before the first MLflow run is made in
+    it: MLflow builds them on first use, and two processes doing so at once (two launches started together on a new
+    store) fail with `table _alembic_tmp_experiments already exists` (issue 54). A store that has its tables, and any
+    store that is not an sqlite file, is left to MLflow."""
+    uri = uri or tracking_uri()
+    db = _sqlite_path(uri) if urlparse(uri).scheme.split("+")[0] == "sqlite" else None
+    if db is None or _has_tables(db):
+        return
+    from emml.runs.tracking import _client
+
+    db.parent.mkdir(parents=True, exist_ok=True)
+    with open(db, "ab") as f:  # an empty file is an empty database; "a" never truncates one being made
+        fcntl.flock(f, fcntl.LOCK_EX)  # a second start waits here while the first builds the tables
+        if not _has_tables(db):
+            _client(uri).search_experiments(max_results=1)
+
+
+def _has_tables(db: Path) -> bool:
+    """Whether the sqlite file ``db`` holds MLflow's tables (their schema version table)."""
+    if not db.is_file() or db.stat().st_size == 0:
+        return False
+    try:
+        with closing(sqlite3.connect(f"{db.as_uri()}?mode=ro", uri=True, timeout=STORE_TIMEOUT_S)) as con:
+            found = con.execute("SELECT 1 FROM sqlite_master WHERE name = 'alembic_version'").fetchone()
+    except sqlite3.Error:
+        return False
+    return found is not None
 
 
 def _check_socket(where: str, host: str, port: int, timeout: float) -> None:

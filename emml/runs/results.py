@@ -6,13 +6,16 @@ such as ``12e0077`` into the float 1.2e+78, and provenance that cannot be read b
 
 from __future__ import annotations
 
+import csv
 import fcntl
+import io
 import os
 from pathlib import Path
 
 import pandas as pd
 
 from emml.runs.diskspace import no_space_names
+from emml.runs.records import note, torn_tail
 
 # identity and provenance columns (read as written); every other column is a metric (float). started_at and ended_at
 # are results.json's (emml.runs.rundir.TIMES), not written to rows: declared so that a row that has them reads
@@ -76,9 +79,12 @@ class ResultsError(ValueError):
 def _read_csv(path: Path) -> pd.DataFrame:
     """Every cell as text; a file that is not a well-formed CSV fails naming it and the line."""
     try:
-        df = pd.read_csv(path, dtype=str, keep_default_na=False)
+        data = path.read_bytes()
     except OSError as e:
         raise ResultsError(f"{path}: cannot be read ({e.strerror})") from None
+    data = _whole_rows(path, data)
+    try:
+        df = pd.read_csv(io.BytesIO(data), dtype=str, keep_default_na=False)
     except UnicodeDecodeError:
         raise ResultsError(f"{path}: {_first_non_utf8(path)}: not UTF-8 text") from None
     except pd.errors.EmptyDataError:
@@ -89,6 +95,25 @@ def _read_csv(path: Path) -> pd.DataFrame:
     if "run_name" not in df.columns:
         raise ResultsError(f"{path}: line 1: no 'run_name' column in the header (found {', '.join(df.columns)})")
     return df
+
+
+def _whole_rows(path: Path, data: bytes) -> bytes:
+    """``data`` less a torn last row (one cut short by a kill or a full disk: no newline, fewer fields than the
+    header), with a one-line note; the file itself is rewritten whole by the next `upsert_result`. A last row without
+    its newline but with every field is whole."""
+    keep = torn_tail(data)
+    if keep == len(data) or keep == 0:
+        return data
+    header = next(csv.reader([data.split(b"\n", 1)[0].decode("utf-8", errors="replace")]), [])
+    last = next(csv.reader([data[keep:].decode("utf-8", errors="replace")]), [])
+    if len(last) >= len(header):
+        return data
+    line = data[:keep].count(b"\n") + 1
+    note(
+        f"{path}: line {line} was cut short ({len(last)} of {len(header)} fields: a write "
+        "interrupted by a kill or a full disk); read up to the last whole row"
+    )
+    return data[:keep]
 
 
 def _first_non_utf8(path: Path) -> str:

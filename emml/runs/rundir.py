@@ -247,12 +247,7 @@ def read_results(path: Path) -> dict:
     path = Path(path)
     if path.is_dir():
         path = path / RESULTS
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise RunDirError(f"{path}: not JSON ({e.msg}, line {e.lineno} column {e.colno})") from None
-    if not isinstance(data, dict):
-        raise RunDirError(f"{path}: not a JSON object")
+    data = _json_object(path)
     missing = [k for k in ("run_id", "table") if not data.get(k)]
     if missing:
         raise RunDirError(f"{path}: no {' and no '.join(map(repr, missing))}")
@@ -265,7 +260,23 @@ def saved_config(directory: Path) -> dict | None:
     path = Path(directory) / RESULTS
     if not path.exists():
         return None
-    return json.loads(path.read_text()).get("config")
+    return _json_object(path).get("config")
+
+
+def _json_object(path: Path) -> dict:
+    """The JSON object in ``path``; RunDirError naming the file (and the line) unless it holds one. results.json is
+    written whole (`write_json`), so a file that does not parse was damaged otherwise: it is named, never guessed."""
+    try:
+        data = json.loads(path.read_bytes().decode("utf-8"))
+    except OSError as e:
+        raise RunDirError(f"{path}: cannot be read ({e.strerror})") from None
+    except UnicodeDecodeError as e:
+        raise RunDirError(f"{path}: not UTF-8 text (byte {e.start})") from None
+    except json.JSONDecodeError as e:
+        raise RunDirError(f"{path}: not JSON ({e.msg}, line {e.lineno} column {e.colno})") from None
+    if not isinstance(data, dict):
+        raise RunDirError(f"{path}: not a JSON object")
+    return data
 
 
 def write_json(path: Path, payload: dict) -> None:

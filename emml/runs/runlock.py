@@ -40,6 +40,43 @@ def _read(path: Path) -> dict:
         return {}
 
 
+def take_lock(path: Path, **info) -> int | None:
+    """An exclusive flock on ``path`` (created), the file then holding who took it (pid, host, start time and
+    ``info``); returns its descriptor (closing it releases the lock), or None when a live process holds it."""
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    os.ftruncate(fd, 0)
+    os.pwrite(
+        fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "started": time.time(), **info}).encode(), 0
+    )
+    return fd
+
+
+def lock_holder(path: Path) -> dict | None:
+    """Who holds the lock ``path`` (`take_lock`'s info), or None when no live process does."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return _read(path) or {"pid": "?", "host": "?"}
+    else:
+        return None
+    finally:
+        os.close(fd)
+
+
+def describe(info: dict) -> str:
+    """'pid N on host H (since …)': a lock holder, as a refusal names it."""
+    return _describe(info)
+
+
 @contextmanager
 def hold_run(directory: Path):
     """Hold the run's lock while the block runs; RunLocked (before anything is written) if another live process
@@ -50,18 +87,12 @@ def hold_run(directory: Path):
             _held[directory][1] += 1
         else:
             directory.mkdir(parents=True, exist_ok=True)
-            fd = os.open(directory / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                os.close(fd)
+            fd = take_lock(directory / LOCK)
+            if fd is None:
                 raise RunLocked(
                     f"{directory} is being trained by {_describe(_read(directory / LOCK))}: wait for it to end, or "
                     "stop that process; a second start would train the same run twice"
-                ) from None
-            info = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.time()}
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, json.dumps(info).encode(), 0)
+                )
             _held[directory] = [fd, 1]
     try:
         yield
@@ -79,15 +110,4 @@ def holder(directory: Path) -> dict | None:
     path = Path(directory) / LOCK
     if Path(directory).resolve() in _held:
         return _read(path)
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except FileNotFoundError:
-        return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return _read(path) or {"pid": "?", "host": "?"}
-    else:
-        return None
-    finally:
-        os.close(fd)
+    return lock_holder(path)

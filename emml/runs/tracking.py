@@ -45,6 +45,7 @@ from typing import Any, TypeVar
 
 from emml.config.paths import REPRODUCE_DIR, project_root
 from emml.runs.diskspace import NoSpaceError, no_space_names
+from emml.runs.records import MIRROR_HEADER, read_points
 
 T = TypeVar("T")
 
@@ -647,20 +648,8 @@ def set_run_status(run_id: str, status: str, uri: str | None = None) -> None:
 
 def read_mirror(path: str | os.PathLike | None) -> list[tuple[int, str, float]]:
     """The points of a run's metrics mirror (:meth:`Tracker.mirror_to`) as (step, key, value); [] if absent.
-    A last line cut short by a kill is skipped."""
-    if path is None or not Path(path).exists():
-        return []
-    out = []
-    with open(path) as f:
-        next(f, None)  # header
-        for line in f:
-            parts = line.rstrip("\n").split(",")
-            if len(parts) == 3 and line.endswith("\n"):
-                try:
-                    out.append((int(parts[0]), parts[1], float(parts[2])))
-                except ValueError:
-                    continue
-    return out
+    A last line cut short by a kill is skipped (`emml.runs.records.read_points`, the mirror's one reader)."""
+    return [] if path is None else read_points(path)
 
 
 def export_mirror(run_id: str, path: str | os.PathLike, uri: str | None = None) -> int:
@@ -671,7 +660,7 @@ def export_mirror(run_id: str, path: str | os.PathLike, uri: str | None = None) 
     points = sorted((st, k, v) for k in keys for st, v in metric_history(run_id, k, uri))
     tmp = Path(f"{path}.tmp")
     with open(tmp, "w") as f:
-        f.write("step,key,value\n")
+        f.write(MIRROR_HEADER + "\n")
         f.writelines(f"{st},{k},{v!r}\n" for st, k, v in points)
     os.replace(tmp, path)
     return len(points)

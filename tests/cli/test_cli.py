@@ -202,6 +202,8 @@ def test_a_stopped_run_prints_a_resume_command_the_shell_reads_back(monkeypatch)
     again = result.output.split("resume with: ", 1)[1].strip()
     argv = ["emml", "run", "table3", "--profile", "quick", "--only", "row=w/o Reward Shaping", "--only", "seed=0"]
     assert shlex.split(again) == argv
+    result = runner.invoke(app, ["run", "table3", "--jobs", "3"])  # issue 54: how many at a time, kept
+    assert shlex.split(result.output.split("resume with: ", 1)[1]) == [*argv[:5], "--jobs", "3"]
 
 
 @pytest.mark.parametrize(

@@ -2,6 +2,7 @@
 are skipped on a rerun, --status shows done / running / to do with frames, a bad file fails naming the file and the
 key before any run, and the pinned worktree holds the commit the campaign runs."""
 
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -97,6 +98,14 @@ def test_status_shows_a_run_held_by_a_live_process_as_running(tracking, campaign
             r"steps\[0\].set 'eval_episodes'",
         ),
         ("title = 'x'\n", r"'steps' must be a non-empty array"),
+        (  # issue 54: two steps of one name were merged by --step and --status
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\n' * 2,
+            r"steps\[1\].name='a' is already the name of steps\[0\]; step names must be unique",
+        ),
+        (  # issue 54: frames below one update passed until the step's runs started, hours in
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nframes = 10\n',
+            r"steps\[0\] \(\S+-smoke\): frames=10 is less than one update .* the minimum is 64",
+        ),
         (
             '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nclaim = "da-is-great"\n',
             r"steps\[0\].claim='da-is-great' is not a claim of reproduce/claims.toml; allowed: da-best-easy-aux",
@@ -201,7 +210,7 @@ def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_
     monkeypatch.chdir(os.getcwd())  # restored after the test: the command changes directory before it execs
     tree = tmp_path / "tree"
     tree.mkdir()
-    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log: tree)
+    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log, need: tree)
     seen = {}
 
     def execve(path, args, env):
@@ -213,9 +222,13 @@ def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_
     assert result.exit_code == 0, result.output
     assert seen["cwd"] == str(tree) and seen["env"]["PYTHONPATH"] == str(tree)  # `-m` reads the cwd first
     args = seen["args"]
-    assert args[args.index("--run-root") + 1] == str(project_path("runs"))  # the checkout's, not the tree's
-    assert args[args.index("--results-root") + 1] == str(project_path("results"))
+    # no roots given: none passed, the tree resolves each step's profile's own under this checkout
+    # (emml.config.paths.checkout_root; tests/config/test_paths.py), smoke under scratch/
+    assert "--run-root" not in args and "--results-root" not in args
     assert "--no-pin" in args and seen["env"]["MLFLOW_TRACKING_URI"]
+    result = CliRunner().invoke(app, ["campaign", "reference", "--run-root", "elsewhere/runs"])
+    args = seen["args"]
+    assert result.exit_code == 0 and args[args.index("--run-root") + 1] == str(project_path("elsewhere/runs"))
 
 
 def test_wall_time_fills_each_steps_slots_in_order_and_steps_follow_each_other():
@@ -281,7 +294,7 @@ def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking
     result = runner.invoke(app, ["campaign", "reference", "--status", "--step", "nope", *roots])
     assert result.exit_code == 2 and "step='nope' is not a step of campaign 'reference'" in result.output
     monkeypatch.chdir(os.getcwd())
-    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log: tmp_path)
+    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log, need: tmp_path)
     seen = {}
 
     def execve(path, args, env):
@@ -293,3 +306,146 @@ def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking
     assert result.exit_code == 0, result.output
     args = seen["args"]
     assert [args[i + 1] for i, a in enumerate(args) if a == "--step"] == ["table3-noaux-s0", "table2-noaux-s0"]
+
+
+def _repo(path: Path) -> Path:
+    def git(*args):
+        subprocess.run(["git", *args], cwd=path, check=True, capture_output=True)
+
+    git("init", "-q")
+    (path / "pyproject.toml").write_text("[project]\nname='x'\n")
+    git("add", "pyproject.toml")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "one")
+    return path
+
+
+def test_a_campaign_file_not_committed_is_refused_saying_to_commit_it(tmp_path):
+    root = _repo(tmp_path)
+    mine = root / "reproduce" / "campaigns" / "mine.toml"
+    mine.parent.mkdir(parents=True)
+    mine.write_text(CAMPAIGN)
+    with pytest.raises(ValueError, match=r"^reproduce/campaigns/mine.toml is not committed: .* commit it \(git add"):
+        pin_worktree(root, log=lambda m: None, need=mine)
+    assert not (root / ".campaign").exists() or not any((root / ".campaign").glob("*/pyproject.toml"))
+
+
+def test_concurrent_pins_make_one_worktree_and_a_half_made_one_is_made_again(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    root = _repo(tmp_path)
+    with ThreadPoolExecutor(4) as pool:  # issue 54: the second start died in a `git worktree add` traceback
+        trees = set(pool.map(lambda _: pin_worktree(root, log=lambda m: None), range(4)))
+    (tree,) = trees
+    assert (tree / "pyproject.toml").exists()
+    shutil.rmtree(tree)
+    tree.mkdir()  # a start killed in the middle of `git worktree add`
+    (tree / "partial").write_text("")
+    assert pin_worktree(root, log=lambda m: None) == tree and (tree / "pyproject.toml").exists()
+
+
+@pytest.fixture
+def campaign_lock(tmp_path, monkeypatch):
+    import emml.experiments.campaign
+
+    path = tmp_path / "lock" / "campaign.lock"
+    monkeypatch.setattr(emml.experiments.campaign, "campaign_lock_path", lambda: path)
+    return path
+
+
+def test_one_campaign_per_checkout_the_second_is_refused_naming_the_first(tracking, campaign_lock, monkeypatch):
+    import os
+
+    from typer.testing import CliRunner
+
+    import emml.experiments.campaign
+    from emml.cli import app
+    from emml.experiments.campaign import CampaignRunning, hold_campaign
+
+    def never(*a, **k):
+        raise AssertionError("nothing may start")
+
+    monkeypatch.setattr(emml.experiments.campaign, "run_campaign", never)
+    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", never)
+    roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
+    with hold_campaign("reference"):
+        with pytest.raises(
+            CampaignRunning, match=rf"campaign 'reference' is already training into .*: pid {os.getpid()}"
+        ):
+            with hold_campaign("reference"):
+                pass
+        for pin in ("--pin", "--no-pin"):  # pinned: refused before a worktree is made; unpinned: before it trains
+            result = CliRunner().invoke(app, ["campaign", "reference", pin, "--jobs", "1", *roots])
+            assert result.exit_code == 2 and result.output.count("\n") == 1, result.output
+            assert f"pid {os.getpid()} on host" in result.output and "one campaign per checkout" in result.output
+        status = CliRunner().invoke(app, ["campaign", "reference", "--status", "--jobs", "1", *roots])
+        assert status.exit_code == 0, status.output  # --status reads, beside a running campaign
+    with hold_campaign("reference"):  # released with its holder
+        pass
+
+
+def test_the_resume_line_repeats_every_option_that_changes_what_is_resumed(tracking, campaign_lock, monkeypatch):
+    import shlex
+
+    from typer.testing import CliRunner
+
+    import emml.experiments.campaign
+    from emml.cli import app
+    from emml.config.paths import project_path
+    from emml.experiments.launch import LaunchReport
+
+    seen = {}
+
+    def stopped(plan, run_root, results_root, device, jobs, log):
+        seen.update(run_root=run_root, results_root=results_root, jobs=jobs, steps=[s.name for s in plan.steps])
+        return [LaunchReport("table2", "quick", "local", stopped="Ctrl-C", unfinished=["x"])]
+
+    monkeypatch.setattr(emml.experiments.campaign, "run_campaign", stopped)
+    args = ["--step", "table2-noaux-s0", "--jobs", "3", "--run-root", tracking["run_root"]]
+    args += ["--results-root", tracking["results_root"], "--no-pin"]
+    result = CliRunner().invoke(app, ["campaign", "reference", *args])
+    assert result.exit_code == 130, result.output
+    again = shlex.split(result.output.strip().split("resume with: ", 1)[1])
+    assert again[:3] == ["emml", "campaign", "reference"] and sorted(again[3:]) == sorted(args)
+    assert project_path(tracking["run_root"]) == project_path(again[again.index("--run-root") + 1])
+    # issue 54: without the roots, the resumed campaign started new runs under the default ones
+    assert seen == {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "jobs": 3,
+                    "steps": ["table2-noaux-s0"]}  # fmt: skip
+
+
+def test_status_names_a_damaged_run_dir_or_results_csv_and_goes_on(tracking, campaigns, capsys):
+    plan = load_campaign("mine", campaigns)
+    roots = (tracking["run_root"], tracking["results_root"])
+    torn = Path(tracking["run_root"]) / "table2" / "ga-easy-aux-s0-smoke" / "metrics.csv"
+    torn.parent.mkdir(parents=True)
+    torn.write_text("step,key,value\n64,charts/fps,100.0\n128,charts/fps,10")  # a live run writing, or a kill
+    garbage = Path(tracking["run_root"]) / "table2" / "ga-easy-noaux-s0-smoke" / "metrics.csv"
+    garbage.parent.mkdir(parents=True)
+    garbage.write_text("step,key,value\n64,charts/fps,100.0\n\x00\x00garbage\n128,charts/fps,100.0\n")
+    for mirror in (torn, garbage):  # interrupted runs: a checkpoint to resume from
+        (mirror.parent / "checkpoint.pt").write_bytes(b"")
+    rows = {r.run_name: r for r in status(plan, *roots)}
+    assert rows["ga-easy-aux-s0-smoke"].frames == 64 and rows["ga-easy-noaux-s0-smoke"].frames == 128
+    err = capsys.readouterr().err
+    assert f"note: {garbage}: a line near its end is not a metric point" in err and str(torn) not in err
+    assert torn.read_text().endswith(",10")  # a reader never cuts a file a live run may be writing
+    csv = Path(tracking["results_root"]) / "table3" / "smoke.csv"
+    csv.parent.mkdir(parents=True)
+    csv.write_text("run_name,seed\nx,notanint\n")
+    rows = status(plan, *roots)
+    assert {r.step for r in rows} == {"second"}  # the step whose CSV is damaged is named and left out
+    assert f"note: step first: not shown: {csv}: line 2: column 'seed'" in capsys.readouterr().err
+
+
+def test_cli_status_of_the_reference_campaign_names_a_garbage_mirror_and_goes_on(tracking):
+    from typer.testing import CliRunner
+
+    from emml.cli import app
+
+    mirror = Path(tracking["run_root"]) / "table2" / "concat-easy-aux-s0-quick" / "metrics.csv"
+    mirror.parent.mkdir(parents=True)
+    mirror.write_text("step,key,value\n1024,charts/fps,50.0\nnot,a,number\n2048,charts/fps,5")
+    roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
+    result = CliRunner().invoke(app, ["campaign", "reference", "--status", "--jobs", "1", *roots])
+    assert result.exit_code == 0, result.output  # issue 54: a ValueError traceback
+    assert f"{mirror}: line 3: not a metric point" in result.output
+    assert "concat-easy-aux-s0-quick" in result.output

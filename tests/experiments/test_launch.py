@@ -2,6 +2,7 @@
 go to the trainer, a failure does not stop the table, runs nest under one MLflow parent, and the Slurm path
 through submitit's in-process debug executor."""
 
+import os
 from pathlib import Path
 
 import pytest
@@ -209,3 +210,53 @@ def test_a_child_that_died_without_sending_is_a_failed_run_not_a_broken_launch()
     receive, send = multiprocessing.Pipe(duplex=False)
     send.send(("done", "a-run"))
     assert _received(receive, SimpleNamespace(exitcode=0)) == ("done", "a-run")
+
+
+def locking_train(cfg, quiet=False, parent_run_id=None):
+    """`fake_train` under the run's lock, as the trainer holds it (module level: picklable)."""
+    from emml.runs.runlock import hold_run
+
+    with hold_run(run_dir(cfg)):
+        fake_train(cfg, quiet, parent_run_id)
+
+
+def test_a_run_another_process_trains_is_reported_busy_not_failed(tracking, monkeypatch):
+    """Issue 54: beside a second launch, each listed the other's runs as FAILED with a RunLocked traceback and
+    exited 1, though every run trained once."""
+    import emml.experiments.launch
+    from emml.config.profiles import profile_config
+    from emml.runs.runlock import hold_run
+
+    monkeypatch.setattr(emml.experiments.launch, "LEFT_BEHIND_WAIT_S", 0.5)
+    only = {"row": "w/o GA2", "aux": "true"}
+    roots = {"run_root": tracking["run_root"], "results_root": tracking["results_root"]}
+    cfg = profile_config("smoke", "easy", {"table": "table3", **roots}, model="da_no_ga2", aux=True)
+    with hold_run(run_dir(cfg)):  # held by this (live) process: the pool's child is refused
+        report = run_table("table3", PROFILE, jobs=2, only=only, train_fn=locking_train, log=print, **roots)
+    assert list(report.busy) == ["da_no_ga2-easy-aux-s0-smoke"] and not report.failed and not report.done
+    assert f"pid {os.getpid()} on host" in report.busy["da_no_ga2-easy-aux-s0-smoke"]
+
+
+def test_a_launch_waits_for_a_run_left_training_by_a_killed_launcher(tracking):
+    """Issue 54: a run process of a campaign killed outright takes a few seconds to save and end; the rerun waits
+    for its lock instead of failing the run as locked."""
+    import subprocess
+    import sys
+    import time
+
+    from emml.config.profiles import profile_config
+    from emml.experiments.launch import _await_left_behind
+
+    roots = {"run_root": tracking["run_root"], "results_root": tracking["results_root"]}
+    cfg = profile_config("smoke", "easy", {"table": "table3", **roots}, model="da_no_ga2", aux=True)
+    code = "import sys, time; from emml.runs.runlock import hold_run\nwith hold_run(sys.argv[1]):\n" \
+           "    print('held', flush=True); time.sleep(1.5)"  # fmt: skip
+    holder = subprocess.Popen([sys.executable, "-c", code, str(run_dir(cfg))], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "held"
+    said, t0 = [], time.monotonic()
+    _await_left_behind([cfg], said.append, wait_s=30)
+    assert 0.3 < time.monotonic() - t0 < 15 and holder.wait(timeout=10) == 0
+    assert len(said) == 1 and f"pid {holder.pid} on host" in said[0]
+    said.clear()
+    _await_left_behind([cfg], said.append, wait_s=30)  # nothing held: no wait, nothing said
+    assert said == []

@@ -20,3 +20,34 @@ def test_quick_first_then_paper_then_the_rest_and_never_smoke(tmp_path):
         "demo": ["table2"],
     }
     assert load_table("eqa_readout").rows[1].label == "mean"  # loadable by its name from here on
+
+
+def test_a_damaged_run_dir_is_named_and_the_reports_go_on(tmp_path, monkeypatch, capsys):
+    """Issue 54: a garbage results.json in a finished run dir killed `emml reports` with a JSON traceback naming no
+    file, and no report was written. Now it is named, its run shown with its declared config, and the rest goes on;
+    a checkpoint that cannot be read costs its figures only."""
+    from emml.config.profiles import profile_seeds
+    from emml.report.index import write_reports
+    from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
+    roots = {"run_root": str(tmp_path / "runs"), "results_root": str(tmp_path / "results")}
+    specs = [s for s in load_table("table2").runs(profile_seeds("demo")) if s.model == "dual_attention"]
+    damaged = None
+    for spec in [s for s in specs if s.difficulty == "easy"]:
+        cfg = spec.to_config("demo", **roots)
+        metrics = {"sgn_train": 0.5, "sgn_test": 0.5, "eqa_train": 0.5, "eqa_test": 0.5}
+        payload = {"run_name": spec.run_name("demo"), "table": "table2", "model": cfg.model, "difficulty": "easy",
+                   "aux": cfg.aux, "seed": 0, "profile": "demo", "frames": 64, "git_sha": "12e0077", "run_id": "x",
+                   "eval_episodes": 1, "metrics": metrics}  # fmt: skip
+        record_result(payload, cfg)
+        if cfg.aux:
+            damaged = run_dir(cfg)
+            damaged.mkdir(parents=True)
+            (damaged / RESULTS).write_text('{"run_name": "x", "config": {"model": ')  # a damaged file
+            (damaged / CHECKPOINT).write_bytes(b"not a checkpoint")
+    index = write_reports(tmp_path / "reports", roots["results_root"], roots["run_root"], log=print)
+    text, out = index.read_text(), capsys.readouterr()
+    assert "**table2** (2 runs, frames 64)" in text and (tmp_path / "reports" / "table2-demo.md").exists()
+    assert f"note: {damaged / RESULTS}: not JSON (" in out.err  # named, once per reader, and the report written
+    assert f"no figures of `{damaged.name}` here: {damaged / RESULTS}: not JSON" in text

@@ -611,3 +611,44 @@ def test_a_sigterm_during_an_update_keeps_the_update_and_its_point_of_the_curve(
     assert stop.value.code == 128 + signal.SIGTERM
     assert load_checkpoint(run_dir(cfg) / CHECKPOINT)["frames"] == 192  # the third update, kept whole
     assert max(s for s, k, _ in read_mirror(run_dir(cfg) / METRICS) if k == "charts/update") == 192  # and its point
+
+
+def test_a_torn_metrics_line_is_cut_back_on_resume_and_the_run_dir_still_imports(
+    tracking, tmp_path, monkeypatch, capsys, no_leftovers
+):
+    """Issue 54: a kill in the middle of a write leaves metrics.csv ending in a torn line; the resumed run appended
+    its first point onto it (both lost) and the run dir no longer imported. Now it is cut back first, with a note."""
+    from emml.runs.import_runs import import_runs
+    from emml.runs.records import read_points
+
+    first = train(smoke(tracking, frames=128, eval_episodes=1), quiet=True)
+    mirror = run_dir(smoke(tracking)) / METRICS
+    with open(mirror, "a") as f:
+        f.write("192,losses/pol")  # the next update's points, cut short by a kill
+    capsys.readouterr()
+    result = train(smoke(tracking, frames=256, eval_episodes=1), quiet=True)
+    assert result.resumed and result.run_id == first.run_id and result.frames == 256
+    assert f"note: {mirror}: line " in capsys.readouterr().err
+    points = read_points(mirror)  # every line a point (RecordError names one that is not)
+    assert len({(k, st) for st, k, _ in points}) == len(points)  # one value per step
+    for key in ("charts/update", "losses/policy"):
+        assert [st for st, k, _ in points if k == key] == [64, 128, 192, 256], key
+    assert [s for s, _ in metric_history(result.run_id, "losses/policy")] == [64, 128, 192, 256]
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/elsewhere.db")  # another machine's store
+    (imported,) = import_runs([run_dir(smoke(tracking))], log=None)
+    assert imported.outcome == "imported", imported.reason
+    assert [s for s, _ in metric_history(imported.mlflow_run_id, "losses/policy")] == [64, 128, 192, 256]
+
+
+def test_a_garbage_metrics_line_or_results_json_fails_naming_file_and_line(tracking, no_leftovers):
+    from emml.runs.records import RecordError
+
+    train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)
+    mirror = run_dir(smoke(tracking)) / METRICS
+    mirror.write_text(mirror.read_text().replace("\n", "\nnot a point\n", 1))
+    with pytest.raises(RecordError, match=rf"^{mirror}: line 2: not a metric point"):
+        train(smoke(tracking, frames=128, eval_episodes=1), quiet=True)
+    results = run_dir(smoke(tracking)) / RESULTS  # issue 54: a garbage results.json crashed `emml train` naming none
+    results.write_text('{"run_id": "x", ')
+    with pytest.raises(ValueError, match=rf"^{results}: not JSON \(.*line 1 column"):
+        train(smoke(tracking, frames=64, eval_episodes=1), quiet=True)

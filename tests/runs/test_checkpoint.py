@@ -93,3 +93,46 @@ def test_a_full_disk_is_one_line_naming_the_path_and_keeps_the_last_checkpoint(t
     monkeypatch.undo()
     assert [p.name for p in tmp_path.iterdir()] == ["ckpt.pt"]  # the temp file is gone
     assert load_checkpoint(path, require=())["step"] == 1
+
+
+def test_a_disk_filling_inside_torch_save_is_the_same_one_line(tmp_path, monkeypatch):
+    """Issue 54: the real torch.save wraps the write's OSError in a RuntimeError ("file write failed"), which hid
+    the full disk behind a traceback. The last checkpoint stays, and a save after room is freed works."""
+    import errno
+
+    from emml.runs.diskspace import NoSpaceError
+
+    path = tmp_path / "ckpt.pt"
+    save_checkpoint(path, {"step": 1})
+    real = os.fdopen
+
+    class Full:
+        """A file on a disk with room for 1,000 bytes."""
+
+        def __init__(self, fh):
+            self.fh, self.room = fh, 1000
+
+        def write(self, data):
+            if len(data) > self.room:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            self.room -= len(data)
+            return self.fh.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self.fh, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+    monkeypatch.setattr(os, "fdopen", lambda fd, mode: Full(real(fd, mode)))
+    with pytest.raises(NoSpaceError) as e:
+        save_checkpoint(path, {"step": 2, "weights": torch.zeros(10_000)})
+    assert str(e.value).startswith(f"no space left on {tmp_path} (writing ckpt.pt, left as it was)")
+    monkeypatch.undo()
+    assert [p.name for p in tmp_path.iterdir()] == ["ckpt.pt"]  # the temp file is gone
+    assert load_checkpoint(path, require=())["step"] == 1
+    save_checkpoint(path, {"step": 3, "weights": torch.zeros(10_000)})  # room again: the same command goes on
+    assert load_checkpoint(path, require=())["step"] == 3

@@ -193,3 +193,87 @@ def test_reports_refuse_a_broken_store_at_once(command, tmp_path, monkeypatch, n
     junk.write_text("junk")
     monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{junk}")
     _refused(runner.invoke(app, [*command, "--out", str(tmp_path / "out")]), f"MLflow store sqlite:///{junk}: ")
+
+
+def _serve(answer):
+    """A local HTTP server whose GET answers ``answer(path) -> (status, content type, body)``; returns (uri, stop)."""
+    import threading
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    class Handler(BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802 - http.server's name
+            status, kind, body = answer(self.path)
+            self.send_response(status)
+            self.send_header("Content-Type", kind)
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return f"http://127.0.0.1:{server.server_address[1]}", server.shutdown
+
+
+def test_a_web_server_that_is_not_mlflow_is_refused_in_one_line(tmp_path):
+    """Issue 54: any server answering /health passed, and training failed 12 s later in a traceback with HTML."""
+    uri, stop = _serve(
+        lambda path: (
+            (200, "text/html", b"<html>OK</html>") if path == "/health" else (404, "text/html", b"<html>no</html>")
+        )
+    )  # noqa: E501
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(PreflightError) as e:
+            check_store(uri)
+        assert time.monotonic() - t0 < 3
+        assert str(e.value).startswith(f"MLflow store {uri}: answers, but is not an MLflow tracking server (GET ")
+        assert "HTTP 404" in str(e.value) and "\n" not in str(e.value)
+    finally:
+        stop()
+
+
+@pytest.mark.parametrize(
+    "status, body",
+    [
+        (200, b'{"experiment": {"experiment_id": "0", "name": "Default"}}'),
+        (404, b'{"error_code": "RESOURCE_DOES_NOT_EXIST", "message": "no experiment Default"}'),
+        (401, b"<html>log in</html>"),  # behind authentication: left to MLflow and its credentials
+    ],
+)
+def test_an_mlflow_server_passes(status, body):
+    from emml.runs.preflight import MLFLOW_PROBE
+
+    def answer(path):
+        return (status, "application/json", body) if path == MLFLOW_PROBE else (404, "text/html", b"")
+
+    uri, stop = _serve(answer)
+    try:
+        check_store(uri)
+        check_store(uri + "/")
+    finally:
+        stop()
+
+
+def test_a_new_store_is_created_once_by_starts_racing_for_it(tmp_path):
+    """Issue 54: two launches on a new sqlite store: the second died in MLflow's schema migration
+    (`table _alembic_tmp_experiments already exists`). Each start makes it under a lock (`ensure_store`)."""
+    import os
+    import subprocess
+    import sys
+
+    uri = f"sqlite:///{tmp_path}/new/mlflow.db"
+    code = "import sys; from emml.runs.preflight import ensure_store; ensure_store(sys.argv[1])"
+    procs = [
+        subprocess.Popen([sys.executable, "-c", code, uri], stderr=subprocess.PIPE, text=True, env=os.environ.copy())
+        for _ in range(3)
+    ]
+    outs = [(p.wait(timeout=180), p.stderr.read()) for p in procs]
+    assert all(rc == 0 for rc, _ in outs), [err[-500:] for _, err in outs]
+    with closing(sqlite3.connect(tmp_path / "new" / "mlflow.db")) as con:
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    assert {"alembic_version", "experiments", "runs"} <= tables and not any(
+        t.startswith("_alembic_tmp") for t in tables
+    )
