@@ -543,8 +543,8 @@ def _checks(claim, table, scores: dict[tuple, list[Score]]) -> list[Check]:
                 out.append(_tag(faster(what, get(claim.than), get(row)), _setting(d, a), m, claim.than))
         elif claim.kind == "diagnostic":
             for row in claim.rows:
-                what = f"{_setting(d, a)}: {row} {claim.key} ≥ {claim.value:g}"
-                out.append(_tag(diagnostic(what, get(row), claim.value), _setting(d, a), m, row))
+                what = f"{_setting(d, a)}, {claim.key}: {row} ≥ {claim.value:g}"
+                out.append(_tag(diagnostic(what, get(row), claim.value), _setting(d, a), claim.key, row))
         elif claim.kind == "at_least":
             for row in claim.rows:
                 check = threshold(f"{where(d, a, m)}: {row} ≥ {claim.value:g}", get(row), m, claim.value)

@@ -168,6 +168,7 @@ def channels_figure(
             im = ax.imshow(arr, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
             ax.set_title(title if r == 0 else "", fontsize=9)
             ax.set_xticks([]), ax.set_yticks([])
+            ax.spines[:].set_visible(True)  # a frame round every map: a white (all 1) channel is not a blank
         axes[r, 0].set_ylabel(word, fontsize=10)
         axes[r, -1].imshow(frame)
         axes[r, -1].set_title("frame" if r == 0 else "", fontsize=9)
