@@ -30,7 +30,7 @@ def test_a_page_opens_with_its_headline_and_figures_and_lists_the_crossings(tmp_
     assert "![table3-quick-rliable](table3-quick-rliable.png)" in text[: text.index("Ours vs the paper")]
     assert "### Sample efficiency" in text and "0.75M / 0.75M / 0.75M" in text  # 0.5 of 1.5M frames
     pdf = (tmp_path / "reports" / "table3-quick-rliable.pdf").read_bytes()
-    assert b"/Type3" not in pdf and b"/TrueType" in pdf  # rcParams pdf.fonttype 42 (emml/report/emml.mplstyle)
+    assert b"/Type3" not in pdf and b"/CIDFontType2" in pdf  # TrueType (Type 42): emml/report/emml.mplstyle
     assert {p.rsplit("/", 1)[1] for p in data["paths"]} >= {"table3-quick-rliable.png", "table3-quick-rliable.pdf"}
 
 

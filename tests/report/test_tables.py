@@ -57,7 +57,7 @@ def fake_run_dirs(table: str, run_root, change=None) -> None:
         if change is not None:
             change(spec, config)
         folder = run_root / spec.table / spec.run_name(PROFILE)  # a borrowed row's runs are in their table's folder
-        folder.mkdir(parents=True)
+        folder.mkdir(parents=True, exist_ok=True)  # Table 3 borrows Table 2's DA runs
         (folder / "results.json").write_text(json.dumps({"run_name": folder.name, "config": config}))
 
 
