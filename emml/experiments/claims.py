@@ -16,11 +16,34 @@ from emml.config.paths import REPRODUCE_DIR
 from emml.experiments.tables import load_table
 
 CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"
-KINDS = ("best", "below", "level", "at_least", "aux_helps")
+KINDS = ("best", "below", "level", "at_least", "aux_helps", "faster", "diagnostic")
 """best: `row` above every other row; below: each of `rows` below `than`; level: each of `rows` within `margin` of
-`than`; at_least: each of `rows` at or above `value`; aux_helps: each of `rows` as high with aux as without."""
-KEYS = ("id", "text", "source", "kind", "table", "row", "rows", "than", "where", "metrics", "margin", "value")
+`than`; at_least: each of `rows` at or above `value`; aux_helps: each of `rows` as high with aux as without; faster:
+`than` crosses `mark` (leaves chance, reaches 0.5 or 0.9) in fewer frames than each of `rows`, on the greedy
+evaluation curves of the runs' metrics.csv; diagnostic: each of `rows` at or above `value` on the metrics.csv key
+`key` (a `diag/*` figure of `emml diagnose`, logged at every evaluation) at the run's last evaluation."""
+KEYS = (
+    "id",
+    "text",
+    "source",
+    "kind",
+    "table",
+    "row",
+    "rows",
+    "than",
+    "where",
+    "metrics",
+    "margin",
+    "value",
+    "mark",
+    "key",
+)
 WHERE_KEYS = ("difficulty", "aux")
+CURVE_METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
+"""What a 'faster' claim may read: the results columns whose greedy evaluation the trainer logs periodically
+(`eval/<metric>` in metrics.csv), whatever the table's own columns."""
+MARKS = ("chance", "0.5", "0.9")
+"""A 'faster' claim's crossing: leaving chance, reaching 0.5, reaching 0.9 (emml/report/efficiency.py)."""
 
 
 @dataclass(frozen=True)
@@ -49,7 +72,11 @@ class Claim:
     margin: float | None = None
     """'level': the largest difference that still counts as level (ours: the paper says 'little effect')."""
     value: float | None = None
-    """'at_least': the threshold."""
+    """'at_least' and 'diagnostic': the threshold."""
+    mark: str | None = None
+    """'faster': the crossing compared, one of MARKS."""
+    key: str | None = None
+    """'diagnostic': the metrics.csv key read (diag/detector_ap, ...)."""
 
 
 def load_claims(path: Path = CLAIMS_FILE) -> dict[str, Claim]:
@@ -64,7 +91,7 @@ def load_claims(path: Path = CLAIMS_FILE) -> dict[str, Claim]:
         unknown = sorted(set(raw) - set(KEYS))
         if unknown:
             raise ValueError(f"{where}: key {unknown[0]!r} is unknown; allowed: {', '.join(KEYS)}")
-        for key in ("id", "text", "source", "kind", "table", "metrics"):
+        for key in ("id", "text", "source", "kind", "table"):
             if key not in raw:
                 raise ValueError(f"{where}: {key} is required")
         if raw["id"] in claims:
@@ -81,16 +108,30 @@ def _claim(where: str, raw: dict) -> Claim:
     table = load_table(raw["table"])
     labels = [r.label for r in table.rows]
     kind = raw["kind"]
-    needs = {"best": ("row",), "below": ("rows", "than"), "level": ("rows", "than", "margin"), "at_least": ("value",)}
-    for key in needs.get(kind, ()):
+    needs = {
+        "best": ("row", "metrics"),
+        "below": ("rows", "than", "metrics"),
+        "level": ("rows", "than", "margin", "metrics"),
+        "at_least": ("value", "metrics"),
+        "aux_helps": ("metrics",),
+        "faster": ("rows", "than", "metrics"),
+        "diagnostic": ("rows", "key", "value"),
+    }
+    for key in needs[kind]:
         if key not in raw:
             raise ValueError(f"{where}: kind={kind!r} needs {key!r}")
+    mark = raw.get("mark", "chance" if kind == "faster" else None)
+    if mark is not None and (kind != "faster" or mark not in MARKS):
+        allowed = ", ".join(MARKS) if kind == "faster" else "kind='faster' only"
+        raise ValueError(f"{where}.mark={mark!r} is not allowed; allowed: {allowed}")
+    if "key" in raw and (kind != "diagnostic" or not str(raw["key"]).startswith("diag/")):
+        raise ValueError(f"{where}.key={raw['key']!r}: kind='diagnostic' only, a metrics.csv key diag/<name>")
     rows = (raw["row"],) if kind == "best" else tuple(raw.get("rows", labels))
     for label in [*rows, *([raw["than"]] if "than" in raw else [])]:
         if label not in labels:
             raise ValueError(f"{where}: row {label!r} is not a row of {raw['table']}; allowed: {', '.join(labels)}")
-    metrics = tuple(raw["metrics"])
-    allowed = tuple(table.metrics.values())
+    metrics = tuple(raw.get("metrics", list(table.metrics.values())[:1]))  # diagnostic: the cell whose runs it reads
+    allowed = tuple(dict.fromkeys([*table.metrics.values(), *(CURVE_METRICS if kind == "faster" else ())]))
     for m in metrics:
         if m not in allowed:
             raise ValueError(f"{where}.metrics: {m!r} is not a column of {raw['table']}; allowed: {', '.join(allowed)}")
@@ -113,4 +154,6 @@ def _claim(where: str, raw: dict) -> Claim:
         raw.get("than"),
         raw.get("margin"),
         raw.get("value"),
+        mark,
+        raw.get("key"),
     )

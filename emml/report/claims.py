@@ -10,7 +10,10 @@ so a claim reads exactly the numbers its table shows. The rules (`RULES`, stated
   episode count (each results row's `eval_episodes`);
 - 'level': the two means within `margin`; 'at_least': every row's mean at or above `value`;
 - a row at chance (its mean within `LEAVE` of the task's chance, `CHANCE`) has not learned at this budget: what it
-  loses says nothing against the paper, and two rows at chance are level trivially.
+  loses says nothing against the paper, and two rows at chance are level trivially;
+- 'faster' (the speed claims) reads each run's greedy evaluation curve in its metrics.csv
+  (emml/report/efficiency.py): the faster row crosses the mark in fewer frames in every seed both rows have;
+  'diagnostic' reads a `diag/*` figure at each run's last evaluation (the same file).
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from emml.report.efficiency import CHANCE, LEAVE, MARK_LABELS, frames_text
+
 SUPPORTED, CONTRADICTED, BUDGET, UNTESTABLE = (
     "supported",
     "contradicted",
@@ -28,12 +33,6 @@ SUPPORTED, CONTRADICTED, BUDGET, UNTESTABLE = (
     "untestable yet",
 )
 STATUSES = (SUPPORTED, CONTRADICTED, BUDGET, UNTESTABLE)
-CHANCE = {"sgn": 0.2, "eqa": 1 / 3}
-"""Chance per task: SGN, walking to one of the 5 objects (docs/fidelity.md); EQA, the paper's Text only row, which
-sees no frame, scores 0.33 in every column of its Table 2 (ours reads the test split's answer priors: 0.45)."""
-LEAVE = 0.1
-"""A row has left chance when its mean is above chance + LEAVE (SGN 0.30, EQA 0.43): the binomial noise of a 500
-episode evaluation is about 0.02, of a 100 episode one about 0.045."""
 Z = 1.0
 """A gap counts when it exceeds Z binomial standard errors of the difference of the two means."""
 SEEDS_ENOUGH = 3
@@ -52,6 +51,8 @@ class Score:
     """Episodes the number is the success rate of (the results row's eval_episodes × the instructions a transfer
     row averages)."""
     frames: int
+    learned: bool = True
+    """'diagnostic': whether the run learned its training split (sgn_train or eqa_train above chance)."""
 
 
 @dataclass
@@ -126,6 +127,14 @@ RULES = [
     "profile's frames, so its loss says nothing against the paper, and two rows at chance are level trivially).",
     "**untestable yet**: a cell the claim compares has no finished run (the missing runs are listed); numbers "
     "already there are shown.",
+    "**faster** (the speed claims): from each run's greedy evaluation curve (metrics.csv, every `eval_every` frames), "
+    "the frames at which it first crosses the claim's mark (leaves chance: above chance + the margin below; or "
+    "reaches 0.5 / 0.9); it holds when the row the claim puts faster crosses first in every seed both rows have (a "
+    "run that never crosses counts as slowest), is reversed when the other row crosses first in every seed, and is "
+    "at chance when the faster row never crosses. **diagnostic**: a `diag/*` figure of `emml diagnose`, logged at "
+    "every evaluation, read at each run's last; holds when the mean is at or above the claim's value, reversed when "
+    "every seed is below it while the run has learned its training split (sgn_train or eqa_train above chance); a "
+    "run with no metrics.csv here (trained elsewhere) is a missing cell.",
     f"Chance: SGN {CHANCE['sgn']:.2f} (one of five objects); EQA {CHANCE['eqa']:.2f} (the paper's Text only row, which "
     f"sees no frame, scores 0.33 in every column); a row is at chance when its mean is at most chance + {LEAVE:.2f}. "
     "Comparisons pair seeds: a row with more seeds than the other is compared on the seeds both have (its other "
@@ -237,6 +246,66 @@ def threshold(what: str, row: list[Score], metric: str, value: float) -> Check:
     return Check(what, outcome, detail, at_chance, len(row), row, f"{mean:.2f} vs {value:g}")
 
 
+def faster(what: str, fast: list[Score], slow: list[Score]) -> Check:
+    """Whether `fast` crosses its mark in fewer frames than `slow` in every seed both have (HOLDS), `slow` first in
+    every seed (REVERSED) or neither; a value is the frames at the crossing, inf for a run that never crosses.
+    `chance`: the faster row never crosses in the seeds compared (it has not learned at this budget)."""
+    if not fast or not slow:
+        return Check(
+            what,
+            MISSING,
+            "no run with a metrics.csv here in " + ("either cell" if not fast and not slow else "one cell"),
+        )
+    f, s = _pair(fast, slow)
+    if not f:
+        return Check(what, MISSING, f"no seed in common ({_frames(fast)} against {_frames(slow)})")
+    if all(a.value < b.value for a, b in zip(f, s)):
+        outcome = HOLDS
+    elif all(b.value < a.value for a, b in zip(f, s)):
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    never = all(math.isinf(a.value) for a in f)
+    detail = f"{_frames(f)} against {_frames(s)}"
+    if never:
+        detail += "; the faster row never crosses by its last evaluation"
+    numbers = f"{_median_frames(f)} vs {_median_frames(s)}"
+    return Check(what, outcome, detail, never, len(f), fast, numbers)
+
+
+def _frames(scores: list[Score]) -> str:
+    return " · ".join(
+        f"{frames_text(None if math.isinf(s.value) else int(s.value), s.frames)} (s{s.seed})" for s in scores
+    )
+
+
+def _median_frames(scores: list[Score]) -> str:
+    v = float(np.median([s.value for s in scores]))
+    return frames_text(None if math.isinf(v) else int(v), max(s.frames for s in scores))
+
+
+def diagnostic(what: str, row: list[Score], value: float) -> Check:
+    """Whether the row's mean diagnostic is at or above `value` (HOLDS), every seed below (REVERSED) or neither;
+    `chance`: no run of the row learned its training split (its figure says nothing yet)."""
+    if not row:
+        return Check(what, MISSING, "no run with a metrics.csv here")
+    mean = _mean(row)
+    if mean >= value:
+        outcome = HOLDS
+    elif all(s.value < value for s in row):
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    unlearned = not any(s.learned for s in row)
+    detail = (
+        " · ".join(f"{s.value:.3f} (s{s.seed}, at {s.frames:,} frames)" for s in row)
+        + f": mean {mean:.3f} against {value:g}"
+    )
+    if unlearned:
+        detail += "; the run has not learned its training split (at chance)"
+    return Check(what, outcome, detail, unlearned, len(row), row, f"{mean:.2f} vs {value:g}")
+
+
 def _status(checks: list[Check], subject: bool = True) -> str:
     """The claim's status from its comparisons (RULES); `subject`: the row the claim puts higher is one row (not
     'aux_helps'), so that row at chance anywhere leaves the claim unsupported at this budget, cells missing or not."""
@@ -296,21 +365,30 @@ def _setting(difficulty: str, aux: bool) -> str:
     return f"{env_label(difficulty)} · {'Aux' if aux else 'No Aux'}"
 
 
-def decide(claim, profile: str, results_root: str | Path | None = None) -> Decision:
+def decide(claim, profile: str, results_root: str | Path | None = None, run_root: str | Path | None = None) -> Decision:
     """The claim decided from the results of `profile` (results/<table>/<profile>.csv and the tables it borrows
-    from), by the rules of RULES."""
-    from emml.config.profiles import profile_seeds
+    from), by the rules of RULES; 'faster' and 'diagnostic' claims read the runs' metrics.csv under `run_root`
+    (default: the profile's)."""
+    from emml.config.profiles import profile_config, profile_seeds
     from emml.experiments.tables import load_table
-    from emml.report.tables import METRIC_LABELS, build_cells, paper_numbers, table_results
+    from emml.report.tables import build_cells, paper_numbers, table_results
 
     table = load_table(claim.table)
     results = table_results(table, profile, results_root)
     cells = build_cells(table, profile, results, paper_numbers(table.name))
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
     runs = table.runs(profile_seeds(profile))
+    specs = {spec.run_name(profile): spec for spec in runs}
+    run_root = run_root if run_root is not None else profile_config(profile).run_root
+    curve = claim.kind in ("faster", "diagnostic")
+    columns = set(table.metrics.values())
 
-    def wanted(c) -> bool:
-        return c.metric in claim.metrics and all(
+    def cell_metric(m: str) -> str:
+        """The table column whose runs a metric reads (a 'faster' claim on sgn_train reads the sgn_test cell's)."""
+        return m if m in columns else m.replace("_train", "_test")
+
+    def wanted(c, m: str) -> bool:
+        return c.metric == cell_metric(m) and all(
             getattr(c, "difficulty" if k == "difficulty" else "aux") == v for k, v in claim.where.items()
         )
 
@@ -319,25 +397,40 @@ def decide(claim, profile: str, results_root: str | Path | None = None) -> Decis
     evidence: list[dict] = []
     frames: set[int] = set()
     involved = _involved(claim, table)
-    for c in (c for c in cells if wanted(c) and c.row in involved):
-        per = len(table.cell_columns(c.row, c.metric))
-        found = []
-        for name, value in zip(c.runs, c.values):
-            row = rows[name]
-            found.append(Score(name, int(row["seed"]), value, int(row["eval_episodes"]) * per, int(row["frames"])))
-            frames.add(int(row["frames"]))
-        scores[(c.row, c.difficulty, c.aux, c.metric)] = found
-        declared = [s.run_name(profile) for s in table.cell_runs(c.row, c.difficulty, c.aux, c.metric, runs)]
-        missing += [n for n in declared if n not in c.runs and n not in missing]
-        evidence.append(
-            {
-                "row": c.row,
-                "setting": _setting(c.difficulty, c.aux),
-                "metric": METRIC_LABELS.get(c.metric, c.metric),
-                "values": {s.seed: s.value for s in found},
-                "declared": c.expected,
-            }
-        )
+    for m in claim.metrics:
+        for c in (c for c in cells if wanted(c, m) and c.row in involved):
+            per = len(table.cell_columns(c.row, c.metric))
+            found, shown = [], {}
+            for name, value in zip(c.runs, c.values):
+                row = rows[name]
+                frames.add(int(row["frames"]))
+                score = Score(name, int(row["seed"]), value, int(row["eval_episodes"]) * per, int(row["frames"]))
+                if curve:
+                    score = _curve_score(claim, m, specs[name], profile, run_root, score, row)
+                    if score is None:
+                        missing.append(f"{name} (no complete metrics.csv here)")
+                        continue
+                    shown[score.seed] = (
+                        frames_text(None if math.isinf(score.value) else int(score.value), score.frames)
+                        if claim.kind == "faster"
+                        else f"{score.value:.3f}"
+                    )
+                else:
+                    shown[score.seed] = f"{value:.3f}"
+                found.append(score)
+            scores[(c.row, c.difficulty, c.aux, m)] = found
+            declared = [s.run_name(profile) for s in table.cell_runs(c.row, c.difficulty, c.aux, c.metric, runs)]
+            missing += [n for n in declared if n not in c.runs and n not in missing]
+            evidence.append(
+                {
+                    "row": c.row,
+                    "setting": _setting(c.difficulty, c.aux),
+                    "metric": _metric_label(claim, m),
+                    "values": {s.seed: s.value for s in found},
+                    "shown": shown,
+                    "declared": c.expected,
+                }
+            )
     checks = _checks(claim, table, scores)
     present = [c.seeds for c in checks if c.outcome != MISSING]
     status = _status(checks, claim.kind != "aux_helps")
@@ -356,6 +449,53 @@ def decide(claim, profile: str, results_root: str | Path | None = None) -> Decis
         sorted(frames),
         min(present) if present else 0,
     )
+
+
+def _metric_label(claim, metric: str) -> str:
+    """How the evidence names what it reads: 'SGN test', 'SGN train: frames to leave chance', 'diag/detector_ap'."""
+    from emml.report.tables import METRIC_LABELS
+
+    if claim.kind == "diagnostic":
+        return claim.key
+    label = METRIC_LABELS.get(metric, metric)
+    return f"{label}: frames until it {MARK_LABELS[claim.mark]}" if claim.kind == "faster" else label
+
+
+def _curve_score(claim, metric: str, spec, profile: str, run_root, score: Score, row: dict) -> Score | None:
+    """A run's number for a 'faster' claim (the frames at its first crossing of the mark, inf when it never crosses
+    by its last evaluation) or a 'diagnostic' one (the key at its last evaluation), from its metrics.csv; None when
+    the file is not here or stops short of the run's frames (a crossing after it cannot be ruled out)."""
+    from emml.report.efficiency import run_efficiency
+    from emml.runs.rundir import METRICS, path_of
+    from emml.runs.tracking import read_mirror
+
+    if claim.kind == "faster":
+        eff = run_efficiency(spec, profile, run_root)
+        if not eff.found or metric not in eff.crossings:
+            return None
+        crossed = eff.crossings[metric][claim.mark]
+        if crossed is None and eff.last + eff.every < score.frames:
+            return None
+        return Score(score.run, score.seed, math.inf if crossed is None else float(crossed), 0, eff.last)
+    points = sorted(
+        (step, v)
+        for step, key, v in read_mirror(path_of(run_root, spec.table, spec.run_name(profile)) / METRICS)
+        if key == claim.key
+    )
+    if not points:
+        return None
+    learned = any(
+        row.get(m) is not None and not _isnan(row.get(m)) and row[m] > _chance(m) + LEAVE
+        for m in ("sgn_train", "eqa_train")
+    )
+    return Score(score.run, score.seed, points[-1][1], 0, points[-1][0], learned=learned)
+
+
+def _isnan(v) -> bool:
+    try:
+        return math.isnan(float(v))
+    except (TypeError, ValueError):
+        return True
 
 
 def _involved(claim, table) -> set[str]:
@@ -397,6 +537,14 @@ def _checks(claim, table, scores: dict[tuple, list[Score]]) -> list[Check]:
             for row in claim.rows:
                 what = f"{where(d, a, m)}: {row} level with {claim.than}"
                 out.append(_tag(level(what, get(row), get(claim.than), m, claim.margin), _setting(d, a), m, claim.than))
+        elif claim.kind == "faster":
+            for row in claim.rows:
+                what = f"{where(d, a, m)}: {claim.than} {MARK_LABELS[claim.mark]} before {row}"
+                out.append(_tag(faster(what, get(claim.than), get(row)), _setting(d, a), m, claim.than))
+        elif claim.kind == "diagnostic":
+            for row in claim.rows:
+                what = f"{_setting(d, a)}, {claim.key}: {row} ≥ {claim.value:g}"
+                out.append(_tag(diagnostic(what, get(row), claim.value), _setting(d, a), claim.key, row))
         elif claim.kind == "at_least":
             for row in claim.rows:
                 check = threshold(f"{where(d, a, m)}: {row} ≥ {claim.value:g}", get(row), m, claim.value)
@@ -431,13 +579,19 @@ def campaign_costs(campaign: str = "reference") -> dict[str, str]:
     return out
 
 
-def decide_all(profile: str, results_root: str | Path | None = None, costs: dict[str, str] | None = None) -> list:
-    """Every claim of reproduce/claims.toml decided from `profile`'s results, in the file's order."""
+def decide_all(
+    profile: str,
+    results_root: str | Path | None = None,
+    costs: dict[str, str] | None = None,
+    run_root: str | Path | None = None,
+) -> list:
+    """Every claim of reproduce/claims.toml decided from `profile`'s results (and its runs' metrics.csv under
+    `run_root`), in the file's order."""
     from emml.experiments.claims import load_claims
 
     out = []
     for claim in load_claims().values():
-        d = decide(claim, profile, results_root)
+        d = decide(claim, profile, results_root, run_root)
         if costs:
             d.costs = [f"`{n}`: {costs[n]}" for n in d.missing if n in costs]
         out.append(d)
@@ -482,7 +636,7 @@ def markdown(decisions: list[Decision], profile: str) -> str:
             lines += ["| Row | Setting | Metric | " + " | ".join(f"seed {s}" for s in seeds) + " |"]
             lines += ["|:--|:--|:--|" + "--:|" * len(seeds)]
             for e in d.evidence:
-                vals = " | ".join(f"{e['values'][s]:.3f}" if s in e["values"] else "—" for s in seeds)
+                vals = " | ".join(e["shown"].get(s, "—") for s in seeds)
                 lines.append(f"| {_cell(e['row'])} | {e['setting']} | {e['metric']} | {vals} |")
             lines.append("")
         elif d.evidence:
@@ -501,14 +655,18 @@ def _cell(text: str) -> str:
 
 
 def write_claims(
-    profile: str, out: str | Path | None = None, results_root: str | Path | None = None, costs: dict | None = None
+    profile: str,
+    out: str | Path | None = None,
+    results_root: str | Path | None = None,
+    costs: dict | None = None,
+    run_root: str | Path | None = None,
 ) -> tuple[Path, list[Decision]]:
     """reports/claims-<profile>.md (scratch/reports for a scratch profile, as the table pages: `reports_dir`)."""
     from emml.report.tables import reports_dir
 
     folder = reports_dir(profile, out)
     folder.mkdir(parents=True, exist_ok=True)
-    decisions = decide_all(profile, results_root, costs)
+    decisions = decide_all(profile, results_root, costs, run_root)
     path = folder / f"claims-{profile}.md"
     path.write_text(markdown(decisions, profile))
     return path, decisions

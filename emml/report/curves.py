@@ -48,11 +48,23 @@ def plot_run(run_id: str, path: Path, title: str) -> Path:
     return path
 
 
-# --- a table's training curves (the paper's Figures 7, 8: Table 2; Figure 9: Table 3) ----------------------------
+# --- a table's curves of its own metric (the paper's Figures 7, 8: Table 2; Figure 9: Table 3) -------------------
 
 TRAIN_KEYS = (("train/success_sgn", "SGN"), ("train/success_eqa", "EQA"))
+"""The training-episode success curves (the paper's figures plot them); the table pages draw the greedy evaluation
+of the tables' own metric instead (`curve_key`)."""
 GRID_POINTS = 300
 """Curves are resampled on at most this many frame values before averaging seeds (keeps the bootstrap cheap)."""
+
+
+def curve_key(metric: str) -> tuple[str, str]:
+    """The metrics-mirror key of a table column's greedy evaluation and its label: eval/sgn_test for sgn_test; a
+    transfer table's sgn_transfer (scored once, after training) draws its runs' training instructions."""
+    from emml.report.tables import METRIC_LABELS
+
+    if metric == "sgn_transfer":
+        return "eval/sgn_train", "SGN train (before the transfer)"
+    return f"eval/{metric}", METRIC_LABELS.get(metric, metric)
 
 
 def _mean_band(curves: list[tuple[np.ndarray, np.ndarray]]):
@@ -82,16 +94,22 @@ def plot_table(
     out: str | Path | None = None,
     run_root: str | Path | None = None,
 ) -> tuple[list[Path], list[str]]:
-    """Training accuracy vs frames for every row of table `name` under `profile`: a panel per (task, difficulty,
-    aux), one line per row (mean over seeds, CI band), and under the panels the deviations from the paper of the
-    runs drawn, read from their configs (emml/report/deviations.py). Runs come from results/<name>/<profile>.csv
-    (their run_id), curves from MLflow, else from the run dir's metrics.csv (under ``run_root``, default: the
-    profile's); a run with neither is skipped with a note. When no run has a curve here, existing figures are kept
-    rather than replaced by empty ones. Returns (paths, notes)."""
+    """Greedy accuracy vs frames for every row of table `name` under `profile`, on the table's own metrics (SGN and
+    EQA test for Table 2): a panel per (metric, difficulty, aux) that has a curve (no empty panel), one line per row
+    (mean over seeds, 95% bootstrap band), the paper's number for the row marked at the right edge, the task's chance
+    dotted, and under the panels the deviations from the paper of the runs drawn, read from their configs
+    (emml/report/deviations.py). Runs come from results/<name>/<profile>.csv (their run_id), curves from MLflow,
+    else from the run dir's metrics.csv (under ``run_root``, default: the profile's); a run with neither is skipped
+    with a note. When no run has a curve here, existing figures are kept rather than replaced by empty ones. Returns
+    (paths, notes)."""
+    import matplotlib.transforms as mtransforms
+    from matplotlib.lines import Line2D
+
     from emml.config.profiles import profile_config, profile_seeds
     from emml.experiments.tables import load_table
     from emml.report import deviations
-    from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, reports_dir, table_results
+    from emml.report.efficiency import chance
+    from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, reports_dir, table_results
     from emml.runs.rundir import METRICS, path_of
     from emml.runs.tracking import read_mirror
 
@@ -103,81 +121,101 @@ def plot_table(
         return [], [f"{name} is a placeholder: no runs, no curves"]
     results = table_results(table, profile, results_root)  # its own rows, and those it borrows (Table 3's DA)
     run_ids = dict(zip(results["run_name"], results["run_id"]))
-    panels = [(d, a) for d in table.difficulties for a in table.aux]
-    fig, axes = plt.subplots(
-        len(TRAIN_KEYS), len(panels), figsize=(3.6 * len(panels), 3.0 * len(TRAIN_KEYS)), squeeze=False, sharey=True
-    )
+    paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
+    metrics = list(dict.fromkeys(table.metrics.values()))
+    keys = list(dict.fromkeys(curve_key(m)[0] for m in metrics))
     specs = table.runs(profile_seeds(profile))
     cache: dict[str, dict] = {}
     drawn: dict = {}  # run name → RunSpec of every run with a curve in the figure
-    plotted = False
-    for j, (difficulty, aux) in enumerate(panels):
-        for i, (key, task) in enumerate(TRAIN_KEYS):
+    panels: dict[tuple, list] = {}  # (metric, difficulty, aux) → [(row index, row, curves)]
+    for metric in metrics:
+        key = curve_key(metric)[0]
+        for difficulty in table.difficulties:
+            for aux in table.aux:
+                for k, row in enumerate(table.curve_rows()):
+                    curves = []
+                    for spec in specs:
+                        if spec.row != row or spec.difficulty != difficulty or spec.aux != aux:
+                            continue
+                        if table.transfer is None and spec not in table.cell_runs(row, difficulty, aux, metric, specs):
+                            continue  # DA Single-Task: its SGN-only run draws SGN, its EQA-only run EQA
+                        rname = spec.run_name(profile)
+                        if rname not in run_ids:
+                            continue
+                        if rname not in cache:
+                            cache[rname] = {kk: _history(run_ids[rname], kk) for kk in keys}
+                            if not any(cache[rname].values()):  # another store's run: its run dir may be here
+                                mirror = read_mirror(path_of(run_root, spec.table, rname) / METRICS)
+                                cache[rname] = {kk: [(st, v) for st, x, v in mirror if x == kk] for kk in keys}
+                            if not any(cache[rname].values()):
+                                notes.append(
+                                    f"{rname}: no curve (MLflow run {run_ids[rname]} not here, no run dir); skipped"
+                                )
+                        hist = sorted(dict(cache[rname][key] or []).items())
+                        if hist:
+                            steps, values = zip(*hist)
+                            curves.append((np.asarray(steps, float), np.asarray(values, float)))
+                            drawn.setdefault(rname, spec)
+                    if curves:
+                        panels.setdefault((metric, difficulty, aux), []).append((k, row, curves))
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / f"{name}-{profile}-curves.png", out / f"{name}-{profile}-curves.pdf"]
+    if not panels:  # never an empty figure: keep what an earlier machine drew, or draw nothing
+        kept = [p for p in paths if p.exists()]
+        what = "kept the existing figures" if kept else "no figure written"
+        return kept, notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
+    settings = list(dict.fromkeys((d, a) for (_, d, a) in panels))
+    shown_metrics = list(dict.fromkeys(m for (m, _, _) in panels))
+    fig, axes = plt.subplots(
+        len(shown_metrics),
+        len(settings),
+        figsize=(3.6 * len(settings) + LEGEND_INCHES, 2.8 * len(shown_metrics) + 0.3),
+        squeeze=False,
+        sharey=True,
+    )
+    legend: dict = {}
+    for i, metric in enumerate(shown_metrics):
+        for j, (difficulty, aux) in enumerate(settings):
             ax = axes[i][j]
-            for k, row in enumerate(table.curve_rows()):
-                curves = []
-                for spec in specs:
-                    if spec.row != row or spec.difficulty != difficulty or spec.aux != aux:
-                        continue
-                    rname = spec.run_name(profile)
-                    if rname not in run_ids:
-                        continue
-                    if rname not in cache:
-                        cache[rname] = {k: _history(run_ids[rname], k) for k, _ in TRAIN_KEYS}
-                        if not any(cache[rname].values()):  # another store's run: its run dir may be here
-                            mirror = read_mirror(path_of(run_root, spec.table, rname) / METRICS)
-                            cache[rname] = {k: [(st, v) for st, kk, v in mirror if kk == k] for k, _ in TRAIN_KEYS}
-                        if not any(cache[rname].values()):
-                            notes.append(
-                                f"{rname}: no curve (MLflow run {run_ids[rname]} not here, no run dir); skipped"
-                            )
-                    hist = cache[rname][key]
-                    if hist:
-                        steps, values = zip(*hist)
-                        curves.append((np.asarray(steps, float), np.asarray(values, float)))
-                        drawn.setdefault(rname, spec)
-                if not curves:
-                    continue
-                plotted = True
+            lines = panels.get((metric, difficulty, aux))
+            if not lines:
+                ax.remove()  # no run of this metric in this setting: no empty panel
+                continue
+            edge = mtransforms.blended_transform_factory(ax.transAxes, ax.transData)
+            for k, row, curves in lines:
                 grid, mean, band = _mean_band(curves)
                 color = f"C{k % 10}"
-                ax.plot(
-                    grid,
-                    mean,
-                    color=color,
-                    lw=1.2,
-                    marker="o" if len(grid) == 1 else None,
-                    label=f"{row} (n={len(curves)})",
-                )
+                ax.plot(grid, mean, color=color, marker="o" if len(grid) == 1 else None, label=row)
                 if band is not None:
                     ax.fill_between(grid, band[0], band[1], color=color, alpha=0.2, lw=0)
-            title = f"{task} — {DIFFICULTY_LABELS.get(difficulty, difficulty)}, {AUX_LABELS[aux]}"
-            ax.set_title(title, fontsize=9)
+                value = paper.get((row, difficulty, aux, metric))
+                if value not in (None, ""):
+                    ax.plot([1.0], [float(value)], marker="<", ms=6, color=color, transform=edge, clip_on=False)
+            ax.axhline(chance(metric), color="grey", lw=0.8, ls=":")
+            label = curve_key(metric)[1]
+            title = f"{label}: {DIFFICULTY_LABELS.get(difficulty, difficulty)}, {AUX_LABELS[aux]}"
+            ax.set_title(title)
             ax.set_ylim(-0.02, 1.02)
-            ax.grid(alpha=0.3)
-            if i == len(TRAIN_KEYS) - 1:
-                ax.set_xlabel("frames (agent steps)")
-            if j == 0:
-                ax.set_ylabel("training accuracy")
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(fontsize=6, loc="upper left")
+            ax.set_xlabel("frames (agent steps)")
+            ax.set_ylabel("greedy accuracy")
+            for handle, text in zip(*ax.get_legend_handles_labels()):
+                legend.setdefault(text, handle)
+            legend.setdefault(f"chance ({chance(metric):.2f})", Line2D([], [], color="grey", lw=0.8, ls=":"))
+            if any(paper.get((row, difficulty, aux, metric)) for _, row, _ in lines):
+                legend.setdefault("paper (its frames)", Line2D([], [], color="grey", marker="<", ls=""))
+    right = 1 - LEGEND_INCHES / fig.get_size_inches()[0]
+    fig.legend(list(legend.values()), list(legend), loc="upper left", bbox_to_anchor=(right + 0.01, 0.92))
     note = "" if profile == "paper" else f"\nprofile '{profile}' is not the paper's protocol: its deviations below"
     fig.suptitle(
-        f"{name} [{profile}]: training accuracy (100-episode success), seed mean, 95% bootstrap band{note}", fontsize=9
+        f"{name} [{profile}]: greedy accuracy (the table's metric, periodic evaluation), seed mean, 95% bootstrap "
+        f"band;\nthe paper's number marked at the right edge{note}"
     )
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
     shown = [deviations.shown_run(spec, profile, run_root, rows.get(r)) for r, spec in drawn.items()]
     footer = deviations.sentence(deviations.summarise(shown)) if shown else ""
-    _footer(fig, footer)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [out / f"{name}-{profile}-curves.png", out / f"{name}-{profile}-curves.pdf"]
-    if not plotted:  # never an empty figure: keep what an earlier machine drew, or draw nothing
-        plt.close(fig)
-        kept = [p for p in paths if p.exists()]
-        what = "kept the existing figures" if kept else "no figure written"
-        return kept, notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
+    _footer(fig, footer, right=right)
     for p in paths:
-        save(fig, p, dpi=120)
+        save(fig, p)
     plt.close(fig)
     return paths, notes
 
@@ -187,15 +225,19 @@ FOOTER_CHARS_PER_INCH = 21
 FOOTER_LINE_INCHES = 0.11
 
 
-def _footer(fig, text: str) -> None:
-    """``text`` wrapped under the panels, the figure grown to hold it."""
+LEGEND_INCHES = 1.8
+"""The width kept right of the panels for the curves figure's one legend."""
+
+
+def _footer(fig, text: str, right: float = 1.0) -> None:
+    """``text`` wrapped under the panels, the figure grown to hold it; the panels end at ``right`` (a fraction)."""
     import textwrap
 
     w, h = fig.get_size_inches()
     lines = textwrap.wrap(text, int(w * FOOTER_CHARS_PER_INCH)) if text else []
     extra = FOOTER_LINE_INCHES * len(lines) + (0.1 if lines else 0)
     fig.set_size_inches(w, h + extra)
-    fig.tight_layout(rect=(0, extra / (h + extra), 1, 1))
+    fig.tight_layout(rect=(0, extra / (h + extra), right, 1))
     if lines:
         fig.text(0.01, 0.005, "\n".join(lines), fontsize=6, ha="left", va="bottom")
 

@@ -108,7 +108,7 @@ def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tup
     return paths
 
 
-def claims_lines(profiles: dict, out: Path, results_root: str | Path) -> list[str]:
+def claims_lines(profiles: dict, out: Path, results_root: str | Path, run_root: str | Path = "runs") -> list[str]:
     """Write each profile's claims page (emml/report/claims.py) and return the index's lead: a link per profile with
     its status counts."""
     from emml.report.claims import campaign_costs, counts, write_claims
@@ -116,7 +116,7 @@ def claims_lines(profiles: dict, out: Path, results_root: str | Path) -> list[st
     costs = campaign_costs() if profiles else {}
     lines = []
     for profile in profiles:
-        path, decisions = write_claims(profile, out, results_root, costs)
+        path, decisions = write_claims(profile, out, results_root, costs, run_root)
         summary = ", ".join(f"{n} {status}" for status, n in counts(decisions).items() if n)
         lines += [
             f"**Claims ({profile})**: [{path.name}]({path.name}), the paper's {len(decisions)} claims: {summary}.",
@@ -148,7 +148,9 @@ def write_reports(
         "read from their configs. Smoke runs (512 frames) are not results and are never listed.",
         "",
     ]
-    lines[2:2] = claims_lines(profiles_with_results(results_root), out, results_root)  # the page leads with them
+    lines[2:2] = claims_lines(
+        profiles_with_results(results_root), out, results_root, run_root
+    )  # the page leads with them
     drawn: set[str] = set()  # the best runs whose figures are drawn: a table borrowing one draws it once
     for profile, tables in profiles_with_results(results_root).items():
         lines += [f"## Profile `{profile}`", ""]
@@ -183,11 +185,11 @@ def _table_lines(table: str, profile: str, out: Path, results_root, run_root, dr
     df = table_results(load_table(table), profile, results_root)
     df = df[df["run_name"].isin(_run_names(load_table(table), profile))] if not df.empty else df
     frames = sorted(set(df["frames"])) if "frames" in df else []
-    data = report_table(table, profile, results_root, out, run_root)
-    paths = [Path(p) for p in data["paths"]]
-    curve_paths, notes = plot_table(table, profile, results_root, out, run_root)
+    curve_paths, notes = plot_table(table, profile, results_root, out, run_root)  # first: the page embeds it
     plt.close("all")
-    paths += [Path(p) for p in curve_paths]
+    data = report_table(table, profile, results_root, out, run_root)
+    plt.close("all")
+    paths = [Path(p) for p in data["paths"]] + [Path(p) for p in curve_paths]
     runs = f"{len(df)} run{'s' if len(df) != 1 else ''}, frames {', '.join(f'{f:,}' for f in frames)}"
     lines.append(f"- **{table}** ({runs}): " + ", ".join(f"[{p.name}]({p.name})" for p in paths))
     missing = [n for n in notes if ": no curve (" in n]

@@ -1,12 +1,14 @@
 """Figures written byte for byte the same from the same data: `make reports` on unchanged results changes no
 committed file. Matplotlib stamps the date (PDF, SVG) and its version (PNG 'Software') into a figure unless told not
-to, and salts SVG ids at random."""
+to, and salts SVG ids at random. And one style for every figure (emml/report/emml.mplstyle: TrueType fonts in PDFs,
+the sizes, the grid), applied when this module is imported: every figure module saves through it."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import matplotlib
+import matplotlib.style
 
 METADATA = {
     ".png": {"Software": None},
@@ -16,6 +18,16 @@ METADATA = {
 """What each format would otherwise stamp: the date, matplotlib's version."""
 SVG_HASHSALT = "emml"
 """A fixed salt for the ids of SVG elements (random by default)."""
+STYLE = Path(__file__).with_name("emml.mplstyle")
+"""The style sheet of every figure under reports/."""
+
+
+def use_style() -> None:
+    """Apply STYLE to matplotlib's rcParams (idempotent)."""
+    matplotlib.style.use(STYLE)
+
+
+use_style()
 
 
 def save(fig, path: str | Path, **kwargs) -> Path:

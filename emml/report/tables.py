@@ -301,8 +301,9 @@ def report_table(
 ) -> dict:
     """Write reports/<name>-<profile>.md and .tex; returns the cells, caption, deviations, aggregate and paths (the
     --json output). Runs' configs are read from their run dirs under ``run_root`` (default: the profile's)."""
-    from emml.report import deviations
+    from emml.report import deviations, efficiency
     from emml.report.aggregate import summary
+    from emml.report.field import plot_field
 
     table = load_table(name)
     name = table.name  # a table file's path (a table of one's own, an experiment) reports under its stem
@@ -321,39 +322,25 @@ def report_table(
     if isinstance(flat.columns, pd.MultiIndex):
         flat.columns = [" · ".join(c) for c in flat.columns]
     shown = path.relative_to(project_root()) if path.is_relative_to(project_root()) else path
-    md = [f"# {name} ({profile})", "", text, ""]
+    field = plot_field(table, profile, cells, out)
+    figures = [p for p in (out / f"{name}-{profile}-curves.png",) if p.exists()] + field[:1]
+    md = [f"# {name} ({profile})", "", headline(table, profile, cells), ""]
+    md += [f"![{p.stem}]({p.name})" for p in figures] + ([""] if figures else [])
+    md += [text, ""]
     if devs is not None:
         md += [deviations.markdown(devs), ""]
     md += [flat.to_markdown(), ""]
     if agg is not None:
         md += [pd.DataFrame(agg[0]).to_markdown(index=False), "", agg[1], ""]
+    names = list(dict.fromkeys(n for c in cells for n in c.runs))
+    if names:
+        from emml.config.profiles import profile_config
+
+        root = run_root if run_root is not None else profile_config(profile).run_root
+        md += [efficiency.markdown(efficiency.table_efficiency(table, profile, names, root))]
     md += [f"Results: `{shown}`", ""]
     md_path.write_text("\n".join(md))
-    tex_df, _ = layout(table, cells, tex=True)
-    tex_df.index = pd.Index([_tex_escape(str(i)) for i in tex_df.index], name=table.row_header)
-    full = text + (" " + deviations.sentence(devs) if devs is not None else "")
-    tex = tex_df.reset_index().to_latex(
-        index=False,
-        escape=False,
-        caption=_tex_caption(full),
-        label=f"tab:ours-{name}-{profile}",
-        multicolumn=True,
-        multicolumn_format="c",
-        column_format="l" + "c" * tex_df.shape[1],
-    )
-    if agg is not None:
-        agg_tex = pd.DataFrame(agg[0]).map(lambda v: _tex_escape(str(v)).replace("−", "-"))
-        agg_tex.columns = [_tex_escape(c).replace("−", "-") for c in agg_tex.columns]
-        tex += "\n" + agg_tex.replace(MISSING, "---", regex=True).to_latex(
-            index=False,
-            escape=False,
-            caption=_tex_caption(
-                f"Aggregate of Table {name.removeprefix('table')} [{profile}]. {agg[1]}".replace("−", "-")
-            ),
-            label=f"tab:ours-{name}-{profile}-aggregate",
-            column_format="ll" + "c" * (agg_tex.shape[1] - 2),
-        )
-    tex_path.write_text(tex)
+    tex_path.write_text(tex_table(table, profile, cells, results, devs, agg))
     return {
         "table": name,
         "profile": profile,
@@ -362,5 +349,156 @@ def report_table(
         "deviations": asdict(devs) if devs is not None else None,
         "aggregate": {"rows": agg[0], "footer": agg[1]} if agg is not None else None,
         "cells": [{**asdict(c), "n": c.n, "mean": c.mean} for c in cells],
-        "paths": [str(md_path), str(tex_path)],
+        "paths": [str(md_path), str(tex_path), *map(str, field)],
     }
+
+
+def headline(table: Table, profile: str, cells: list[Cell]) -> str:
+    """The page's first line: per setting and metric with runs, where the reference row (Dual-Attention) stands and
+    the row that leads; the seeds it rests on; where the claims are decided."""
+    from emml.report.aggregate import reference_row
+
+    ref = reference_row(table)
+    parts = []
+    groups: dict[tuple, list[Cell]] = {}
+    for c in cells:
+        if c.values:
+            groups.setdefault((c.difficulty, c.aux), []).append(c)
+    for (difficulty, aux), group in groups.items():
+        per = []
+        for metric in dict.fromkeys(c.metric for c in group):
+            ranked = sorted((c for c in group if c.metric == metric), key=lambda c: -c.mean)
+            label = _label("metric", metric)
+            top = ranked[0]
+            mine = next((c for c in ranked if c.row == ref), None)
+            if len(ranked) == 1:
+                per.append(f"{label} {top.row} {top.mean:.2f} (the only row run)")
+            elif mine is None:
+                per.append(f"{label} best {top.row} {top.mean:.2f} of {len(ranked)} rows")
+            elif mine is top:
+                per.append(
+                    f"{label} {ref} first of {len(ranked)} ({mine.mean:.2f}; next {ranked[1].row} {ranked[1].mean:.2f})"
+                )
+            else:
+                rank = ranked.index(mine) + 1
+                per.append(f"{label} {ref} {rank} of {len(ranked)} ({mine.mean:.2f}; {top.row} {top.mean:.2f})")
+        parts.append(f"{_label('difficulty', difficulty)} · {_label('aux', aux)}: " + ", ".join(per))
+    seeds = sorted({c.n for c in cells if c.values})
+    if not parts:
+        return f"**In one line**: no run of {table.name} has finished under '{profile}' yet."
+    rest = (
+        f"; {seeds[0]}–{seeds[-1]} seeds per cell"
+        if len(seeds) > 1
+        else f"; {seeds[0]} seed{'s' if seeds[0] != 1 else ''} per cell"
+    )
+    claims = f" Claims decided on [claims-{profile}.md](claims-{profile}.md)." if table.name in list_tables() else ""
+    return f"**In one line** ({profile}{rest}): " + "; ".join(parts) + "." + claims
+
+
+TEX_PACKAGES = ("booktabs", "graphicx")
+"""What the .tex tables need in the preamble (stated in each file's first line)."""
+TEX_CHARS = {
+    "·": r"$\cdot$",
+    "−": "-",
+    "≥": r"$\geq$",
+    "≤": r"$\leq$",
+    "†": r"$\dagger$",
+    "×": r"$\times$",
+    "—": "---",
+    "–": "--",
+    "→": r"$\rightarrow$",
+    "…": r"\dots{}",
+    "§": r"\S{}",
+}
+"""Characters a bare pdflatex (no unicode packages) cannot set, as LaTeX."""
+
+
+def tex_text(text: str) -> str:
+    """Plain text as LaTeX that a minimal pdflatex document sets: specials escaped, the Unicode above replaced, any
+    other non-ASCII character dropped."""
+    out = _tex_escape(text).replace("|", r"$\mid$")
+    for char, repl in TEX_CHARS.items():
+        out = out.replace(char, repl)
+    return "".join(ch for ch in out if ord(ch) < 128)
+
+
+def _fit(tabular: str) -> str:
+    """The tabular scaled down to \\linewidth when wider (never up)."""
+    return "\\resizebox{\\ifdim\\width>\\linewidth\\linewidth\\else\\width\\fi}{!}{%\n" + tabular.strip() + "%\n}\n"
+
+
+def tex_table(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame, devs, agg) -> str:
+    """reports/<table>-<profile>.tex: the table (and its aggregate) as floats that compile in a minimal document with
+    the packages of the first line, scaled to fit the text width; a short caption, the deviations as notes."""
+    tex_df, constant = layout(table, cells, tex=True)
+    tex_df.index = pd.Index([tex_text(str(i)) for i in tex_df.index], name=tex_text(table.row_header))
+    tex_df.columns = (
+        pd.MultiIndex.from_tuples([tuple(tex_text(x) for x in c) for c in tex_df.columns])
+        if isinstance(tex_df.columns, pd.MultiIndex)
+        else [tex_text(c) for c in tex_df.columns]
+    )
+    tex_df = tex_df.map(lambda v: tex_text(str(v).replace(r" $\mid$ ", " | ")))
+    tabular = tex_df.reset_index().to_latex(
+        index=False,
+        escape=False,
+        multicolumn=True,
+        multicolumn_format="c",
+        column_format="l" + "c" * tex_df.shape[1],
+    )
+    used = results[results["run_name"].isin(_run_names(table, profile))] if not results.empty else results
+    paper = table.name in list_tables()
+    what = f"Ours vs the paper's Table {table.name.removeprefix('table')}" if paper else table.title
+    if used.empty:
+        runs = "no finished run yet"
+    else:
+        lo, hi = int(used["frames"].min()), int(used["frames"].max())
+        frames = f"{lo:,}" if lo == hi else f"{lo:,}--{hi:,}"
+        seeds = ", ".join(str(s) for s in sorted(int(x) for x in used["seed"].unique()))
+        runs = f"{frames} frames, seeds {seeds}, {len(used)} of {len(_run_names(table, profile))} runs"
+    setting = f" {', '.join(constant)}." if constant else ""
+    cap = f"{what} ({profile} profile: {runs}).{setting} Each cell: ours, the mean (each seed) | the paper"
+    cap += "; --- = not run."
+    notes = []
+    if devs is not None and devs.deviations:
+        notes.append("Deviations from the paper: " + "; ".join(f"{line} [{h}]" for line, h in devs.deviations) + ".")
+    if profile != "paper":
+        notes.append(f"The '{profile}' profile is not the paper's protocol: compare orderings, not absolute numbers.")
+    label = f"tab:ours-{table.name}-{profile}"
+    lines = [
+        f"% {table.name} [{profile}], written by `make reports` (emml/report/tables.py). Needs "
+        + ", ".join(f"\\usepackage{{{p}}}" for p in TEX_PACKAGES)
+        + "; fits \\linewidth (scaled down when wider).",
+        "\\begin{table}[t]",
+        "\\centering",
+        f"\\caption{{{tex_text(cap)}}}",
+        f"\\label{{{label}}}",
+        _fit(tabular).rstrip(),
+    ]
+    if notes:
+        lines += ["\\par\\smallskip", "{\\footnotesize\\raggedright Notes: " + tex_text(" ".join(notes)) + "\\par}"]
+    lines += ["\\end{table}", ""]
+    if agg is not None:
+        agg_df = pd.DataFrame(agg[0]).map(lambda v: tex_text(_short(str(v))))
+        agg_df.columns = [tex_text(c.replace(" [95% CI]", "")) for c in agg_df.columns]
+        agg_cap = (
+            f"Aggregate per setting ({what}, {profile}): IQM, the reference row minus the row, P(reference > row), "
+            "each with its 95% bootstrap interval; a number alone: one run, no interval."
+        )
+        agg_tab = agg_df.to_latex(index=False, escape=False, column_format="ll" + "c" * (agg_df.shape[1] - 2))
+        lines += [
+            "\\begin{table}[t]",
+            "\\centering",
+            f"\\caption{{{tex_text(agg_cap)}}}",
+            f"\\label{{{label}-aggregate}}",
+            _fit(agg_tab).rstrip(),
+            "\\end{table}",
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def _short(value: str) -> str:
+    """An aggregate cell without its parenthesised counts ('0.93 (1 run in 1 cell: no interval)' -> '0.93')."""
+    import re
+
+    return re.sub(r" \([^()]*\)$", "", value)

@@ -124,7 +124,10 @@ def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure
         ax.imshow(frame)
         if ep.attention:
             h, w = frame.shape[:2]
-            ax.imshow(ep.attention[t], cmap="inferno", alpha=0.6, extent=(0, w, h, 0), interpolation="nearest")
+            im = ax.imshow(
+                ep.attention[t], cmap="inferno", alpha=0.6, extent=(0, w, h, 0), interpolation="nearest", vmin=0
+            )
+            fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02, label="x_spat")
             ax.set_title(f"x_spat (max {ep.attention[t].max():.2f})", fontsize=9)
         else:
             ax.set_title("no spatial attention in this model", fontsize=9)
@@ -164,15 +167,18 @@ def channels_figure(
         panels = [("aux label", labels[v])] + [(name, channels[name][v]) for name in channels]
         for c, (title, arr) in enumerate(panels):
             ax = axes[r, c]
-            ax.imshow(arr, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+            im = ax.imshow(arr, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
             ax.set_title(title if r == 0 else "", fontsize=9)
             ax.set_xticks([]), ax.set_yticks([])
+            ax.spines[:].set_visible(True)  # a frame round every map: a white (all 1) channel is not a blank
         axes[r, 0].set_ylabel(word, fontsize=10)
         axes[r, -1].imshow(frame)
         axes[r, -1].set_title("frame" if r == 0 else "", fontsize=9)
         axes[r, -1].axis("off")
     fig.suptitle(f"conv3 channels and aux labels, '{first.sentence}' (first frame)", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 0.92, 1))
+    bar = fig.add_axes((0.93, 0.15, 0.015, 0.7))
+    fig.colorbar(im, cax=bar, label="aux label / sigmoid(conv3): 0 black, 1 white")
     save(fig, path, dpi=100)
     return fig, labels, channels
 

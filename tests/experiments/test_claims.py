@@ -18,6 +18,8 @@ def test_the_committed_claims_load_and_point_at_their_tables():
         assert set(claim.rows) <= labels and (claim.than is None or claim.than in labels)
     assert claims["da-best-hard-aux"].where == {"difficulty": "hard", "aux": True}
     assert claims["aux-helps"].rows == tuple(r.label for r in load_table("table2").rows)  # no rows: all of them
+    assert claims["shaping-speed"].mark == "chance" and claims["shaping-speed"].metrics == ("sgn_train",)
+    assert claims["noaux-channels-align"].metrics == ("sgn_test",)  # the table's first: the cell whose runs it reads
 
 
 GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_test"]\n'
@@ -33,6 +35,13 @@ GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_te
         ('kind = "best"\nrow = "GA"\nwhere = { seed = 0 }\n', r"where: 'seed' is unknown; allowed: difficulty, aux"),
         ('kind = "level"\nrows = ["GA"]\nthan = "FiLM"\n', r"kind='level' needs 'margin'"),
         ('kind = "best"\nrow = "GA"\nweight = 2\n', r"key 'weight' is unknown"),
+        (
+            'kind = "faster"\nrows = ["GA"]\nthan = "FiLM"\nmark = "0.7"\n',
+            r"mark='0.7' is not allowed; allowed: chance",
+        ),
+        ('kind = "best"\nrow = "GA"\nmark = "0.5"\n', r"mark='0.5' is not allowed; allowed: kind='faster' only"),
+        ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\n', r"kind='diagnostic' needs 'key'"),
+        ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\nkey = "eval/x"\n', r"key='eval/x': kind='diagnostic' only"),
     ],
 )
 def test_a_bad_claim_fails_naming_the_file_and_the_field(tmp_path, body, message):

@@ -26,7 +26,7 @@ def test_plot_table_skips_runs_without_history(tracking, tmp_path):
         tracker = Tracker()
         run_id = tracker.start("table3", name)
         for step in (1024, 2048, 3072):
-            tracker.log_metrics({"train/success_sgn": 0.1 * seed + step / 4096, "train/success_eqa": 0.2}, step=step)
+            tracker.log_metrics({"eval/sgn_test": 0.1 * seed + step / 4096, "eval/eqa_test": 0.2}, step=step)
         tracker.finish()
         rows.append({"run_name": name, "run_id": run_id, "seed": seed, "frames": 3072})
     rows.append({"run_name": "da_no_sa-easy-aux-s0-quick", "run_id": "not-in-this-store", "seed": 0, "frames": 3072})
@@ -60,7 +60,7 @@ def test_curves_come_from_the_run_dir_when_mlflow_lacks_the_run_and_are_never_bl
     assert any("kept the existing figures" in n for n in notes)
     run = tmp_path / "runs" / "table3" / name
     run.mkdir(parents=True)
-    (run / "metrics.csv").write_text("step,key,value\n1024,train/success_sgn,0.25\n2048,train/success_sgn,0.5\n")
+    (run / "metrics.csv").write_text("step,key,value\n1024,eval/sgn_test,0.25\n2048,eval/sgn_test,0.5\n")
     paths, notes = plot_table("table3", "quick", **kw)  # the run dir's mirror gives the curve
     assert not any(name in n for n in notes) and (out / "table3-quick-curves.png").stat().st_size > 1000
 
@@ -87,7 +87,7 @@ def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(track
 
     footers = []
     real = curves._footer
-    monkeypatch.setattr(curves, "_footer", lambda fig, text: (footers.append(text), real(fig, text)))
+    monkeypatch.setattr(curves, "_footer", lambda fig, text, **kw: (footers.append(text), real(fig, text, **kw)))
     name = "dual_attention-easy-aux-s0-quick"
     csv = tmp_path / "results" / "table3" / "quick.csv"
     csv.parent.mkdir(parents=True)
@@ -97,7 +97,7 @@ def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(track
     spec = next(s for s in load_table("table3").runs([0]) if s.run_name("quick") == name)
     run = tmp_path / "runs" / spec.table / name  # the folder of the table that trains it
     run.mkdir(parents=True)
-    (run / "metrics.csv").write_text("step,key,value\n1024,train/success_sgn,0.25\n2048,train/success_sgn,0.5\n")
+    (run / "metrics.csv").write_text("step,key,value\n1024,eval/sgn_test,0.25\n2048,eval/sgn_test,0.5\n")
     config = profile_config("quick", "easy", model="dual_attention", aux=True).to_dict()
     (run / "results.json").write_text(json.dumps({"config": config}))
     kw = dict(results_root=tmp_path / "results", out=tmp_path / "reports", run_root=tmp_path / "runs")

@@ -57,7 +57,7 @@ def fake_run_dirs(table: str, run_root, change=None) -> None:
         if change is not None:
             change(spec, config)
         folder = run_root / spec.table / spec.run_name(PROFILE)  # a borrowed row's runs are in their table's folder
-        folder.mkdir(parents=True)
+        folder.mkdir(parents=True, exist_ok=True)  # Table 3 borrows Table 2's DA runs
         (folder / "results.json").write_text(json.dumps({"run_name": folder.name, "config": config}))
 
 
@@ -81,7 +81,11 @@ def test_every_cell_filled_with_each_seeds_value(tmp_path):
     assert "[" not in md.split("| Model")[1].split("\n\n")[0]  # no bootstrap CI over three values in the cells
     assert "not the paper's protocol" in md and "1,500,000–5,000,000 frames" in md
     tex = (tmp_path / "reports" / "table2-quick.tex").read_text()
-    assert r"\multicolumn" in tex and "Easy" in tex and r"0.20 (0.10 · 0.20 · 0.30) $\mid$ 0.96" in tex
+    assert (
+        r"\multicolumn" in tex
+        and "Easy" in tex
+        and r"0.20 (0.10 $\cdot$ 0.20 $\cdot$ 0.30) | 0.96".replace("|", r"$\mid$") in tex
+    )
 
 
 def test_a_missing_run_is_shown_missing_not_zero(tmp_path):
@@ -141,7 +145,7 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
         "all 48 runs"  # from the results rows (the evaluation the score came from), not the config
     )
     tex = (tmp_path / "reports" / "table3-quick.tex").read_text()
-    assert r"input 84×150 (paper 168×300, App. A) [all 48 runs]" in tex
+    assert r"input 84$\times$150 (paper 168$\times$300, App. A) [all 48 runs]" in tex  # ASCII: a bare pdflatex
 
     def paper_input_unscaled(spec, config):
         if spec.row == "DA Multi-Task" and spec.seed == 0:

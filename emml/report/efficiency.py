@@ -1,0 +1,152 @@
+"""Sample efficiency (issue 49): per run, the frames at which its greedy accuracy first leaves chance and first
+reaches 0.5 and 0.9, on SGN and EQA, train and test split, read from the periodic evaluation points of the run's
+metrics mirror (`runs/<table>/<run>/metrics.csv`, keys `eval/sgn_test`, `eval/eqa_train`, ...: the trainer evaluates
+greedily every `eval_every` frames on `eval_episodes` episodes per task and split).
+
+The table pages show them run by run (`markdown`); the claims page decides the paper's speed claims with them ("reward
+shaping and the task indicator help with learning speed", §5.3, Figure 9: `emml/report/claims.py`, kind `faster`).
+A crossing is only as fine as the evaluation cadence: a run evaluated every 100,000 frames that first leaves chance
+at 300,000 left it somewhere after 200,000.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+CHANCE = {"sgn": 0.2, "eqa": 1 / 3}
+"""Chance per task: SGN, walking to one of the 5 objects (docs/fidelity.md); EQA, the paper's Text only row, which
+sees no frame, scores 0.33 in every column of its Table 2 (ours reads the test split's answer priors: 0.45)."""
+LEAVE = 0.1
+"""A run has left chance when its accuracy is above chance + LEAVE (SGN 0.30, EQA 0.43): the binomial noise of a 500
+episode evaluation is about 0.02, of a 100 episode one about 0.045."""
+CURVE_METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
+"""The results columns whose greedy evaluation is logged periodically as `eval/<metric>`."""
+MARKS = ("chance", "0.5", "0.9")
+"""The crossings per metric: leaving chance (above chance + LEAVE), reaching 0.5, reaching 0.9."""
+MARK_LABELS = {"chance": "leaves chance", "0.5": "reaches 0.5", "0.9": "reaches 0.9"}
+
+
+def chance(metric: str) -> float:
+    """The chance accuracy of a results column's task (sgn_* or eqa_*)."""
+    return CHANCE["eqa" if metric.startswith("eqa") else "sgn"]
+
+
+def level(metric: str, mark: str) -> float:
+    """The accuracy a crossing `mark` asks for: above chance + LEAVE for 'chance', else at least the number."""
+    return chance(metric) + LEAVE if mark == "chance" else float(mark)
+
+
+def first_crossing(points: list[tuple[int, float]], metric: str, mark: str) -> int | None:
+    """The first frame count at which the curve crosses `mark` (`level`); None when it never does."""
+    bar = level(metric, mark)
+    for step, value in points:
+        if (value > bar) if mark == "chance" else (value >= bar):
+            return step
+    return None
+
+
+@dataclass
+class RunEfficiency:
+    """One run's crossings."""
+
+    run: str
+    row: str
+    difficulty: str
+    aux: bool
+    seed: int
+    crossings: dict[str, dict[str, int | None]] = field(default_factory=dict)
+    """metric → mark → the first frame count at the crossing (None: not by `last`); a metric the run never
+    evaluated (a single-task run's other task) is absent."""
+    last: int = 0
+    """The frames of the last evaluation point."""
+    every: int = 0
+    """The frames between evaluation points (the cadence; 0 with one point)."""
+    found: bool = True
+    """False when the run has no metrics mirror here (its run dir is on the machine that trained it)."""
+
+
+def curves(path: Path) -> dict[str, list[tuple[int, float]]]:
+    """metric → its greedy evaluation points (frames, accuracy) in frame order, from a metrics mirror; a point logged
+    twice (a resumed run) keeps its last value. {} when the file is absent."""
+    from emml.runs.tracking import read_mirror
+
+    keys = {f"eval/{m}": m for m in CURVE_METRICS}
+    out: dict[str, dict[int, float]] = {}
+    for step, key, value in read_mirror(path):
+        if key in keys:
+            out.setdefault(keys[key], {})[step] = value
+    return {m: sorted(points.items()) for m, points in out.items()}
+
+
+def run_efficiency(spec, profile: str, run_root: str | Path) -> RunEfficiency:
+    """The crossings of one declared run (a RunSpec) from its run dir under `run_root`."""
+    from emml.runs.rundir import METRICS, path_of
+
+    name = spec.run_name(profile)
+    eff = RunEfficiency(name, spec.row, spec.difficulty, spec.aux, spec.seed)
+    path = path_of(run_root, spec.table, name) / METRICS
+    found = curves(path)
+    if not found:
+        eff.found = False
+        return eff
+    steps = sorted({s for points in found.values() for s, _ in points})
+    eff.last = steps[-1]
+    eff.every = min((b - a for a, b in zip(steps, steps[1:])), default=0)
+    for metric in CURVE_METRICS:
+        if metric in found:
+            eff.crossings[metric] = {mark: first_crossing(found[metric], metric, mark) for mark in MARKS}
+    return eff
+
+
+def table_efficiency(table, profile: str, names: list[str], run_root: str | Path) -> list[RunEfficiency]:
+    """The crossings of the named runs of `table` (the runs its page shows), in the table's run order."""
+    from emml.config.profiles import profile_seeds
+
+    wanted = set(names)
+    return [
+        run_efficiency(spec, profile, run_root)
+        for spec in table.runs(profile_seeds(profile))
+        if spec.run_name(profile) in wanted
+    ]
+
+
+def frames_text(frames: int | None, last: int) -> str:
+    """'0.30M', or '>1.50M' (not by the last evaluation)."""
+    return f">{last / 1e6:.2f}M" if frames is None else f"{frames / 1e6:.2f}M"
+
+
+def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS) -> str:
+    """The page's sample-efficiency section: one line per run, per metric its three crossings."""
+    from emml.config.env_kinds import env_label
+    from emml.report.tables import METRIC_LABELS
+
+    runs = [r for r in runs]
+    if not runs:
+        return ""
+    shown = [m for m in metrics if any(m in r.crossings for r in runs)]
+    every = sorted({r.every for r in runs if r.every})
+    cadence = ", ".join(f"{e:,}" for e in every) or "—"
+    lines = [
+        "### Sample efficiency",
+        "",
+        "Frames at which each run's greedy accuracy (its periodic evaluation in `metrics.csv`) first leaves chance "
+        f"(above chance + {LEAVE:.2f}: SGN {CHANCE['sgn'] + LEAVE:.2f}, EQA {CHANCE['eqa'] + LEAVE:.2f}), then "
+        f"reaches 0.5 and 0.9, as 'leaves chance / 0.5 / 0.9'; >F: not by its last evaluation at F frames. "
+        f"Evaluations every {cadence} frames: a crossing is known to that resolution.",
+        "",
+    ]
+    header = ["Run", "Setting", "seed"] + [METRIC_LABELS.get(m, m) for m in shown]
+    lines += ["| " + " | ".join(header) + " |", "|:--|:--|--:|" + ":--|" * len(shown)]
+    for r in runs:
+        setting = f"{env_label(r.difficulty)} · {'Aux' if r.aux else 'No Aux'}"
+        cells = []
+        for m in shown:
+            if not r.found:
+                cells.append("no metrics.csv here")
+            elif m not in r.crossings:
+                cells.append("—")
+            else:
+                cells.append(" / ".join(frames_text(r.crossings[m][k], r.last) for k in MARKS))
+        lines.append(f"| {r.row} | {setting} | {r.seed} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
