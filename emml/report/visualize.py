@@ -177,7 +177,7 @@ def channels_figure(
         axes[r, -1].axis("off")
     fig.suptitle(f"conv3 channels and aux labels, '{first.sentence}' (first frame)", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.92, 1))
-    bar = fig.add_axes((0.93, 0.15, 0.015, 0.7))
+    bar = fig.add_axes((0.93, 0.15, 0.015, 0.7), label="<colorbar>")  # as matplotlib names the ones it makes
     fig.colorbar(im, cax=bar, label="aux label / sigmoid(conv3): 0 black, 1 white")
     save(fig, path, dpi=100)
     return fig, labels, channels

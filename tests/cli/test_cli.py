@@ -12,7 +12,7 @@ runner = CliRunner()
 def test_tasks_show_json():
     result = runner.invoke(app, ["tasks", "show", "doom", "--json"])
     assert result.exit_code == 0, result.output
-    data = json.loads(result.output)
+    data = json.loads(result.stdout)
     assert len(data["sgn_train"]) == 42 and len(data["sgn_test"]) == 28
     assert len(data["eqa_train"]) == 21 and len(data["eqa_test"]) == 8
     assert len(data["vocabulary"]) == 22 and len(data["actors"]) == 18
@@ -37,7 +37,7 @@ def test_oracle_json(no_leftovers):
         ],
     )
     assert result.exit_code == 0, result.output
-    assert json.loads(result.output)["accuracy"] == 1.0
+    assert json.loads(result.stdout)["accuracy"] == 1.0
 
 
 def test_bad_input_is_named_before_compute(no_leftovers):
@@ -60,7 +60,7 @@ def test_diagnose_a_checkpoint(tracking, no_leftovers):
     sgn = ["--episodes", "2", "--step0-episodes", "10", "--eqa-episodes", "0"]
     result = runner.invoke(app, ["diagnose", str(path), *sgn, "--json"])
     assert result.exit_code == 0, result.output
-    data = json.loads(result.output)
+    data = json.loads(result.stdout)
     assert 0.0 <= data["attention_on_target"] <= 1.0 and 0.0 <= data["actor_sensitivity"] <= 1.0
     assert all(0.0 <= ap <= 1.0 for ap in data["detector_ap_words"].values())
     assert "eqa" not in data and data["control"] == "none"
@@ -78,13 +78,13 @@ def test_diagnose_a_checkpoint(tracking, no_leftovers):
     eqa = ["diagnose", str(path), "--episodes", "0", "--step0-episodes", "0", "--eqa-episodes", "1"]
     gated = runner.invoke(app, [*eqa, "--control", "type_gate", "--json"])
     assert gated.exit_code == 0, gated.output
-    data = json.loads(gated.output)
+    data = json.loads(gated.stdout)
     assert data["control"] == "type_gate" and len(data["eqa"]["questions"]) == 29 and "detector_ap" not in data
     bad = runner.invoke(app, [*eqa, "--control", "oracle"], env={"COLUMNS": "200"})
     assert bad.exit_code == 2 and "'oracle' is not one of" in bad.output
     scores = runner.invoke(app, ["eval", str(path), "--episodes", "1", "--control", "type_gate", "--json"])
     assert scores.exit_code == 0, scores.output
-    assert set(json.loads(scores.output)) == {"sgn_train", "sgn_test", "eqa_train", "eqa_test"}
+    assert set(json.loads(scores.stdout)) == {"sgn_train", "sgn_test", "eqa_train", "eqa_test"}
     missing = runner.invoke(app, ["diagnose", str(path.parent / "nope.pt")])
     assert missing.exit_code == 2 and "no such file" in missing.output
 
@@ -144,13 +144,13 @@ def test_train_over_a_bad_or_foreign_checkpoint_fails_by_name_and_keeps_it(track
 def test_house_tasks_and_oracle_json(no_leftovers):
     result = runner.invoke(app, ["tasks", "show", "house", "--json"])
     assert result.exit_code == 0, result.output
-    data = json.loads(result.output)
+    data = json.loads(result.stdout)
     assert len(data["sgn_train"]) == 22 and len(data["sgn_test"]) == 11
     assert len(data["eqa_train"]) == 8 and len(data["eqa_test"]) == 2 and len(data["actors"]) == 24
     args = ["oracle", "--env", "house", "--task", "sgn", "--episodes", "3", "--height", "60", "--width", "108"]
     result = runner.invoke(app, [*args, "--json"])
     assert result.exit_code == 0, result.output
-    data = json.loads(result.output)
+    data = json.loads(result.stdout)
     assert data["env"] == "house" and data["accuracy"] == 1.0
     result = runner.invoke(app, ["oracle", "--env", "attic"], env={"COLUMNS": "200"})
     assert result.exit_code == 2 and "'attic' is not one of 'doom', 'house'" in result.output

@@ -151,7 +151,7 @@ def test_a_checkpoints_outcomes_match_its_evaluation(tracking, no_leftovers):
     quiet = ["--episodes", "0", "--step0-episodes", "0", "--eqa-episodes", "0"]
     out = CliRunner().invoke(app, ["diagnose", str(path), *quiet, "--sgn-outcomes", str(n), "--json"])
     assert out.exit_code == 0, out.output
-    result = json.loads(out.output)["sgn_outcomes"]
+    result = json.loads(out.stdout)["sgn_outcomes"]
     assert result["seed"] == EVAL_SEED and list(result["splits"]) == ["train", "test"]
     scores = evaluate_checkpoint(path, n)
     for split, data in result["splits"].items():

@@ -216,7 +216,7 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no
     ckpt = next(Path(roots["run_root"]).glob("table4/*easy*/checkpoint.pt"))
     result = CliRunner().invoke(app, ["transfer", str(ckpt), "--episodes", "1", "--json"])
     assert result.exit_code == 0, result.output
-    data = json.loads(result.output)
+    data = json.loads(result.stdout)
     assert len(data["instructions"]) == 28 and len(data["rows"]) == 15
     result = CliRunner().invoke(app, ["transfer", str(ckpt), "--words", "red,torch"])
     assert result.exit_code == 2 and "['torch'] are already in the model's vocabulary" in result.output

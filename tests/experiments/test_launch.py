@@ -141,7 +141,7 @@ def test_cli_run_list_report(tmp_path, monkeypatch, placeholder_table):
     assert result.exit_code == 2 and "profile" in result.output
     result = runner.invoke(app, ["list", "--profile", "smoke", "--json"])
     assert result.exit_code == 0, result.output
-    tables = {t["table"]: t for t in json.loads(result.output)["tables"]}
+    tables = {t["table"]: t for t in json.loads(result.stdout)["tables"]}
     assert tables["table2"]["total"] == 28 and tables["table3"]["total"] == 16 and tables["table4"]["total"] == 2
     assert tables["table5"]["total"] == 7  # the House (Appendix C): 7 models, no aux, one seed under smoke
     result = runner.invoke(
@@ -149,7 +149,7 @@ def test_cli_run_list_report(tmp_path, monkeypatch, placeholder_table):
     )
     assert result.exit_code == 0, result.output
     assert (tmp_path / f"{placeholder_table}-smoke.md").exists()
-    assert "PLACEHOLDER" in json.loads(result.output)["caption"]
+    assert "PLACEHOLDER" in json.loads(result.stdout)["caption"]
 
 
 def test_runs_packed_on_a_gpu_are_capped_by_its_free_memory(monkeypatch):

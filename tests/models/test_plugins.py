@@ -99,7 +99,7 @@ def toy(tmp_path) -> Path:
 def models_json(*plugin: str) -> dict[str, dict]:
     result = runner.invoke(app, [*plugin, "models", "--height", "60", "--width", "108", "--json"])
     assert result.exit_code == 0, result.output
-    return {r["name"]: r for r in json.loads(result.output)}
+    return {r["name"]: r for r in json.loads(result.stdout)}
 
 
 def test_every_list_of_models_derives_from_the_registry(sandbox):

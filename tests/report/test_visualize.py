@@ -57,13 +57,20 @@ def test_the_recorded_episode_is_the_models_own_output(checkpoints, no_leftovers
     assert set(w for w in words if w in ep.words) <= set(ep.words)
 
 
+def _panels(fig) -> list:
+    """A figure's panels, its colour scales left out."""
+    return [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+
+
 def test_the_attention_figure_has_a_row_per_step_with_the_models_arrays(checkpoints, tmp_path, no_leftovers):
     model, cfg = load_model(checkpoints[True])
     ep = record_episode(model, cfg.env, "eqa", seed=1)
     fig = attention_figure(ep, tmp_path / "a.png", rows=3)
     steps = min(3, len(ep.frames))
-    assert len(fig.axes) == 1 + 3 * steps and (tmp_path / "a.png").stat().st_size > 0
-    overlay = fig.axes[2].get_images()[1].get_array()  # first step row: frame, then frame + x_spat
+    panels = _panels(fig)
+    assert len(panels) == 1 + 3 * steps and (tmp_path / "a.png").stat().st_size > 0
+    assert len(fig.axes) > len(panels)  # the maps carry a colour scale
+    overlay = panels[2].get_images()[1].get_array()  # first step row: frame, then frame + x_spat
     np.testing.assert_array_equal(np.asarray(overlay), ep.attention[0])
     assert "EQA" in fig.axes[0].get_title()
     # the top panel: x_sent on every vocabulary channel, labelled, with the model's values (Eq. 4's gate)
@@ -78,7 +85,7 @@ def test_the_channel_figure_compares_aux_and_no_aux_channels(checkpoints, tmp_pa
     models = [("aux", load_model(checkpoints[True])[0]), ("no aux", load_model(checkpoints[False])[0])]
     cfg = load_model(checkpoints[True])[1]
     fig, labels, channels = channels_figure(models, cfg.env, tmp_path / "c.png")
-    axes = np.array(fig.axes).reshape(len(CHANNEL_WORDS), 4)
+    axes = np.array(_panels(fig)).reshape(len(CHANNEL_WORDS), 4)
     assert [ax.get_title() for ax in axes[0]] == ["aux label", "aux", "no aux", "frame"]
     assert [ax.get_ylabel() for ax in axes[:, 0]] == list(CHANNEL_WORDS)
     v = list(cfg.env.vocabulary).index("red")  # the plotted channel is the model's sigmoid(conv3) for the word
@@ -92,7 +99,7 @@ def test_the_channel_figure_leaves_out_words_the_run_does_not_know(checkpoints, 
     an error (`make reports` failed on the Table 4 quick run)."""
     model, cfg = load_model(checkpoints[True])
     fig, _, _ = channels_figure([("aux", model)], cfg.env, tmp_path / "c.png", words=("red", "unseenword"))
-    assert [ax.get_ylabel() for ax in np.array(fig.axes).reshape(-1, 3)[:, 0]] == ["red"]
+    assert [ax.get_ylabel() for ax in np.array(_panels(fig)).reshape(-1, 3)[:, 0]] == ["red"]
 
 
 def test_cli_figures_and_videos(checkpoints, tmp_path, no_leftovers):

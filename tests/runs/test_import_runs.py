@@ -157,8 +157,8 @@ def test_bad_files_fail_by_name_and_the_other_run_dirs_import(tmp_path):
         "unfinished": "skipped",
     }
     assert results["bad-json"].reason.startswith(f"{bad_json / 'results.json'}: not JSON")
-    where = f"{bad_line / 'metrics.csv'}:{len(CURVE) + 2}"  # the line after the header and the curve
-    assert results["bad-line"].reason == f"{where}: not a step,key,value line: '256,train/loss'"
+    where = f"{bad_line / 'metrics.csv'}: line {len(CURVE) + 2}"  # the line after the header and the curve
+    assert results["bad-line"].reason.startswith(f"{where}: not a metric point (step,key,value): '256,train/loss'")
     assert str(refused) in results["refused"].reason and "train/../loss" in results["refused"].reason
     assert results["unfinished"].reason.startswith("unfinished")
     assert [r["run_name"] for r in tracking.find_runs("imp-e")] == ["good"]  # the refused one's half-made run: gone
@@ -168,7 +168,7 @@ def test_read_points_and_run_dirs(tmp_path):
     run = write_run(tmp_path, "t", "r", "9" * 32)
     assert read_points(run / "metrics.csv") == CURVE
     (run / "metrics.csv").write_text("key,step,value\n")
-    with pytest.raises(ValueError, match="metrics.csv:1: header"):
+    with pytest.raises(ValueError, match="metrics.csv: line 1: expected the header"):
         read_points(run / "metrics.csv")
     assert run_dirs([tmp_path]) == run_dirs([run]) == [run]
 
@@ -179,7 +179,7 @@ def test_import_runs_command(tmp_path):
     run = write_run(tmp_path, "imp-f", "cli", "a" * 32)
     first = CliRunner().invoke(app, ["import-runs", str(run), "--json"])
     assert first.exit_code == 0, first.output
-    assert {k: json.loads(first.output)[k] for k in ("imported", "skipped", "failed")} == {
+    assert {k: json.loads(first.stdout)[k] for k in ("imported", "skipped", "failed")} == {
         "imported": 1,
         "skipped": 0,
         "failed": 0,
