@@ -81,13 +81,15 @@ def count_parameters(model) -> int:
 
 
 def model_table(vocab_size: int, height: int, width: int, max_steps: int) -> list[dict]:
-    """[{name, description, parameters, source}] for every registry model (plugins' included)."""
+    """[{name, description, parameters, source, options}] for every registry model (plugins' included); options: its
+    fusion's own (`Fusion.options`) with the entry's values, those a run may set beside the shared ones."""
     return [
         {
             "name": name,
             "description": describe(name),
             "parameters": count_parameters(build_model(name, vocab_size, height, width, max_steps)),
             "source": spec.source,
+            "options": {k: v for k, v in model_options(name).items() if k not in option_fields(ModelConfig)},
         }
         for name, spec in MODELS.items()
     ]

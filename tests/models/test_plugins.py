@@ -186,6 +186,7 @@ def test_a_plugin_loads_from_the_option_or_the_variable_once(sandbox, toy, monke
     monkeypatch.chdir(toy.parent)  # the option takes a path relative to the working directory: absolute for children
     rows = models_json("--plugin", "toy_fusion.py")
     assert rows["toy"]["source"] == str(toy) and "toy_no_indicator" in rows
+    assert rows["toy"]["options"] == {"gain": 1.0, "detach": False}  # its own, listed
     assert os.environ[plugins.ENV_VAR] == str(toy)  # for the processes the command starts
 
 

@@ -325,6 +325,9 @@ def test_model_table():
     for r in rows:
         assert isinstance(r["parameters"], int) and r["parameters"] > 0
         assert r["description"] and "{" not in r["description"]
+    options = {r["name"]: r["options"] for r in rows}  # each fusion's own, with the entry's values
+    assert options["ga"] == {} and options["pacman"] == {"pacman_frames": 5}
+    assert options["da_no_sa"]["spatial_attention"] is False and options["dual_attention"]["answer_grad"] == "all"
 
 
 def test_the_description_says_the_x_s_the_code_computes():
