@@ -4,14 +4,15 @@ allowed values.
 
 Configs are leaves: this module imports no other layer of `emml` but the leaves `emml.config.geometry` and
 `emml.config.env_kinds`. What needs more than the values is checked where training starts, not here
-(`emml.rl.hardware.check_runnable`): the model registry (plugins loaded) names the model and the ablations its
-fusion declares; the machine runs `compile` (a C++ compiler), `precision` (native bf16) and `device` (CUDA)."""
+(`emml.rl.hardware.check_runnable`): the model registry (plugins loaded) names the model and checks the options
+its fusion declares (`model_option`, `emml.models.Fusion.options`); the machine runs `compile` (a C++ compiler),
+`precision` (native bf16) and `device` (CUDA)."""
 
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import Field, asdict, dataclass, field, fields
 from typing import ClassVar
 
 from emml.config.env_kinds import DOOM_ID, ENV_KINDS, HOUSE_ID, kinds_of
@@ -307,152 +308,199 @@ SENTENCE_READOUTS: tuple[str, ...] = ("last", "mean")
 SENTENCE_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
 """Values of `ModelConfig.sentence_activation`: the paper's ReLU on x_sent's Linear, or softplus (never 0)."""
 EQ1_WORDS: tuple[str, ...] = ("all", "content")
-"""Values of `ModelConfig.eq1_words`: Eq. 1 gates x_I with every word of the text (the paper's x_BoW), or with its
-content words only."""
+"""Values of Dual-Attention's option `eq1_words` (`emml.models.fusion.DualAttentionOptions`, which declares it; here
+for the command line, which imports no torch): Eq. 1 gates x_I with every word of the text (the paper's x_BoW), or
+with its content words only."""
 ANSWER_GRADS: tuple[str, ...] = ("all", "gate", "centered")
-"""Values of `ModelConfig.answer_grad`: Eq. 5's answer loss trains the conv and x_sent (the paper's, end to end),
-x_sent only, or both with its gradient into x_I centred over the cells."""
+"""Values of Dual-Attention's option `answer_grad` (`emml.models.fusion.DualAttentionOptions`): Eq. 5's answer loss
+trains the conv and x_sent (the paper's, end to end), x_sent only, or both with its gradient into x_I centred over
+the cells."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
 """The controls that read the env's privileged aux labels (acting needs them; training needs aux=True)."""
 
+NAME_PART = "name_part"
+"""Key of a model option's field metadata (`model_option`): the format of its part of the run name."""
+CHOICES = "choices"
+"""Key of a model option's field metadata (`model_option`): its allowed values."""
+
+
+def model_option(default, *, name: str | None = None, choices: tuple | None = None):
+    """Declare a model option: a dataclass field of `ModelConfig` (the options every model shares) or of a fusion's
+    own options class (`emml.models.Fusion.options`), its docstring below it as for every config field.
+
+    ``default``: its value unless `TrainConfig.model_options` sets it (the paper's, for the paper's models).
+    ``name``: the format of its part of the run name, spelled when a run sets it to another value than the default
+    ('ans{}' with 'gate' gives 'ansgate'; a number formats as {:g}: 'xs{}' with 0.25 gives 'xs0.25'); None: a run that
+    sets it is named by `emml.runs.rundir.swept` ('+model_options.NAME=VALUE'), like any other field.
+    ``choices``: its allowed values (checked by `check_model_options`, naming the field)."""
+    metadata = {}
+    if name is not None:
+        if not isinstance(name, str) or name.count("{}") != 1 or not PLAIN_NAME.fullmatch(name.replace("{}", "x")):
+            raise ValueError(f"model option name={name!r} must be a plain word holding '{{}}' once, e.g. 'ans{{}}'")
+        metadata[NAME_PART] = name
+    if choices is not None:
+        metadata[CHOICES] = tuple(choices)
+    return field(default=default, metadata=metadata)
+
+
+def option_fields(options: type) -> dict[str, Field]:
+    """A declared options class's fields (a dataclass type: `ModelConfig`'s shared ones, or a fusion's own), by name;
+    `ModelConfig`'s `name` and `options` are not options a run sets."""
+    return {f.name: f for f in fields(options) if not (options is ModelConfig and f.name in ("name", "options"))}
+
+
+def named_options(options: type) -> tuple[str, ...]:
+    """The options of ``options`` (a declared options class) that a run's name spells when a run sets them."""
+    return tuple(name for name, f in option_fields(options).items() if NAME_PART in f.metadata)
+
+
+def option_name_parts(options: type, values: dict) -> list[str]:
+    """The run name's parts of the options in ``values`` (`TrainConfig.model_options`) that ``options`` declares with
+    a name (`model_option`) and that ``values`` sets to another value than the default, in declaration order."""
+    parts = []
+    for name, f in option_fields(options).items():
+        spelled = f.metadata.get(NAME_PART)
+        if spelled is None or name not in values or values[name] == f.default:
+            continue
+        value = values[name]
+        parts.append(
+            spelled.replace(
+                "{}", f"{value:g}" if isinstance(value, (int, float)) and not isinstance(value, bool) else str(value)
+            )
+        )
+    return parts
+
+
+def _check_type(label: str, value, hint) -> None:
+    """Raise a ValueError naming ``label`` when ``value`` is not of the field's annotation ``hint`` (bool, int,
+    float — an int is accepted —, str, None, a Literal, or a union of them; any other annotation is not checked)."""
+    import types
+    import typing
+
+    args = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
+    what = []
+    for arg in args:
+        if arg is type(None) or arg is None:
+            ok, text = value is None, "None"
+        elif typing.get_origin(arg) is typing.Literal:
+            ok, text = value in typing.get_args(arg), "one of " + ", ".join(map(repr, typing.get_args(arg)))
+        elif arg is bool:
+            ok, text = type(value) is bool, "true or false"
+        elif arg is int:
+            ok, text = type(value) is int, "an integer"
+        elif arg is float:
+            ok, text = type(value) in (int, float), "a number"
+        elif arg is str:
+            ok, text = isinstance(value, str), "a string"
+        else:
+            return
+        if ok:
+            return
+        what.append(text)
+    raise ValueError(f"{label}={value!r} must be " + " or ".join(what))
+
+
+def check_model_options(options: type, values: dict, label: str = "ModelConfig"):
+    """``options`` (a declared options class) built from ``values``: each value checked against its field's type and
+    `model_option` choices, then the class's own ``check()`` (ranges, options that need one another); a ValueError
+    names the field ('ModelConfig.eq1_words=...'). Unknown names are the caller's to refuse (`emml.models.model_config`
+    names the model and its options)."""
+    import typing
+
+    declared = option_fields(options)
+    try:
+        hints = typing.get_type_hints(options)
+    except Exception:  # an annotation that does not resolve (a plugin's): its values are checked by its check() only
+        hints = {}
+    for name, value in values.items():
+        if name in hints:
+            _check_type(f"{label}.{name}", value, hints[name])
+        allowed = declared[name].metadata.get(CHOICES)
+        if allowed is not None:
+            check_choice(f"{label}.{name}", value, allowed)
+    built = options(**values)
+    check = getattr(built, "check", None)
+    if callable(check):
+        check()
+    return built
+
 
 @dataclass
 class ModelConfig:
-    """Hyperparameters of one model; every model shares encoders and policy."""
+    """A model's configuration: the options every model shares (the encoders, the policy module, the diagnostic
+    controls), declared here, and ``options``, those its fusion declares itself (`emml.models.Fusion.options`:
+    Dual-Attention's ablations and opt-ins, PACMAN's window, a plugin's own), read through as attributes
+    (``cfg.ga1`` is ``cfg.options.ga1``). Built by `emml.models.model_config` from a registry entry and
+    `TrainConfig.model_options`."""
 
     name: str = "dual_attention"
     """Fusion architecture, one of `emml.models.ARCHITECTURES`: a fusion class of the model registry,
-    emml/models/registry.py (ablations use the switches below)."""
-    embed_dim: int = 32
+    emml/models/registry.py (ablations are its options)."""
+    embed_dim: int = model_option(32)
     """Word-embedding size (paper appendix: 32)."""
-    gru_text: int = 32
+    gru_text: int = model_option(32)
     """Hidden size of the sentence GRU (paper appendix: 32)."""
-    hidden: int = 128
+    hidden: int = model_option(128)
     """Hidden size of the policy's linear layer and GRU (paper appendix: 128)."""
-    time_dim: int = 32
+    time_dim: int = model_option(32)
     """Size of the learned time-step embedding (paper is silent; our choice)."""
-    pacman_frames: int = 5
-    """Frames in the PACMAN attention window, current frame included (paper: 5)."""
-    spatial_attention: bool = True
-    """Dual-Attention: use the Spatial-Attention unit (Eq. 2-3); False = 'w/o SA' ablation."""
-    ga1: bool = True
-    """Dual-Attention: use the BoW Gated-Attention (Eq. 1); False = 'w/o GA1' ablation."""
-    ga2: bool = True
-    """Dual-Attention: use the sentence Gated-Attention (Eq. 4); False = 'w/o GA2' ablation."""
-    task_indicator: bool = True
+    task_indicator: bool = model_option(True)
     """Feed the SGN/EQA task one-hot to the policy; False = 'w/o task indicator' ablation."""
-    state_scale: bool = True
-    """Dual-Attention: hand the policy x_S = h·w · vec(x_spat) (mean 1 per cell) instead of vec(x_spat) (entries
-    ~1/(h·w)). Paper silent on input scaling; measured in docs/fidelity.md."""
-    state_temperature: float | None = None
-    """Dual-Attention, opt-in: hand the policy x_S = h·w · softmax(scores / state_temperature) with the gradient
-    stopped, a sharper copy of x_spat (Eq. 2); x_spat itself, Eq. 3-5 and every loss's gradient into the detectors
-    stay as they are. None (the default): x_S = h·w · vec(x_spat). The paper is silent on how the policy reads the
-    map: at temperature 1 a detector that ranks the target first but scores it 0.6 against 0.2 gives it 1.5x a
-    background cell, too faint for the actor; measured in docs/fidelity.md."""
-    sentence_readout: str = "last"
+    sentence_readout: str = model_option("last", name="sent{}", choices=SENTENCE_READOUTS)
     """Which GRU output x_sent's Linear reads (§3: x_sent = f(T; θ_sent), "passing the words in T through a GRU
     network followed by a linear layer"): 'last', the GRU's output after the last word (the paper's reading, the
     default); or, opt-in, 'mean', the mean of its outputs over the words, which keeps the question word ('what' /
     'which') in x_sent. Measured in docs/fidelity.md (issue 34): with 'last', a test question ending in a word no
     training question ends in gets the GA2 gate of the instructions ending in it ('what color is the torch'
     answered 'torch')."""
-    sentence_activation: str = "relu"
+    sentence_activation: str = model_option("relu", name="xsent{}", choices=SENTENCE_ACTIVATIONS)
     """The activation on x_sent's Linear (§3: "the linear layer with ReLU activations"; "ReLU activations for
     sentence embedding ensure aggregation"): 'relu', the paper's, the default; or, opt-in, 'softplus', as
     non-negative but never 0, so that no gate channel can die. Measured in docs/fidelity.md (issue 34): under ReLU a
     channel whose pre-activation is negative for every question gets no gradient from the answer loss and its word
     can never be answered (seed 0: 'blue' with the last readout; 'torch', 'skullkey' and 'blue' with the mean)."""
-    eq1_words: str = "all"
-    """Dual-Attention with GA1: the words whose channels Eq. 1 gates x_I with. 'all', the paper's x_BoW of every word
-    of the text (the default); or, opt-in, 'content', the dataset's content words only (objects, colours, sizes,
-    superlatives: `Dataset.content_words`), so that the function words ('what', 'which', 'is', 'the', 'color', ...)
-    do not add their channels to the attention scores of Eq. 2. x_sent still reads every word. The paper is silent
-    on the function words: "a particular feature map is activated if and only if the corresponding word occurs in
-    the textual input" (§3.1). Measured in docs/fidelity.md (issue 34): their channels, all-zero in the aux labels,
-    learn to fire on the kinds of object that were referents of training questions and pull the attention off a
-    test question's referent."""
-    answer_grad: str = "all"
-    """Dual-Attention with GA2: what Eq. 5's answer loss trains. 'all', the conv (through x_I and the map of Eq. 1-3)
-    and the GA2 gate's encoder x_sent, as end-to-end training does (the default; the paper stops no gradient); or,
-    opt-in, 'gate', x_sent only: x_SA is read with its gradient stopped in Eq. 4-5, so that the detectors learn from
-    the aux labels and the policy, not from the answers (without aux labels, the policy alone); or, opt-in,
-    'centered', both, with the gradient that reaches x_I through Eq. 3 centred over the h×w cells of each frame and
-    channel: it raises a detector where Eq. 2's map attends against where it does not, and cannot shift a whole
-    channel (which pins sigmoid x_I without aux labels: docs/fidelity.md, issue 48). Values are unchanged.
-    Measured in docs/fidelity.md (issue 34): retraining a checkpoint's conv offline on EQA frames, the
-    answer loss beside the aux loss holds the keys' detectors at AP 0.11-0.33 where the aux loss alone reaches
-    0.81-0.86."""
-    x_image: str = "sigmoid"
+    x_image: str = model_option("sigmoid", choices=("sigmoid", "relu"))
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
     either way. The paper contradicts itself; measured in docs/fidelity.md."""
-    control: str = "none"
+    control: str = model_option("none", choices=CONTROLS)
     """Diagnostic controls, not the paper's model (they read privileged labels, so they need aux labels):
     'none'; 'detectors': x_I := the aux labels (perfect detectors, unlabelled channels 0); 'target_mask':
     x_S := the cells showing the episode's referent (perfect x_S, values 0/1); 'type_gate' (Dual-Attention with GA2,
     evaluation only: `emml eval CKPT --control type_gate`): Eq. 4's x_sent := a gate from the dataset's word types
     that opens the channels of the attribute a question asks for (emml/models/type_gate.py), no labels read."""
+    options: object = None
+    """The fusion's own options, an instance of its `Fusion.options` class (Dual-Attention's:
+    `emml.models.fusion.DualAttentionOptions`); None until the model registry fills in its defaults
+    (`emml.models.registry.check_architecture`)."""
 
-    def _unit_option(self, field: str, allowed: tuple[str, ...], part: str, what: str) -> None:
-        """An opt-in option of the Dual-Attention unit: one of ``allowed``, and other than the paper's (the first)
-        only for name='dual_attention' with its ``part`` ('ga1', 'ga2') on."""
-        value, on = getattr(self, field), getattr(self, part)
-        check_choice(f"ModelConfig.{field}", value, allowed)
-        if value != allowed[0] and not (self.name == "dual_attention" and on):
-            raise ValueError(
-                f"ModelConfig.{field}={value!r} {what}: only for name='dual_attention' with {part}=True (got "
-                f"name={self.name!r}, {part}={on}); allowed there: " + ", ".join(map(repr, allowed))
-            )
+    def __getattr__(self, name: str):
+        """A fusion option read through: ``cfg.ga1`` is ``cfg.options.ga1``."""
+        options = self.__dict__.get("options")
+        if not name.startswith("__") and options is not None and hasattr(options, name):
+            return getattr(options, name)
+        raise AttributeError(f"{type(self).__name__} of model {self.__dict__.get('name')!r} has no option {name!r}")
 
     def validate(self) -> ModelConfig:
-        """The fields' values: raise `ValueError` naming the offending field; return self when valid. Whether `name`
-        is registered and declares the ablations switched off is the model registry's check
+        """The shared options' values: raise `ValueError` naming the offending field; return self when valid. The
+        fusion's own options, and whether `name` is registered, are the model registry's check
         (`emml.models.registry.check_architecture`), made where a model is built or a run starts."""
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"ModelConfig.name={self.name!r} must be the name of a fusion architecture")
-        for name in ("embed_dim", "gru_text", "hidden", "time_dim", "pacman_frames"):
+        for name in ("embed_dim", "gru_text", "hidden", "time_dim"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"ModelConfig.{name}={value!r} must be a positive integer (>= 1)")
-        t = self.state_temperature
-        if t is not None and (isinstance(t, bool) or not isinstance(t, (int, float)) or not t > 0):
-            raise ValueError(f"ModelConfig.state_temperature={t!r} must be None (off) or a number > 0")
-        if t is not None and not (self.name == "dual_attention" and self.spatial_attention):
-            raise ValueError(
-                f"ModelConfig.state_temperature={t!r} sharpens the spatial attention map: only for "
-                f"name='dual_attention' with spatial_attention=True (got name={self.name!r}, "
-                f"spatial_attention={self.spatial_attention}); allowed there: None or a number > 0"
-            )
-        check_choice("ModelConfig.sentence_readout", self.sentence_readout, SENTENCE_READOUTS)
-        check_choice("ModelConfig.sentence_activation", self.sentence_activation, SENTENCE_ACTIVATIONS)
-        self._unit_option("eq1_words", EQ1_WORDS, "ga1", "chooses the words of Eq. 1")
-        self._unit_option("answer_grad", ANSWER_GRADS, "ga2", "sets the answer loss's reach into the conv")
-        if self.answer_grad == "centered" and not self.spatial_attention:  # it centres the gradient Eq. 3 passes
-            raise ValueError(
-                "ModelConfig.answer_grad='centered' centres the answer's gradient through Eq. 3: only with "
-                "spatial_attention=True (got False); allowed without it: 'all', 'gate'"
-            )
-        if self.x_image not in ("sigmoid", "relu"):
-            raise ValueError(f"ModelConfig.x_image={self.x_image!r} is unknown; allowed: sigmoid, relu")
-        if self.control not in CONTROLS:
-            raise ValueError(f"ModelConfig.control={self.control!r} is unknown; allowed: " + ", ".join(CONTROLS))
-        if self.control == "type_gate" and not (self.name == "dual_attention" and self.ga2):
-            raise ValueError(
-                f"ModelConfig.control='type_gate' replaces the GA2 gate (Eq. 4): only for name='dual_attention' "
-                f"with ga2=True (got name={self.name!r}, ga2={self.ga2})"
-            )
-        for name in ("spatial_attention", "ga1", "ga2", "task_indicator", "state_scale"):
-            value = getattr(self, name)
-            if not isinstance(value, bool):
-                raise ValueError(f"ModelConfig.{name}={value!r} must be True or False")
+        check_model_options(ModelConfig, {name: getattr(self, name) for name in option_fields(ModelConfig)})
         return self
 
 
-MODEL_OPTIONS: tuple[str, ...] = tuple(f.name for f in fields(ModelConfig))
-"""The names `TrainConfig.model_options` may set: the fields of `ModelConfig`."""
+SHARED_MODEL_OPTIONS: tuple[str, ...] = tuple(option_fields(ModelConfig))
+"""The names `TrainConfig.model_options` may set for every model: the options `ModelConfig` declares. A model's
+fusion declares more (`emml.models.Fusion.options`), checked where the model registry is read
+(`emml.models.model_config`: where a run starts, a table is read, a model is built)."""
 
 
 @dataclass
@@ -544,7 +592,9 @@ class TrainConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """The PPO update's hyper-parameters (the paper's defaults)."""
     model_options: dict = field(default_factory=dict)
-    """Overrides of the model registry entry's ModelConfig fields."""
+    """Overrides of the model's options: those every model shares (`ModelConfig`) and those its fusion declares
+    (`emml.models.Fusion.options`); checked against the model's declared options where training starts
+    (`emml.rl.hardware.check_runnable`, `emml.models.model_config`), before any compute."""
 
     RUNTIME: ClassVar[tuple[str, ...]] = (
         "frames",  # asking for more frames continues a run (finished or not) to the new target
@@ -580,11 +630,15 @@ class TrainConfig:
         training starts (`emml.rl.hardware.check_runnable`)."""
         if not isinstance(self.model, str) or not PLAIN_NAME.fullmatch(self.model):
             raise ValueError(f"model={self.model!r} must be a model registry name (`emml models`)")
-        unknown = sorted(set(self.model_options) - set(MODEL_OPTIONS))
-        if unknown:
-            raise ValueError(
-                f"model_options: unknown ModelConfig field(s) {unknown}; allowed: {', '.join(MODEL_OPTIONS)}"
-            )
+        if not isinstance(self.model_options, dict):
+            raise ValueError(f"model_options={self.model_options!r} must be a table of model option names to values")
+        for key in self.model_options:
+            if not isinstance(key, str) or not key.isidentifier() or key in ("name", "options"):
+                raise ValueError(
+                    f"model_options: {key!r} is not a model option name; the options every model shares: "
+                    + ", ".join(SHARED_MODEL_OPTIONS)
+                    + " (and its fusion's own, `emml models`)"
+                )
         check_choice("env.difficulty", self.env.difficulty, ENV_DIFFICULTIES)
         self.env.validate()
         self.ppo.validate()
@@ -640,25 +694,24 @@ class TrainConfig:
         """Derived: updates to reach `frames` (rounded up)."""
         return -(-self.frames // self.frames_per_update)
 
-    def spelled_name(self) -> str:
-        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the opt-in
-        model options (state temperature, sentence readout and activation, Eq. 1 words, the answer loss's reach), the
-        aux loss's balance, precision, seed, profile."""
+    def spelled_name(self, fusion_options: type | None) -> str:
+        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the model
+        options a run sets that are declared with a name (`model_option`: the shared ones of `ModelConfig`, sentence
+        readout and activation, then those of ``fusion_options``, the model's fusion's declared options class, e.g.
+        Dual-Attention's state temperature, Eq. 1 words and answer loss's reach), the aux loss's balance, precision,
+        seed, profile. ``fusion_options`` may be None when `model_options` sets only shared options (the run's owner,
+        `emml.runs.rundir.run_name`, asks the model registry for it only then)."""
         parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
         if self.env.tasks != "both":
             parts.append(f"{self.env.tasks}only")
         if not self.env.shaping:
             parts.append("noshaping")
-        if (t := self.model_options.get("state_temperature")) is not None:  # opt-in: the policy reads a sharper map
-            parts.append(f"xs{t:g}")
-        if (readout := self.model_options.get("sentence_readout", "last")) != "last":  # opt-in: x_sent's readout
-            parts.append(f"sent{readout}")
-        if (activation := self.model_options.get("sentence_activation", "relu")) != "relu":  # opt-in: x_sent's
-            parts.append(f"xsent{activation}")
-        if (eq1 := self.model_options.get("eq1_words", "all")) != "all":  # opt-in: Eq. 1 over the content words
-            parts.append(f"eq1{eq1}")
-        if (grad := self.model_options.get("answer_grad", "all")) != "all":  # opt-in: the answer loss's reach
-            parts.append(f"ans{grad}")
+        own = {k: v for k, v in self.model_options.items() if k not in SHARED_MODEL_OPTIONS}
+        if own and fusion_options is None:
+            raise ValueError(f"spelled_name: model options {sorted(own)} need the declared options of {self.model!r}")
+        parts += option_name_parts(ModelConfig, self.model_options)  # opt-in: x_sent's readout, activation
+        if fusion_options is not None:  # opt-in: the fusion's, e.g. Dual-Attention's 'xs0.25', 'eq1content', 'ansgate'
+            parts += option_name_parts(fusion_options, own)
         if self.ppo.aux_balance != "none":  # opt-in: the aux cross-entropy balanced per word
             parts.append(f"auxbal{self.ppo.aux_balance}")
         if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it
@@ -690,16 +743,21 @@ class TrainConfig:
 def apply_overrides(cfg: TrainConfig, overrides: dict, source: str = "--set") -> TrainConfig:
     """Set fields by dotted name ('frames', 'env.height', 'ppo.lr', 'model_options.state_temperature'); an unknown
     name or a value of the wrong type fails naming ``source`` (the --set option, or the profile it came from), the
-    field and what it accepts. Model options are checked by name here and by value in `validate()`."""
+    field and what it accepts. A model option's name and value are checked against its model's declared options
+    where the model registry is read (`emml.models.model_config`: where training starts, a table is read)."""
     for key, value in overrides.items():
         target, name = cfg, key
         if "." in key:
             section, name = key.split(".", 1)
             if section not in ("env", "ppo", "model_options"):
                 raise ValueError(f"{source} {key!r}: section {section!r} is not one of 'env', 'ppo', 'model_options'")
-            if section == "model_options":
-                if name not in MODEL_OPTIONS:
-                    raise ValueError(f"{source} {key!r}: unknown model option; known: {', '.join(MODEL_OPTIONS)}")
+            if section == "model_options":  # its name and value: the model registry's check (`validate`)
+                if not name.isidentifier() or name in ("name", "options"):
+                    raise ValueError(
+                        f"{source} {key!r}: not a model option name; the options every model shares: "
+                        + ", ".join(SHARED_MODEL_OPTIONS)
+                        + " (and its fusion's own, `emml models`)"
+                    )
                 cfg.model_options = {**cfg.model_options, name: value}
                 continue
             target = getattr(cfg, section)

@@ -62,11 +62,12 @@ def check_transferable(model, vocab: Vocabulary, words) -> tuple[str, ...]:
     paper's protocol (no diagnostic control), whose vocabulary does not know them yet."""
     words = tuple(words)
     cfg = model.cfg
-    if cfg.name != "dual_attention" or not (cfg.ga1 and cfg.spatial_attention) or cfg.control != "none":
+    ga1, spatial = getattr(cfg, "ga1", None), getattr(cfg, "spatial_attention", None)  # Dual-Attention's options
+    if cfg.name != "dual_attention" or not (ga1 and spatial) or cfg.control != "none":
         raise ValueError(
             "transfer needs a Dual-Attention model with GA1 and spatial attention (the BoW gate routes a new "
-            f"word to its detector channel); got model name={cfg.name!r}, ga1={cfg.ga1}, "
-            f"spatial_attention={cfg.spatial_attention}, control={cfg.control!r}"
+            f"word to its detector channel); got model name={cfg.name!r}, ga1={ga1}, "
+            f"spatial_attention={spatial}, control={cfg.control!r}"
         )
     if not words or len(set(words)) != len(words):
         raise ValueError(f"words={list(words)!r} must be distinct new words (at least one)")

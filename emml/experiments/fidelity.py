@@ -309,7 +309,8 @@ def resolve(saved: dict) -> dict:
     cfg = {**_flatten(defaults), **_flatten(saved)}
     options = dict(saved.get("model_options") or {})
     model = model_config(cfg["model"], **options)
-    cfg.update({f"model.{f.name}": getattr(model, f.name) for f in fields(model)})
+    cfg.update({f"model.{f.name}": getattr(model, f.name) for f in fields(model) if f.name != "options"})
+    cfg.update({f"model.{f.name}": getattr(model.options, f.name) for f in fields(model.options)})  # its fusion's
     cfg["score_episodes"] = saved.get("final_eval_episodes", saved.get("eval_episodes", cfg["eval_episodes"]))
     return cfg
 

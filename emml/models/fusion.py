@@ -11,8 +11,9 @@ representation x_S and answer logits (x_Ans = softmax(answer logits)):
   "Baseline details"; their answer head is x_Ans = softmax(ReLU(Linear(x_S))).
 * `Pacman` -- QA attention of Das et al. 2018 over the last K frames.
 
-Each is a `Fusion`: what it needs (x_BoW, x_sent, a window of K frames, ablation switches) is declared as class
-attributes, which the model registry (emml/models/registry.py) and `EmmlModel` read.
+Each is a `Fusion`: what it needs (x_BoW, x_sent, a window of K frames) is declared as class attributes, which the
+model registry (emml/models/registry.py) and `EmmlModel` read, and so are its own options (`Fusion.options`: a
+dataclass of `model_option` fields, e.g. `DualAttentionOptions`, its ablation switches and opt-ins).
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
+
+from emml.config.schema import ANSWER_GRADS, EQ1_WORDS, model_option
 
 
 @dataclass
@@ -35,6 +38,20 @@ class FusionOutput:
     """(N, h, w) spatial attention map x_spat (Dual-Attention only), else None."""
 
 
+@dataclass
+class FusionOptions:
+    """The options a fusion declares of its own (`Fusion.options`): subclass it as a dataclass, one field per
+    option, each declared with `emml.config.schema.model_option` (its default, optionally its run-name part and its
+    choices) and a docstring below it; `check` refuses values that do not go together. A run sets them as any other
+    model option (`TrainConfig.model_options`, ``--set model_options.NAME=VALUE``); a name the model's fusion does
+    not declare, or a value of the wrong type or choice, fails naming the field before any compute
+    (`emml.models.model_config`). `ModelConfig` reads them through: ``cfg.NAME``."""
+
+    def check(self) -> None:
+        """Raise a ValueError naming the field ('ModelConfig.NAME=…') when the values do not go together, or one is
+        out of range; the types and choices are already checked. Nothing to check here."""
+
+
 class Fusion(nn.Module):
     """A fusion unit: (x_I, x_BoW, x_sent) -> `FusionOutput`. Subclass it for a model of your own (README, "Compare
     your own model") and register it (`emml.models.register_model`). What it needs is declared by the class
@@ -45,19 +62,23 @@ class Fusion(nn.Module):
     uses_sent: bool = False
     """Reads x_sent (N, V): the text encoder builds its sentence GRU only then; otherwise the fusion gets None."""
     frame_window: str | None = None
-    """The `ModelConfig` field holding K when the unit reads the last K frames (PACMAN: 'pacman_frames'): it is then
-    called with x_I of (N, K, V, h, w), oldest first, and `EmmlModel` carries the window across steps; None: the
-    current frame's x_I (N, V, h, w)."""
+    """The option holding K when the unit reads the last K frames (PACMAN: its 'pacman_frames'): it is then called
+    with x_I of (N, K, V, h, w), oldest first, and `EmmlModel` carries the window across steps; None: the current
+    frame's x_I (N, V, h, w)."""
     ablations: tuple[str, ...] = ()
-    """The `ModelConfig` ablation switches (spatial_attention, ga1, ga2) this unit reads; under any other unit they
-    must stay True (`ModelConfig.validate`)."""
+    """Those of its options (`options`) that are the ablation switches of §4 (spatial_attention, ga1, ga2): a
+    diagnostic asks the fusion whether it has the gate it reads (emml/eval/diagnose_eqa.py)."""
+    options: type = FusionOptions
+    """Its own options: a dataclass type (`FusionOptions`) whose fields are the options a run may set beside the
+    ones every model shares (`ModelConfig`); `from_config` reads their values as ``cfg.options``."""
     state_dim: int
     """D, the size of x_S (N, D) it hands the policy module (set by ``__init__``)."""
 
     @classmethod
     def from_config(cls, cfg, vocab_size: int, height: int, width: int) -> Fusion:
-        """The unit for a V-word vocabulary and a conv3 grid of (height, width) = (h, w), under `ModelConfig` cfg;
-        by default ``cls(vocab_size, height, width)`` (no switch read)."""
+        """The unit for a V-word vocabulary and a conv3 grid of (height, width) = (h, w), under `ModelConfig` cfg
+        (its own options: ``cfg.options``, an instance of `options`); by default ``cls(vocab_size, height, width)``,
+        no option read."""
         return cls(vocab_size, height, width)
 
     @classmethod
@@ -101,6 +122,71 @@ def centered_grad(x: Tensor) -> Tensor:
     return _CenteredGrad.apply(x)
 
 
+@dataclass
+class DualAttentionOptions(FusionOptions):
+    """Dual-Attention's options (`DualAttention.options`): the ablation switches of §4 and the opt-ins measured in
+    docs/fidelity.md. The defaults are the paper's model (`state_scale` aside: the paper is silent on it)."""
+
+    spatial_attention: bool = model_option(True)
+    """Use the Spatial-Attention unit (Eq. 2-3); False = 'w/o SA' ablation."""
+    ga1: bool = model_option(True)
+    """Use the BoW Gated-Attention (Eq. 1); False = 'w/o GA1' ablation."""
+    ga2: bool = model_option(True)
+    """Use the sentence Gated-Attention (Eq. 4); False = 'w/o GA2' ablation."""
+    state_scale: bool = model_option(True)
+    """Hand the policy x_S = h·w · vec(x_spat) (mean 1 per cell) instead of vec(x_spat) (entries ~1/(h·w)). Paper
+    silent on input scaling; measured in docs/fidelity.md."""
+    state_temperature: float | None = model_option(None, name="xs{}")
+    """Opt-in: hand the policy x_S = h·w · softmax(scores / state_temperature) with the gradient stopped, a sharper
+    copy of x_spat (Eq. 2); x_spat itself, Eq. 3-5 and every loss's gradient into the detectors stay as they are.
+    None (the default): x_S = h·w · vec(x_spat). The paper is silent on how the policy reads the map: at temperature
+    1 a detector that ranks the target first but scores it 0.6 against 0.2 gives it 1.5x a background cell, too
+    faint for the actor; measured in docs/fidelity.md. Run name: 'xs0.25'."""
+    eq1_words: str = model_option("all", name="eq1{}", choices=EQ1_WORDS)
+    """With GA1: the words whose channels Eq. 1 gates x_I with. 'all', the paper's x_BoW of every word of the text
+    (the default); or, opt-in, 'content', the dataset's content words only (objects, colours, sizes, superlatives:
+    `Dataset.content_words`), so that the function words ('what', 'which', 'is', 'the', 'color', ...) do not add
+    their channels to the attention scores of Eq. 2. x_sent still reads every word. The paper is silent on the
+    function words: "a particular feature map is activated if and only if the corresponding word occurs in the
+    textual input" (§3.1). Measured in docs/fidelity.md (issue 34): their channels, all-zero in the aux labels, learn
+    to fire on the kinds of object that were referents of training questions and pull the attention off a test
+    question's referent. Run name: 'eq1content'."""
+    answer_grad: str = model_option("all", name="ans{}", choices=ANSWER_GRADS)
+    """With GA2: what Eq. 5's answer loss trains. 'all', the conv (through x_I and the map of Eq. 1-3) and the GA2
+    gate's encoder x_sent, as end-to-end training does (the default; the paper stops no gradient); or, opt-in,
+    'gate', x_sent only: x_SA is read with its gradient stopped in Eq. 4-5, so that the detectors learn from the aux
+    labels and the policy, not from the answers (without aux labels, the policy alone); or, opt-in, 'centered', both,
+    with the gradient that reaches x_I through Eq. 3 centred over the h×w cells of each frame and channel: it raises
+    a detector where Eq. 2's map attends against where it does not, and cannot shift a whole channel (which pins
+    sigmoid x_I without aux labels: docs/fidelity.md, issue 48). Values are unchanged. Measured in docs/fidelity.md
+    (issue 34): retraining a checkpoint's conv offline on EQA frames, the answer loss beside the aux loss holds the
+    keys' detectors at AP 0.11-0.33 where the aux loss alone reaches 0.81-0.86. Run name: 'ansgate', 'anscentered'."""
+
+    def check(self) -> None:
+        t = self.state_temperature
+        if t is not None and not t > 0:
+            raise ValueError(f"ModelConfig.state_temperature={t!r} must be None (off) or a number > 0")
+        if t is not None and not self.spatial_attention:
+            raise ValueError(
+                f"ModelConfig.state_temperature={t!r} sharpens the spatial attention map: only with "
+                "spatial_attention=True (got False); allowed without it: None"
+            )
+        for name, part, what in (
+            ("eq1_words", "ga1", "chooses the words of Eq. 1"),
+            ("answer_grad", "ga2", "sets the answer loss's reach into the conv"),
+        ):
+            value = getattr(self, name)
+            if value != "all" and not getattr(self, part):
+                raise ValueError(
+                    f"ModelConfig.{name}={value!r} {what}: only with {part}=True (got False); allowed: 'all'"
+                )
+        if self.answer_grad == "centered" and not self.spatial_attention:  # it centres the gradient Eq. 3 passes
+            raise ValueError(
+                "ModelConfig.answer_grad='centered' centres the answer's gradient through Eq. 3: only with "
+                "spatial_attention=True (got False); allowed without it: 'all', 'gate'"
+            )
+
+
 class DualAttention(Fusion):
     """The Dual-Attention unit f_DA (Section 3.1, Eq. 1-5); parameter-free.
 
@@ -113,10 +199,10 @@ class DualAttention(Fusion):
         x_Ans  = softmax_V(sum_{j,k} x_GA2[:, j, k])  (Eq. 5)
         x_S    = h*w * vec(x_spat)                    (``state_scale``, the default; the paper: vec(x_spat))
 
-    Opt-in, ``eq1_words='content'`` (`ModelConfig.eq1_words`): Eq. 1 gates with x_BoW * m, m the run's content
-    words (1) and function words (0), set from the run's words by `read_words` or restored with a checkpoint.
-    Opt-in, ``answer_grad='gate'`` (`ModelConfig.answer_grad`): Eq. 4 reads x_SA with its gradient stopped, so that
-    the answer loss trains x_sent only; ``answer_grad='centered'``: Eq. 3 reads x_I with its gradient centred over
+    Its options are `DualAttentionOptions` (`options`). Opt-in, ``eq1_words='content'``: Eq. 1 gates with x_BoW * m,
+    m the run's content words (1) and function words (0), set from the run's words by `read_words` or restored with
+    a checkpoint. Opt-in, ``answer_grad='gate'``: Eq. 4 reads x_SA with its gradient stopped, so that the answer loss
+    trains x_sent only; ``answer_grad='centered'``: Eq. 3 reads x_I with its gradient centred over
     the cells (`centered_grad`), so that the answer loss moves a detector where the map attends against where it
     does not, never a whole channel (issue 48); every value is unchanged under both.
 
@@ -134,6 +220,7 @@ class DualAttention(Fusion):
     """
 
     ablations = ("spatial_attention", "ga1", "ga2")
+    options = DualAttentionOptions
 
     def __init__(
         self,
@@ -164,17 +251,18 @@ class DualAttention(Fusion):
 
     @classmethod
     def from_config(cls, cfg, vocab_size: int, height: int, width: int) -> DualAttention:
+        o: DualAttentionOptions = cfg.options
         return cls(
             vocab_size,
             height,
             width,
-            ga1=cfg.ga1,
-            ga2=cfg.ga2,
-            spatial=cfg.spatial_attention,
-            state_scale=cfg.state_scale,
-            state_temperature=cfg.state_temperature,
-            eq1_words=cfg.eq1_words,
-            answer_grad=cfg.answer_grad,
+            ga1=o.ga1,
+            ga2=o.ga2,
+            spatial=o.spatial_attention,
+            state_scale=o.state_scale,
+            state_temperature=o.state_temperature,
+            eq1_words=o.eq1_words,
+            answer_grad=o.answer_grad,
         )
 
     def read_words(self, mask: Tensor) -> None:
@@ -194,10 +282,11 @@ class DualAttention(Fusion):
     def state_formula(cls, cfg) -> str:
         """The paper's vec(x_spat) (the text after Eq. 5), times h·w under `state_scale` (the default), a sharper
         gradient-stopped copy of the map under `state_temperature`; vec(x_GA1) without spatial attention."""
-        if not cfg.spatial_attention:
+        o: DualAttentionOptions = cfg.options
+        if not o.spatial_attention:
             return "x_S = vec(x_GA1)"
-        read = "vec(x_spat)" if cfg.state_temperature is None else f"softmax(scores / {cfg.state_temperature:g})"
-        return f"x_S = h·w·{read}" if cfg.state_scale else f"x_S = {read}"
+        read = "vec(x_spat)" if o.state_temperature is None else f"softmax(scores / {o.state_temperature:g})"
+        return f"x_S = h·w·{read}" if o.state_scale else f"x_S = {read}"
 
     def forward(
         self, x_image: Tensor, x_bow: Tensor | None, x_sent: Tensor | None, x_extra: Tensor | None = None
@@ -339,6 +428,18 @@ class FiLM(_Baseline):
         return (gamma * x_image + beta).flatten(1)
 
 
+@dataclass
+class PacmanOptions(FusionOptions):
+    """PACMAN's option (`Pacman.options`): its window of frames."""
+
+    pacman_frames: int = model_option(5)
+    """Frames in the PACMAN attention window, current frame included (paper: 5)."""
+
+    def check(self) -> None:
+        if self.pacman_frames < 1:
+            raise ValueError(f"ModelConfig.pacman_frames={self.pacman_frames!r} must be a positive integer (>= 1)")
+
+
 class Pacman(Fusion):
     """PACMAN QA attention (Das et al. 2018), adapted as in the appendix.
 
@@ -354,6 +455,7 @@ class Pacman(Fusion):
 
     uses_sent = True
     frame_window = "pacman_frames"
+    options = PacmanOptions
 
     def __init__(self, vocab_size: int, height: int, width: int) -> None:
         super().__init__()

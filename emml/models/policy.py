@@ -180,7 +180,7 @@ class EmmlModel(nn.Module):
 
     def __init__(self, cfg: ModelConfig, vocab_size: int, height: int, width: int, max_steps: int) -> None:
         super().__init__()
-        check_architecture(cfg.validate())
+        cfg = check_architecture(cfg.validate())  # its fusion's options: their defaults where None
         if isinstance(vocab_size, bool) or not isinstance(vocab_size, int) or vocab_size < 1:
             raise ValueError(f"vocab_size={vocab_size!r} must be a positive integer")
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:

@@ -1,7 +1,9 @@
 """The model registry: every model the harness can build, declared once.
 
-A model is a fusion architecture (a `Fusion` subclass: how x_I, x_BoW and x_sent become x_S and the answer logits)
-plus the `ModelConfig` switches it sets; an ablation of Section 4 is a variant, the same architecture with switches.
+A model is a fusion architecture (a `Fusion` subclass: how x_I, x_BoW and x_sent become x_S and the answer logits,
+and the options it declares, `Fusion.options`) plus the option values it sets; an ablation of Section 4 is a variant,
+the same architecture with switches (Dual-Attention's options spatial_attention, ga1, ga2, or the shared
+task_indicator).
 The paper's models are the entries at the bottom of this module. A model of one's own registers from its own module,
 loaded as a plugin (emml/models/plugins.py), with the same call::
 
@@ -16,9 +18,10 @@ loads the plugins, once per process; registering does not.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any, TypeVar
 
+from emml.config.schema import ModelConfig, check_model_options, option_fields
 from emml.models import plugins
 from emml.models.fusion import (
     Concat,
@@ -53,14 +56,14 @@ class ModelSpec:
     fusion: type[Fusion]
     """The fusion class; `EmmlModel` reads what it needs (a frame window, x_sent, …) from its attributes."""
     switches: Mapping[str, Any] = field(default_factory=dict)
-    """`ModelConfig` fields it sets beyond `name`, e.g. {'spatial_attention': False} for 'w/o SA' (their names are
-    checked when the model's config is built, `emml.models.model_config`)."""
+    """Option values it sets: shared ones (`ModelConfig`) or its fusion's own (`Fusion.options`), e.g.
+    {'spatial_attention': False} for 'w/o SA' (checked when the model's config is built, `emml.models.model_config`)."""
     source: str = "emml"
     """Who registered it: 'emml' (the paper's models), or the plugin (its file, or its module)."""
 
     @property
     def options(self) -> dict[str, Any]:
-        """The `ModelConfig` fields the entry sets, `name` included."""
+        """The option values the entry sets, and `name`, its architecture."""
         return {"name": self.architecture, **self.switches}
 
 
@@ -85,7 +88,8 @@ def _add(spec: ModelSpec) -> ModelSpec:
     if not isinstance(spec.description, str) or not spec.description.strip():
         raise ValueError(f"model {spec.name!r}: its description must be a non-empty line for `emml models`")
     if not all(isinstance(k, str) for k in spec.switches):
-        raise ValueError(f"model {spec.name!r}: its switches must be ModelConfig field names")
+        raise ValueError(f"model {spec.name!r}: its switches must be option names")
+    _check_declared(spec.name, spec.fusion)
     old = _ENTRIES.get(spec.name)
     if old is not None:
         same = (old.fusion.__module__, old.fusion.__qualname__, old.architecture, dict(old.switches)) == (
@@ -100,6 +104,27 @@ def _add(spec: ModelSpec) -> ModelSpec:
     _ENTRIES[spec.name] = spec
     plugins.count_registration()
     return spec
+
+
+def _check_declared(name: str, fusion: type[Fusion]) -> None:
+    """A fusion's `Fusion.options` is a dataclass type whose fields have defaults and are not named as the options
+    every model shares (`ModelConfig`); a ValueError names the model and the field."""
+    declared = getattr(fusion, "options", None)
+    if not (isinstance(declared, type) and is_dataclass(declared)):
+        raise ValueError(
+            f"model {name!r}: {fusion.__qualname__}.options={declared!r} must be a dataclass type (emml.models."
+            "FusionOptions) whose fields are its options"
+        )
+    shared = option_fields(ModelConfig)
+    for f in fields(declared):
+        if f.name in shared or f.name in ("name", "options"):
+            raise ValueError(
+                f"model {name!r}: its option {f.name!r} is one every model shares (ModelConfig); name it otherwise"
+            )
+    try:
+        declared()
+    except TypeError as e:
+        raise ValueError(f"model {name!r}: every field of {declared.__qualname__} needs a default ({e})") from e
 
 
 def register_model(
@@ -186,17 +211,33 @@ def architecture(name: str) -> type[Fusion]:
     return _ENTRIES[name].fusion
 
 
+def fusion_options(model: str) -> type:
+    """The options class (`Fusion.options`) of registry model ``model``'s fusion: the options a run of it may set
+    beside the shared ones (`ModelConfig`); an unknown model fails naming it."""
+    if model not in MODELS:
+        raise ValueError(f"unknown model name={model!r}; known names: {', '.join(MODELS)}; {PLUGIN_HINT}")
+    return MODELS[model].fusion.options
+
+
 def check_architecture(cfg):
-    """The registry's check of a `ModelConfig` (validated for its values): its name is a registered fusion, and the
-    ablations it switches off (§4) are ones that fusion declares it reads; returns ``cfg``."""
-    architecture(cfg.name)
-    for field_name in ("spatial_attention", "ga1", "ga2"):
-        if not getattr(cfg, field_name) and field_name not in architecture(cfg.name).ablations:
-            readers = [a for a in ARCHITECTURES if field_name in architecture(a).ablations]
-            raise ValueError(
-                f"ModelConfig.{field_name}=False is only allowed for "
-                f"name={' or '.join(map(repr, readers))} (got name={cfg.name!r}); allowed: True"
-            )
+    """The registry's check of a `ModelConfig` (validated for its shared options' values): its name is a registered
+    fusion, its ``options`` that fusion's declared options class (its defaults filled in where None) with values
+    that pass their checks (`emml.config.schema.check_model_options`), and the type_gate control meets a GA2 gate;
+    returns ``cfg``."""
+    fusion = architecture(cfg.name)
+    declared = fusion.options
+    if cfg.options is None:
+        cfg.options = declared()
+    if type(cfg.options) is not declared:
+        raise ValueError(
+            f"ModelConfig.options={cfg.options!r} must be the options of fusion {cfg.name!r}: a {declared.__qualname__}"
+        )
+    check_model_options(declared, {f.name: getattr(cfg.options, f.name) for f in fields(declared)})
+    if cfg.control == "type_gate" and not (issubclass(fusion, DualAttention) and cfg.options.ga2):
+        raise ValueError(
+            f"ModelConfig.control='type_gate' replaces the GA2 gate (Eq. 4): only for name='dual_attention' "
+            f"with ga2=True (got name={cfg.name!r}, ga2={getattr(cfg.options, 'ga2', None)})"
+        )
     return cfg
 
 

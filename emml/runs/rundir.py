@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
-from emml.config.schema import TrainConfig, apply_overrides
+from emml.config.schema import SHARED_MODEL_OPTIONS, ModelConfig, TrainConfig, apply_overrides, named_options
 from emml.runs.diskspace import no_space_names
 
 CHECKPOINT = "checkpoint.pt"
@@ -45,11 +45,9 @@ EVAL_SEED = 10_000
 RUN_FILES = (CHECKPOINT, METRICS, RESULTS)
 """Files any of which makes a folder a run dir."""
 NAMED = ("table", "model", "aux", "seed", "profile", "precision", "env.difficulty", "env.tasks", "env.shaping",
-         "model_options.state_temperature", "model_options.sentence_readout",
-         "model_options.sentence_activation", "model_options.eq1_words", "model_options.answer_grad",
          "ppo.aux_balance")  # fmt: skip
 """Identifying fields the run dir's path spells out (its table folder, `TrainConfig.spelled_name`): never repeated by
-`swept`."""
+`swept`; so are the model options declared with a name part (`named`)."""
 RESOLVED = ("env.vocabulary", "env.aux_words", "env.aux_labels")
 """Identifying fields that the trainer resolves at start (a vocabulary source becomes its word list, the aux words
 are the dataset's, aux_labels follows aux): compared on resume, never part of the name (it would change when
@@ -93,17 +91,38 @@ def _baseline(cfg: TrainConfig) -> dict:
     return _flat(base.identity())
 
 
+def fusion_options(cfg: TrainConfig) -> type | None:
+    """The options class the run's model's fusion declares (`emml.models.Fusion.options`); None when `model_options`
+    sets none but the shared ones (`ModelConfig`), so that naming such a run reads no model registry (which imports
+    torch and loads the plugins)."""
+    if not set(cfg.model_options) - set(SHARED_MODEL_OPTIONS):
+        return None
+    from emml.models import fusion_options as declared  # the model registry: a plugin's model needs its plugin
+
+    return declared(cfg.model)
+
+
+def named(cfg: TrainConfig) -> tuple[str, ...]:
+    """The identifying fields (dotted) the run's name spells: `NAMED`, and the model options declared with a name
+    part (`emml.config.schema.model_option`), the shared ones and those of the model's fusion."""
+    options = [*named_options(ModelConfig)]
+    if (declared := fusion_options(cfg)) is not None:
+        options += named_options(declared)
+    return (*NAMED, *(f"model_options.{name}" for name in options))
+
+
 def swept(cfg: TrainConfig) -> dict:
     """Identifying fields (dotted) that differ from the profile's value and that the readable name does not spell:
     {field: value}, sorted. Empty for every run a table or profile declares as-is."""
     base, own = _baseline(cfg), _flat(cfg.identity())
-    skip = set(NAMED) | set(RESOLVED)
+    skip = set(named(cfg)) | set(RESOLVED)
     return {k: own[k] for k in sorted(own) if k not in skip and own[k] != base.get(k)}
 
 
 def run_name(cfg: TrainConfig) -> str:
-    """The run's name: `TrainConfig.spelled_name()`, then ``+field=value`` per `swept` field (a digest when long)."""
-    name, extra = cfg.spelled_name(), swept(cfg)
+    """The run's name: `TrainConfig.spelled_name()` (with the options the model's fusion declares), then
+    ``+field=value`` per `swept` field (a digest when long)."""
+    name, extra = cfg.spelled_name(fusion_options(cfg)), swept(cfg)
     if not extra:
         return name
     spelled = "+".join(f"{k}={_short(v)}" for k, v in extra.items())

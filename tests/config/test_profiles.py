@@ -54,7 +54,11 @@ def test_a_missing_profiles_file_is_named(tmp_path):
         ('frames="lots"', "--set 'frames': expected an integer, got 'lots'"),
         ("env.shaping=1", "--set 'env.shaping': expected true or false, got 1"),
         ("fraems=5", "--set 'fraems': unknown field"),
-        ("model_options.state_temprature=0.25", "--set 'model_options.state_temprature': unknown model option"),
+        (
+            "model_options.state_temprature=0.25",
+            "model_options: 'state_temprature' is not an option of model 'dual_attention'; its options: embed_dim",
+        ),
+        ("model_options.2x=1", "--set 'model_options.2x': not a model option name"),
         ("model_options.state_temperature=-1", "ModelConfig.state_temperature=-1 must be None (off) or a number > 0"),
     ],
 )

@@ -7,9 +7,20 @@ from emml.experiments import fidelity
 
 
 def test_every_declared_field_is_a_field_of_the_resolved_config():
-    cfg = fidelity.resolve(profile_config("paper").to_dict())
-    for entry in (*fidelity.PAPER, *fidelity.CHOICES):
-        assert set(entry.fields) <= set(cfg), entry.label
+    """A setting's fields are in the resolved config of every paper model it applies to (a fusion's own options,
+    e.g. PACMAN's window, only in its models'), and every setting applies to one of them."""
+    from emml.models import MODELS
+
+    applied = set()
+    for model in [m for m, spec in MODELS.items() if spec.source == "emml"]:
+        cfg = fidelity.resolve(
+            profile_config("paper", model=model, aux=True, overrides={"precision": "bf16"}).to_dict()
+        )
+        for entry in (*fidelity.PAPER, *fidelity.CHOICES):
+            if entry.applies(cfg):
+                assert set(entry.fields) <= set(cfg), (model, entry.label)
+                applied.add(entry.label)
+    assert applied == {entry.label for entry in (*fidelity.PAPER, *fidelity.CHOICES)}
 
 
 @pytest.mark.parametrize("difficulty", ["easy", "hard", "house"])

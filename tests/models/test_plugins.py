@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -19,25 +20,47 @@ from emml.models import registry
 
 runner = CliRunner()
 
-TOY = '''"""A fusion of one's own, outside the package: x_S = vec(x_I ⊙ x_BoW), answers from the channel means."""
+TOY = '''"""A fusion of one's own, outside the package: x_S = gain · vec(x_I ⊙ x_BoW), answers from the channel means;
+its options declared beside it."""
+
+from dataclasses import dataclass
 
 from torch import nn
 
-from emml.models import Fusion, FusionOutput, register_model, register_variant
+from emml.models import Fusion, FusionOptions, FusionOutput, model_option, register_model, register_variant
 
 
-@register_model("toy", "Toy: x_S = vec(x_I ⊙ x_BoW)")
+@dataclass
+class ToyOptions(FusionOptions):
+    gain: float = model_option(1.0, name="gain{}")
+    """x_S's scale; a run that sets it is named 'gain2'."""
+    detach: bool = model_option(False)
+    """Stop the answer's gradient into x_I (no name part: a run that sets it is named '+model_options.detach=True')."""
+
+    def check(self):
+        if not self.gain > 0:
+            raise ValueError(f"ModelConfig.gain={self.gain!r} must be > 0")
+
+
+@register_model("toy", "Toy: x_S = gain · vec(x_I ⊙ x_BoW)")
 class Toy(Fusion):
     uses_bow = True
+    options = ToyOptions
 
-    def __init__(self, vocab_size, height, width):
+    def __init__(self, vocab_size, height, width, gain=1.0, detach=False):
         super().__init__()
         self.state_dim = vocab_size * height * width
         self.answer = nn.Linear(vocab_size, vocab_size)
+        self.gain, self.detach = gain, detach
+
+    @classmethod
+    def from_config(cls, cfg, vocab_size, height, width):
+        return cls(vocab_size, height, width, gain=cfg.options.gain, detach=cfg.options.detach)
 
     def forward(self, x_image, x_bow, x_sent):
-        state = (x_image * x_bow[:, :, None, None]).flatten(1)
-        return FusionOutput(state=state, answer_logits=self.answer(x_image.mean(dim=(2, 3))))
+        state = self.gain * (x_image * x_bow[:, :, None, None]).flatten(1)
+        x = x_image.detach() if self.detach else x_image
+        return FusionOutput(state=state, answer_logits=self.answer(x.mean(dim=(2, 3))))
 
 
 register_variant("toy_no_indicator", "toy", "Toy w/o task indicator", task_indicator=False)
@@ -140,10 +163,8 @@ def test_every_list_of_models_derives_from_the_registry(sandbox):
     model = build_model("probe", 6, 60, 108, 20)
     assert isinstance(model.fusion, Probe) and model.window == 0
     assert not model.text_encoder.sentence  # it reads no x_sent: no sentence GRU
-    with pytest.raises(ValueError, match="ga1=False is only allowed for name='dual_attention'"):
-        check_architecture(
-            ModelConfig(name="probe", ga1=False).validate()
-        )  # ablations are declared by the fusion that reads them
+    with pytest.raises(ValueError, match="'ga1' is not an option of model 'probe'; its options: embed_dim"):
+        model_config("probe", ga1=False)  # ablations are options of the fusion that reads them (Dual-Attention)
     with pytest.raises(ValueError, match="'probe' is already registered"):
         register_model("probe", "another", Fusion)
     with pytest.raises(TypeError, match="not a subclass of emml.models.Fusion"):
@@ -165,6 +186,7 @@ def test_a_plugin_loads_from_the_option_or_the_variable_once(sandbox, toy, monke
     monkeypatch.chdir(toy.parent)  # the option takes a path relative to the working directory: absolute for children
     rows = models_json("--plugin", "toy_fusion.py")
     assert rows["toy"]["source"] == str(toy) and "toy_no_indicator" in rows
+    assert rows["toy"]["options"] == {"gain": 1.0, "detach": False}  # its own, listed
     assert os.environ[plugins.ENV_VAR] == str(toy)  # for the processes the command starts
 
 
@@ -202,14 +224,70 @@ def test_a_bad_plugin_is_named_in_one_line(sandbox, tmp_path, plugin, why):
     assert result.output.count("\n") == 1 and "Traceback" not in result.output
 
 
+def test_a_plugin_declares_its_options_in_its_file(sandbox, toy, monkeypatch):
+    """Issue 52 (4): the toy's options are its own: a run sets them as any model option, they are checked against
+    its declaration (type, check()) naming the field before any compute, and the one declared with a name part
+    spells it in the run name; the other is named as a swept field. Other models do not take them."""
+    from emml.config.profiles import profile_config
+    from emml.config.schema import TrainConfig, apply_overrides
+    from emml.models import MODELS, model_config, model_options
+    from emml.rl.hardware import check_runnable
+    from emml.runs.rundir import run_name
+
+    monkeypatch.setenv(plugins.ENV_VAR, str(toy))
+    assert model_options("toy")["gain"] == 1.0 and model_options("toy_no_indicator")["task_indicator"] is False
+    assert model_config("toy", gain=2).gain == 2 and model_config("toy").options.detach is False
+
+    def cfg(**options):
+        return profile_config("smoke", "easy", {f"model_options.{k}": v for k, v in options.items()}, model="toy")
+
+    assert run_name(cfg(gain=2)) == "toy-easy-noaux-gain2-s0-smoke"
+    assert run_name(cfg(gain=0.5, sentence_readout="mean")) == "toy-easy-noaux-sentmean-gain0.5-s0-smoke"
+    assert run_name(cfg(gain=1.0)) == run_name(cfg()) == "toy-easy-noaux-s0-smoke"  # the default: not spelled
+    assert run_name(cfg(detach=True)) == "toy-easy-noaux-s0-smoke+model_options.detach=True"
+    for options, message in [
+        ({"gain": -1}, "ModelConfig.gain=-1 must be > 0"),
+        ({"gain": "high"}, "ModelConfig.gain='high' must be a number"),
+        ({"detach": 1}, "ModelConfig.detach=1 must be true or false"),
+        ({"gian": 2}, "model_options: 'gian' is not an option of model 'toy'; its options: embed_dim, "),
+    ]:
+        with pytest.raises(ValueError, match=re.escape(message)):
+            check_runnable(cfg(**options))
+    with pytest.raises(ValueError, match="'gain' is not an option of model 'ga'"):
+        check_runnable(apply_overrides(TrainConfig(model="ga"), {"model_options.gain": 2}).validate())
+    assert "gain" not in model_options("dual_attention") and MODELS["toy"].fusion.options.__name__ == "ToyOptions"
+
+
+def test_a_bad_option_declaration_is_named_where_it_registers(sandbox):
+    from dataclasses import make_dataclass
+
+    from emml.models import Fusion, model_option, register_model
+
+    def fusion(*fields):
+        return type("Bad", (Fusion,), {"options": make_dataclass("BadOptions", fields)})
+
+    with pytest.raises(ValueError, match="model 'bad': its option 'hidden' is one every model shares"):
+        register_model("bad", "Bad", fusion(("hidden", int, model_option(3))))
+    with pytest.raises(ValueError, match="model 'bad': every field of BadOptions needs a default"):
+        register_model("bad", "Bad", fusion(("gain", float)))
+    with pytest.raises(ValueError, match="model 'bad': Bad.options=<class 'dict'> must be a dataclass type"):
+        register_model("bad", "Bad", type("Bad", (Fusion,), {"options": dict}))
+    with pytest.raises(ValueError, match=re.escape("name='gain' must be a plain word holding '{}' once")):
+        model_option(1.0, name="gain")
+
+
 def test_train_eval_and_diagnose_a_plugin_model(sandbox, toy, tracking, monkeypatch, no_leftovers):
     roots = ["--set", f"run_root={tracking['run_root']}", "--set", f"results_root={tracking['results_root']}"]
     short = [x for k, v in SHORT.items() if k != "frames" for x in ("--set", f"{k}={v}")]
     args = ["train", "--model", "toy", "--profile", "smoke", "--table", "plug", "--frames", "64", *roots, *short]
-    result = runner.invoke(app, ["--plugin", str(toy), *args, "--json"])
+    bad = runner.invoke(app, ["--plugin", str(toy), *args, "--set", "model_options.gain=-1"])  # before any compute
+    assert bad.exit_code == 2 and "ModelConfig.gain=-1 must be > 0" in bad.output, bad.output
+    assert not Path(tracking["run_root"]).exists()
+    result = runner.invoke(app, ["--plugin", str(toy), *args, "--set", "model_options.gain=2", "--json"])
     assert result.exit_code == 0, result.output
     run_dir = Path(json.loads(result.stdout)["run_dir"])
-    assert run_dir.name.startswith("toy-easy-noaux-s0-smoke")
+    assert run_dir.name.startswith("toy-easy-noaux-gain2-s0-smoke")  # the toy's own option, spelled from its file
+    assert json.loads((run_dir / "results.json").read_text())["config"]["model_options"] == {"gain": 2}
     checkpoint = str(run_dir / "checkpoint.pt")
     scores = runner.invoke(app, ["eval", checkpoint, "--episodes", "1", "--json"])
     assert scores.exit_code == 0, scores.output

@@ -4,12 +4,14 @@ gradients, ablations, recurrent-state resets and the PACMAN frame window."""
 import pytest
 import torch
 
+from emml.config.schema import SHARED_MODEL_OPTIONS
 from emml.models import (
     MODELS,
     EmmlModel,
     ModelConfig,
     build_model,
     check_architecture,
+    model_config,
     model_table,
 )
 from emml.models.policy import FRAME_LOGITS
@@ -297,15 +299,20 @@ def test_unknown_model_name_lists_known_names():
     ],
 )
 def test_config_validate_names_field(kwargs, field):
-    with pytest.raises(ValueError, match=field):
-        check_architecture(ModelConfig(**kwargs).validate())  # values, then the registry's name and ablations
+    kwargs = dict(kwargs)
+    name = kwargs.pop("name", "dual_attention" if field != "pacman_frames" else "pacman")
+    with pytest.raises(ValueError, match=field):  # the shared options' values, then the fusion's declared ones
+        model_config(name, **kwargs)
+    if set(kwargs) <= set(SHARED_MODEL_OPTIONS):  # a ModelConfig built by hand: its values, then the registry's
+        with pytest.raises(ValueError, match=field):
+            check_architecture(ModelConfig(name=name, **kwargs).validate())
 
 
 def test_build_model_overrides_and_too_small_image():
     model = build_model("pacman", V, H, W, MAX_STEPS, pacman_frames=3, hidden=64)
     assert model.initial_state(1)["frames"].shape[1] == 2
     assert model.policy.gru.hidden_size == 64
-    with pytest.raises(ValueError, match="unknown ModelConfig field"):
+    with pytest.raises(ValueError, match="'hiden' is not an option of model 'concat'; its options: embed_dim, "):
         build_model("concat", V, H, W, MAX_STEPS, hiden=64)
     with pytest.raises(ValueError, match="width"):
         build_model("concat", V, 60, 20, MAX_STEPS)
@@ -318,6 +325,9 @@ def test_model_table():
     for r in rows:
         assert isinstance(r["parameters"], int) and r["parameters"] > 0
         assert r["description"] and "{" not in r["description"]
+    options = {r["name"]: r["options"] for r in rows}  # each fusion's own, with the entry's values
+    assert options["ga"] == {} and options["pacman"] == {"pacman_frames": 5}
+    assert options["da_no_sa"]["spatial_attention"] is False and options["dual_attention"]["answer_grad"] == "all"
 
 
 def test_the_description_says_the_x_s_the_code_computes():

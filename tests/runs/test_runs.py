@@ -48,3 +48,36 @@ def test_the_report_tables_and_the_run_owner_import_no_torch():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(project_root()))
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
+
+
+def test_a_run_setting_only_shared_model_options_is_named_without_the_model_registry():
+    """Issue 52 (4): the name parts of a model's own options come from its fusion's declaration (the registry, which
+    imports torch); a run that sets none is named from the configs alone."""
+    code = (
+        "import sys; from emml.config.profiles import profile_config; from emml.runs.rundir import run_name; "
+        "print(run_name(profile_config('quick', 'easy', {'model_options.sentence_readout': 'mean'})), "
+        "'torch' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(project_root()))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["dual_attention-easy-noaux-sentmean-s0-quick", "False"]
+
+
+def test_the_model_options_name_parts_come_from_their_declarations():
+    """The shared options' parts, then the fusion's, each in declaration order: every committed name keeps its
+    spelling (`test_every_committed_run_dir_keeps_its_name`); a state temperature beside a sentence readout, which
+    no run has set, now follows it."""
+    over = {
+        "model_options.answer_grad": "gate",
+        "model_options.eq1_words": "content",
+        "model_options.sentence_activation": "softplus",
+        "model_options.sentence_readout": "mean",
+    }
+    cfg = profile_config("quick", "easy", over, aux=True)
+    assert run_name(cfg) == "dual_attention-easy-aux-sentmean-xsentsoftplus-eq1content-ansgate-s0-quick"
+    cfg = profile_config("quick", "easy", {"model_options.state_temperature": 0.25, "model_options.eq1_words": "all"})
+    assert run_name(cfg) == "dual_attention-easy-noaux-xs0.25-s0-quick" and swept(cfg) == {}
+    both = {"model_options.state_temperature": 0.25, "model_options.sentence_readout": "mean"}
+    assert run_name(profile_config("quick", "easy", both)) == "dual_attention-easy-noaux-sentmean-xs0.25-s0-quick"
+    unnamed = profile_config("quick", "easy", {"model_options.state_scale": False})  # declared without a name part
+    assert run_name(unnamed) == "dual_attention-easy-noaux-s0-quick+model_options.state_scale=False"

@@ -1,0 +1,71 @@
+"""Issue 52 (4): a model option is declared once (`model_option`: its default, run-name part and choices), checked
+from its declaration, and named from it: the config layer's half, no model registry (no torch) needed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import pytest
+
+from emml.config.schema import (
+    SHARED_MODEL_OPTIONS,
+    ModelConfig,
+    TrainConfig,
+    check_model_options,
+    model_option,
+    named_options,
+    option_name_parts,
+)
+
+
+@dataclass
+class Mine:
+    scale: float | None = model_option(None, name="sc{}")
+    """A number or None; named 'sc0.5'."""
+    mode: Literal["a", "b"] = model_option("a", name="mode{}")
+    """A Literal: its values are its choices."""
+    kind: str = model_option("x", choices=("x", "y"))
+    """Declared choices; no name part."""
+    on: bool = model_option(False, name="on{}")
+    """A bool named by its str."""
+
+
+def test_the_declared_options_spell_their_parts_in_declaration_order_when_not_default():
+    assert named_options(Mine) == ("scale", "mode", "on")
+    assert option_name_parts(Mine, {"mode": "b", "scale": 0.5, "kind": "y"}) == ["sc0.5", "modeb"]
+    assert option_name_parts(Mine, {"scale": 2, "on": True}) == ["sc2", "onTrue"]  # an int formats as {:g}
+    assert option_name_parts(Mine, {"scale": None, "mode": "a", "other": 1}) == []  # the defaults: not spelled
+    assert named_options(ModelConfig) == ("sentence_readout", "sentence_activation")
+    assert option_name_parts(ModelConfig, {"sentence_activation": "softplus", "sentence_readout": "mean"}) == [
+        "sentmean",
+        "xsentsoftplus",
+    ]
+
+
+@pytest.mark.parametrize(
+    "values,message",
+    [
+        ({"scale": "big"}, "Mine.scale='big' must be a number or None"),
+        ({"mode": "c"}, "Mine.mode='c' must be one of 'a', 'b'"),
+        ({"kind": "z"}, "Mine.kind='z' is not allowed; choose one of 'x', 'y'"),
+        ({"on": 1}, "Mine.on=1 must be true or false"),
+    ],
+)
+def test_a_value_is_checked_against_its_declaration_naming_the_field(values, message):
+    with pytest.raises(ValueError) as err:
+        check_model_options(Mine, values, "Mine")
+    assert str(err.value) == message
+    assert check_model_options(Mine, {"scale": 1, "mode": "b"}) == Mine(scale=1, mode="b")
+
+
+def test_the_configs_leave_a_models_own_options_to_its_declaration():
+    assert "ga1" not in SHARED_MODEL_OPTIONS and "hidden" in SHARED_MODEL_OPTIONS and "name" not in SHARED_MODEL_OPTIONS
+    cfg = TrainConfig(model_options={"gain": 2}).validate()  # the model's fusion declares it or not: the registry's
+    with pytest.raises(ValueError, match=r"spelled_name: model options \['gain'\] need the declared options"):
+        cfg.spelled_name(None)
+    assert cfg.spelled_name(Mine) == "dual_attention-easy-noaux-s0-paper"  # declared by none: spelled by none
+    with pytest.raises(ValueError, match="model_options: 'name' is not a model option name"):
+        TrainConfig(model_options={"name": "ga"}).validate()
+    with pytest.raises(AttributeError, match="ModelConfig of model 'dual_attention' has no option 'ga1'"):
+        ModelConfig().ga1  # noqa: B018 - its fusion's options are filled in by the model registry
