@@ -25,7 +25,7 @@ demo: setup
 	$(EMML) demo
 
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto
 
 # the learning checks too long for CI (tests marked slow: the end-to-end SGN test on learned detectors, ~8 min)
 test-slow: setup
