@@ -9,7 +9,7 @@ from emml.config.schema import TrainConfig
 from emml.eval.diagnose import SCALARS
 from emml.report.curves import plot_run
 from emml.runs.rundir import run_name
-from emml.runs.tracking import metric_history, tracking_uri
+from emml.runs.tracking import metric_history, portable, portable_uri, tracking_uri
 
 
 def _diagnostics_table(run_id: str) -> list[str]:
@@ -76,7 +76,8 @@ def write_demo_report(cfg: TrainConfig, result, out: Path) -> list[Path]:
             "",
         ]
     lines += [
-        f"MLflow run `{result.run_id}` in `{tracking_uri()}` (browse: `make ui`); checkpoint in `{result.run_dir}`.",
+        f"MLflow run `{result.run_id}` in `{portable_uri(tracking_uri())}` (browse: `make ui`); checkpoint in "
+        f"`{portable(str(result.run_dir))}`.",
         "",
     ]
     md = out / f"{name}.md"

@@ -43,7 +43,7 @@ from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from emml.config.paths import REPRODUCE_DIR, project_root
+from emml.config.paths import REPRODUCE_DIR, checkout_root, project_root
 from emml.runs.diskspace import NoSpaceError, no_space_names
 from emml.runs.records import MIRROR_HEADER, read_points
 
@@ -87,21 +87,6 @@ def _sqlite_path(uri: str) -> Path | None:
     return Path(path).resolve()
 
 
-PIN_DIR = ".campaign"
-"""Where a campaign pins its worktrees inside the checkout (emml.experiments.campaign.PIN_DIR)."""
-
-
-def checkout_root() -> Path:
-    """The checkout whose folders runs, results and the store live in: the project root, or the checkout that holds
-    it when the project root is a campaign's pinned worktree (``<checkout>/.campaign/<sha>``, which writes into its
-    checkout's runs/)."""
-    root = project_root()
-    for parent in root.parents:
-        if parent.name == PIN_DIR and (parent.parent / "pyproject.toml").is_file():
-            return parent.parent
-    return root
-
-
 _ABSOLUTE = re.compile(r"(?<![\w.:/~-])/[^\s'\",()\[\]{}]+")
 """An absolute POSIX path inside a value (a path alone, or in a tuple's repr): '/' not after a word, dot, colon
 (a URI's 'sqlite:///x' is left alone) or another '/'."""
@@ -120,6 +105,13 @@ def portable(value: str) -> str:
         return os.path.relpath(path, root) if os.path.isabs(path) else path
 
     return _ABSOLUTE.sub(rel, value)
+
+
+def portable_uri(uri: str) -> str:
+    """A tracking URI as a report may print it: a sqlite store's file relative to the checkout
+    ('sqlite:////home/me/emml/mlflow.db' -> 'sqlite:///mlflow.db'), any other URI as it is."""
+    path = _sqlite_path(uri)
+    return f"sqlite:///{portable(str(path))}" if path is not None else uri
 
 
 _COMMITS: dict[str, str] = {}

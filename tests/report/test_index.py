@@ -51,3 +51,19 @@ def test_a_damaged_run_dir_is_named_and_the_reports_go_on(tmp_path, monkeypatch,
     assert "**table2** (2 runs, frames 64)" in text and (tmp_path / "reports" / "table2-demo.md").exists()
     assert f"note: {damaged / RESULTS}: not JSON (" in out.err  # named, once per reader, and the report written
     assert f"no figures of `{damaged.name}` here: {damaged / RESULTS}: not JSON" in text
+
+
+def test_no_committed_report_names_a_folder_of_the_machine_that_wrote_it():
+    """Committed reports are read on other machines: no absolute path of this checkout, a home or a temp folder."""
+    from emml.config.paths import checkout_root
+    from emml.runs.tracking import portable, portable_uri
+
+    here = str(checkout_root())
+    for path in sorted((checkout_root() / "reports").glob("*.*")):
+        if path.suffix not in (".md", ".tex", ".json", ".csv"):
+            continue
+        text = path.read_text(errors="replace")
+        for machine in (here, "/tmp/", "/home/", "/root/"):
+            assert machine not in text, f"{path.name} names {machine!r}"
+    assert portable_uri(f"sqlite:///{here}/mlflow.db") == "sqlite:///mlflow.db"  # what the demo report prints
+    assert portable(f"{here}/runs/demo/x") == "runs/demo/x"
