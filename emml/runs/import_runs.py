@@ -355,11 +355,10 @@ def import_runs(
     ``progress``: a progress bar over the run dirs with its ETA on stderr (a terminal only)."""
     from tqdm import tqdm
 
-    from emml.runs.tracking import import_lock, open_store
+    from emml.runs.preflight import ensure_store
 
     dirs = run_dirs(paths)
-    with import_lock(uri):  # a new store is made by one process at a time
-        open_store(uri)
+    ensure_store(uri)  # a new store's tables are made by one process at a time, under the lock the trainer takes too
     committed = commit_times(dirs)
     out = []
     with tqdm(total=len(dirs), unit="run", disable=None if progress else True) as bar:

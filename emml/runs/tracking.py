@@ -517,13 +517,6 @@ def _bulk_points(client, run_id: str, points, when: Callable[[int], int] | None)
     return len(rows)
 
 
-def open_store(uri: str | None = None) -> None:
-    """Make the store at ``uri`` answer a query, creating its tables if it is new (MLflow's migrations: two
-    processes running them at once on one new sqlite file fail, so call it under :func:`import_lock`)."""
-    client = _client(uri)
-    _retry(lambda: client.search_experiments(max_results=1))
-
-
 @contextmanager
 def import_lock(uri: str | None = None):
     """Held while one run dir is imported into the store at ``uri`` (emml/runs/import_runs.py): an exclusive lock
