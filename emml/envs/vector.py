@@ -140,6 +140,37 @@ class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
                     return False
         return True
 
+    def _died(self, error: Exception) -> WorkerDied:
+        """A pipe that broke (EOF, or a reset when the worker died with our message unread) as the `WorkerDied`
+        it means, naming the dead worker."""
+        self._state = AsyncState.DEFAULT
+        deadline = time.monotonic() + 2  # the pipe breaks as the process ends: give is_alive a moment to agree
+        while time.monotonic() < deadline:
+            dead = [(i, p) for i, p in enumerate(self.processes) if not p.is_alive()]
+            if dead:
+                index, process = dead[0]
+                return WorkerDied(f"env worker {index} (pid {process.pid}) died with exit code {process.exitcode}")
+            time.sleep(0.05)
+        return WorkerDied(f"an env worker's pipe broke ({type(error).__name__}: {error})")
+
+    def step_async(self, actions) -> None:
+        try:
+            super().step_async(actions)
+        except (EOFError, ConnectionError) as e:
+            raise self._died(e) from e
+
+    def step_wait(self, timeout: float | None = None):
+        try:
+            return super().step_wait(timeout)
+        except (EOFError, ConnectionError) as e:
+            raise self._died(e) from e
+
+    def reset_wait(self, timeout: float | None = None):
+        try:
+            return super().reset_wait(timeout)
+        except (EOFError, ConnectionError) as e:
+            raise self._died(e) from e
+
     def close_extras(self, timeout: float | None = None, terminate: bool = False) -> None:
         terminate = terminate or not all(p.is_alive() for p in self.processes)  # a dead one would never answer
         try:

@@ -109,13 +109,19 @@ def test_worker_parent_ending_leaves_no_engine(how, k, no_leftovers, tmp_path):
     assert engine_pids() - before == set()
 
 
+@pytest.mark.parametrize("pipe_broken", [False, True])
 @pytest.mark.parametrize("k", [1, 2])
-def test_a_dead_worker_is_reported_not_waited_on(k, no_leftovers):
-    from emml.envs.engine import WorkerDied
+def test_a_dead_worker_is_reported_not_waited_on(k, pipe_broken, no_leftovers):
+    """Stepped at once after the kill (its engines live on and hold the pipe open), or once its engines are gone too
+    (the pipe broken, as CI met it: ConnectionResetError from a read): either way a `WorkerDied` naming it."""
+    from emml.envs.engine import WorkerDied, end_orphan_engines
 
     with make_vector_env(DoomConfig(**SMOKE), 2, envs_per_worker=k) as venv:
         venv.reset(seed=0)
-        os.kill(venv.processes[0].pid, signal.SIGKILL)  # its engines live on and hold the pipe open
+        os.kill(venv.processes[0].pid, signal.SIGKILL)
+        if pipe_broken:
+            venv.processes[0].join(5)
+            assert end_orphan_engines()  # the engines it left to us (their subreaper): nothing holds its pipe now
         t0 = time.monotonic()
         with pytest.raises(WorkerDied, match="env worker 0 .* died"):
             venv.step(np.array([[0, 0], [0, 0]]))

@@ -7,6 +7,7 @@ import os
 import re
 import subprocess
 
+from emml.config import paths
 from emml.config.paths import project_root
 from emml.config.profiles import profile_config
 from emml.rl.trainer import train
@@ -105,7 +106,7 @@ def test_a_campaign_worktree_writes_paths_relative_to_its_checkout(tmp_path, mon
     pinned = tmp_path / ".campaign" / "abc1234"
     pinned.mkdir(parents=True)
     (pinned / "pyproject.toml").write_text("")
-    monkeypatch.setattr(tracking, "project_root", lambda: pinned)
+    monkeypatch.setattr(paths, "project_root", lambda: pinned)  # checkout_root reads it from its own module
     assert tracking.checkout_root() == tmp_path
     assert tracking.portable(str(tmp_path / "runs" / "table2")) == "runs/table2"
     assert display_name(tmp_path / "runs" / "table2" / "x", "x") == "x"
