@@ -9,7 +9,7 @@ BACKEND ?= local
 TCMALLOC := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib/x86_64-linux-gnu/libtcmalloc.so.4))
 EMML := $(if $(TCMALLOC),LD_PRELOAD=$(TCMALLOC) )$(VENV)/bin/emml
 
-.PHONY: setup demo test test-slow lint bench ui table2 ablations transfer house3d reports list campaign campaign-status
+.PHONY: setup demo test test-slow lint bench bench-gpu ui table2 ablations transfer house3d reports list campaign campaign-status
 
 setup: $(VENV)/.installed
 
@@ -38,6 +38,11 @@ lint: setup
 
 bench: setup
 	$(EMML) bench env
+
+# the prepared GPU check (issue 51): on a lent GPU machine, which has no .venv (its python3 holds torch), so no setup;
+# a dry run here: make bench-gpu DEVICE=cpu RUNS=2 UPDATES=1 PROFILES=smoke
+bench-gpu:
+	scripts/gpu-check
 
 # the committed run dirs into the store first (emml import-runs: once each; later calls only skip), then the browser;
 # a run dir that cannot be imported is named and the browser opens all the same

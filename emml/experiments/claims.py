@@ -16,12 +16,13 @@ from emml.config.paths import REPRODUCE_DIR
 from emml.experiments.tables import load_table
 
 CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"
-KINDS = ("best", "below", "level", "at_least", "aux_helps", "faster", "diagnostic")
+KINDS = ("best", "below", "level", "at_least", "aux_helps", "faster", "diagnostic", "harder")
 """best: `row` above every other row; below: each of `rows` below `than`; level: each of `rows` within `margin` of
 `than`; at_least: each of `rows` at or above `value`; aux_helps: each of `rows` as high with aux as without; faster:
 `than` crosses `mark` (leaves chance, reaches 0.5 or 0.9) in fewer frames than each of `rows`, on the greedy
 evaluation curves of the runs' metrics.csv; diagnostic: each of `rows` at or above `value` on the metrics.csv key
-`key` (a `diag/*` figure of `emml diagnose`, logged at every evaluation) at the run's last evaluation."""
+`key` (a `diag/*` figure of `emml diagnose`, logged at every evaluation) at the run's last evaluation; harder: in
+most of `rows` (more than half) the first of the two `metrics` below the second, in each setting."""
 KEYS = (
     "id",
     "text",
@@ -116,6 +117,7 @@ def _claim(where: str, raw: dict) -> Claim:
         "aux_helps": ("metrics",),
         "faster": ("rows", "than", "metrics"),
         "diagnostic": ("rows", "key", "value"),
+        "harder": ("metrics",),
     }
     for key in needs[kind]:
         if key not in raw:
@@ -131,10 +133,14 @@ def _claim(where: str, raw: dict) -> Claim:
         if label not in labels:
             raise ValueError(f"{where}: row {label!r} is not a row of {raw['table']}; allowed: {', '.join(labels)}")
     metrics = tuple(raw.get("metrics", list(table.metrics.values())[:1]))  # diagnostic: the cell whose runs it reads
-    allowed = tuple(dict.fromkeys([*table.metrics.values(), *(CURVE_METRICS if kind == "faster" else ())]))
+    columns = table.metrics.values()
+    trains = [m.replace("_test", "_train") for m in columns if m.endswith("_test")]  # read from the same runs' rows
+    allowed = tuple(dict.fromkeys([*columns, *trains, *(CURVE_METRICS if kind == "faster" else ())]))
     for m in metrics:
         if m not in allowed:
             raise ValueError(f"{where}.metrics: {m!r} is not a column of {raw['table']}; allowed: {', '.join(allowed)}")
+    if kind == "harder" and len(metrics) != 2:
+        raise ValueError(f"{where}.metrics={list(metrics)!r}: kind='harder' compares two, the harder task's first")
     cells = dict(raw.get("where", {}))
     for key, value in cells.items():
         if key not in WHERE_KEYS:

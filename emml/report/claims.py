@@ -13,7 +13,9 @@ so a claim reads exactly the numbers its table shows. The rules (`RULES`, stated
   loses says nothing against the paper, and two rows at chance are level trivially;
 - 'faster' (the speed claims) reads each run's greedy evaluation curve in its metrics.csv
   (emml/report/efficiency.py): the faster row crosses the mark in fewer frames in every seed both rows have;
-  'diagnostic' reads a `diag/*` figure at each run's last evaluation (the same file).
+  'diagnostic' reads a `diag/*` figure at each run's last evaluation (the same file);
+- 'harder': per setting, each row's two metrics ordered as above, the claim holding in a setting where more than half
+  of the rows hold (the paper's "most models").
 """
 
 from __future__ import annotations
@@ -135,6 +137,9 @@ RULES = [
     "every evaluation, read at each run's last; holds when the mean is at or above the claim's value, reversed when "
     "every seed is below it while the run has learned its training split (sgn_train or eqa_train above chance); a "
     "run with no metrics.csv here (trained elsewhere) is a missing cell.",
+    "**harder** ('EQA is more challenging than SGN'): per setting, each row's first metric against its second, "
+    "ordered by the rule above on the same runs; it holds where more than half of the rows hold (the paper: 'most "
+    "models'), is reversed where more than half are reversed, and waits while a row has no run.",
     f"Chance: SGN {CHANCE['sgn']:.2f} (one of five objects); EQA {CHANCE['eqa']:.2f} (the paper's Text only row, which "
     f"sees no frame, scores 0.33 in every column); a row is at chance when its mean is at most chance + {LEAVE:.2f}. "
     "Comparisons pair seeds: a row with more seeds than the other is compared on the seeds both have (its other "
@@ -306,6 +311,28 @@ def diagnostic(what: str, row: list[Score], value: float) -> Check:
     return Check(what, outcome, detail, unlearned, len(row), row, f"{mean:.2f} vs {value:g}")
 
 
+def most(what: str, checks: list[Check]) -> Check:
+    """'harder': the rows' own comparisons (`order`, one per row) taken together: HOLDS when more than half of the
+    rows hold, REVERSED when more than half are reversed, MISSING while a row has no run (the paper's "most models"
+    counts every row); `chance` when it does not hold and a row that fails is at chance on the higher metric."""
+    absent = [c.what.split(":", 1)[0] for c in checks if c.outcome == MISSING]
+    if absent:
+        return Check(what, MISSING, f"no run yet for {', '.join(absent)}")
+    held = sum(c.outcome == HOLDS for c in checks)
+    reversed_ = sum(c.outcome == REVERSED for c in checks)
+    if held * 2 > len(checks):
+        outcome = HOLDS
+    elif reversed_ * 2 > len(checks):
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    detail = "; ".join(f"{c.what}: {c.outcome}, {c.numbers}" + (" (at chance)" if c.chance else "") for c in checks)
+    # rows that fail while at chance on the metric the claim puts higher have not learned it at this budget
+    chance = outcome != HOLDS and any(c.chance and c.outcome != HOLDS for c in checks)
+    seeds = min(c.seeds for c in checks)
+    return Check(what, outcome, detail, chance, seeds, [], f"in {held} of {len(checks)} rows")
+
+
 def _status(checks: list[Check], subject: bool = True) -> str:
     """The claim's status from its comparisons (RULES); `subject`: the row the claim puts higher is one row (not
     'aux_helps'), so that row at chance anywhere leaves the claim unsupported at this budget, cells missing or not."""
@@ -404,6 +431,11 @@ def decide(claim, profile: str, results_root: str | Path | None = None, run_root
             for name, value in zip(c.runs, c.values):
                 row = rows[name]
                 frames.add(int(row["frames"]))
+                if m not in columns and not curve:  # a train column (sgn_train): the same run's results row
+                    if _isnan(row.get(m)):
+                        missing.append(f"{name} (no {m} in its results row)")
+                        continue
+                    value = float(row[m])
                 score = Score(name, int(row["seed"]), value, int(row["eval_episodes"]) * per, int(row["frames"]))
                 if curve:
                     score = _curve_score(claim, m, specs[name], profile, run_root, score, row)
@@ -514,6 +546,21 @@ def _checks(claim, table, scores: dict[tuple, list[Score]]) -> list[Check]:
     def where(d, a, m) -> str:
         return f"{METRIC_LABELS.get(m, m)}, {_setting(d, a)}"
 
+    if claim.kind == "harder":
+        hard, easy = claim.metrics
+        for d, a in dict.fromkeys((d, a) for (d, a, _) in keys):
+            checks = [
+                order(
+                    f"{row}: {METRIC_LABELS.get(easy, easy)} > {METRIC_LABELS.get(hard, hard)}",
+                    scores.get((row, d, a, easy), []),
+                    scores.get((row, d, a, hard), []),
+                    easy,
+                )
+                for row in claim.rows
+            ]
+            what = f"{_setting(d, a)}: below {METRIC_LABELS.get(easy, easy)}"
+            out.append(_tag(most(what, checks), _setting(d, a), hard, "most rows"))
+        return out
     if claim.kind == "aux_helps":
         for row in claim.rows:
             for d, m in dict.fromkeys((d, m) for (d, _, m) in keys):

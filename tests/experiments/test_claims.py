@@ -41,6 +41,8 @@ GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_te
         ),
         ('kind = "best"\nrow = "GA"\nmark = "0.5"\n', r"mark='0.5' is not allowed; allowed: kind='faster' only"),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\n', r"kind='diagnostic' needs 'key'"),
+        ('kind = "harder"\nmetrics = ["eqa_test"]\n', r"metrics=\['eqa_test'\]: kind='harder' compares two"),
+        ('kind = "best"\nrow = "GA"\nmetrics = ["eqa_val"]\n', r"'eqa_val' is not a column of table2"),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\nkey = "eval/x"\n', r"key='eval/x': kind='diagnostic' only"),
     ],
 )
