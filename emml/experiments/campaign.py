@@ -20,7 +20,6 @@ checkout's.
 
 from __future__ import annotations
 
-import fcntl
 import os
 import shutil
 import statistics
@@ -36,6 +35,7 @@ from emml.config.paths import PIN_DIR, REPRODUCE_DIR, checkout_root, project_pat
 from emml.experiments.tables import RunSpec
 from emml.runs.records import RecordError, mirror_point, note, read_points, torn_tail
 from emml.runs.rundir import run_name
+from emml.runs.runlock import waiting_lock
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
 STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "claim", "note")
@@ -516,8 +516,7 @@ def pin_worktree(root: Path, log: Callable[[str], None] = print, need: Path | No
         log(f"warning: uncommitted changes in {root} are not in the campaign's code (it runs commit {sha[:7]})")
     tree = root / PIN_DIR / sha[:12]
     (root / PIN_DIR).mkdir(exist_ok=True)
-    with open(root / PIN_DIR / "pin.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # a second start waits for the first's `git worktree add`, then uses it
+    with waiting_lock(root / PIN_DIR / "pin.lock"):  # a second start waits for the first's `git worktree add`
         if not (tree / "pyproject.toml").exists():
             if tree.exists():  # half-made by a killed start: git refuses to add over it
                 shutil.rmtree(tree)

@@ -7,7 +7,6 @@ sqlite store is created by `ensure_store`, once, under a lock, where the first M
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
 import socket
@@ -20,6 +19,7 @@ from pathlib import Path
 from urllib.parse import urlparse
 
 from emml.config.schema import TrainConfig
+from emml.runs.runlock import waiting_lock
 from emml.runs.tracking import _sqlite_path, tracking_uri
 
 STORE_TIMEOUT_S = 5.0
@@ -167,8 +167,7 @@ def ensure_store(uri: str | None = None) -> None:
     from emml.runs.tracking import _client
 
     db.parent.mkdir(parents=True, exist_ok=True)
-    with open(db, "ab") as f:  # an empty file is an empty database; "a" never truncates one being made
-        fcntl.flock(f, fcntl.LOCK_EX)  # a second start waits here while the first builds the tables
+    with waiting_lock(db):  # a second start waits here while the first builds the tables (opened to append: never cut)
         if not _has_tables(db):
             _client(uri).search_experiments(max_results=1)
 

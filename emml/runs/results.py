@@ -7,7 +7,6 @@ such as ``12e0077`` into the float 1.2e+78, and provenance that cannot be read b
 from __future__ import annotations
 
 import csv
-import fcntl
 import io
 import os
 from pathlib import Path
@@ -16,6 +15,7 @@ import pandas as pd
 
 from emml.runs.diskspace import no_space_names
 from emml.runs.records import note, torn_tail
+from emml.runs.runlock import waiting_lock
 
 # identity and provenance columns (read as written); every other column is a metric (float). started_at and ended_at
 # are results.json's (emml.runs.rundir.TIMES), not written to rows: declared so that a row that has them reads
@@ -145,8 +145,7 @@ def upsert_result(path: str | Path, row: dict) -> Path:
     read-modify-write, so that no row is lost."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path.with_suffix(".csv.lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    with waiting_lock(path.with_suffix(".csv.lock")):
         table = read_results(path)
         table = table[table["run_name"] != row["run_name"]]
         new = pd.DataFrame([{k: str(v) if k in TEXT else v for k, v in row.items()}])

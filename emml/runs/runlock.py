@@ -78,6 +78,16 @@ def describe(info: dict) -> str:
 
 
 @contextmanager
+def waiting_lock(path: Path):
+    """An exclusive flock on ``path`` (created, never truncated), waited for and held while the block runs: the one
+    way the project takes turns on a file (a campaign's pin, a results CSV's rows, a new MLflow store's tables, a run
+    dir's import). The kernel releases it however its holder ends."""
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        yield
+
+
+@contextmanager
 def hold_run(directory: Path):
     """Hold the run's lock while the block runs; RunLocked (before anything is written) if another live process
     holds it. Creates the run directory."""

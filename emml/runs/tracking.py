@@ -28,7 +28,6 @@ Conventions (see docs / shared notes on MLflow 3.x):
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import os
 import random
@@ -46,6 +45,7 @@ from typing import Any, TypeVar
 from emml.config.paths import REPRODUCE_DIR, checkout_root, project_root
 from emml.runs.diskspace import NoSpaceError, no_space_names
 from emml.runs.records import MIRROR_HEADER, read_points
+from emml.runs.runlock import waiting_lock
 
 T = TypeVar("T")
 
@@ -530,12 +530,8 @@ def import_lock(uri: str | None = None):
         path = db.with_name(db.name + ".import.lock")
     else:
         path = Path(tempfile.gettempdir()) / f"emml-import-{hashlib.sha1(uri.encode()).hexdigest()[:12]}.lock"
-    with open(path, "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
+    with waiting_lock(path):
+        yield
 
 
 def stored_run(experiment: str, run_id: str, uri: str | None = None) -> str | None:

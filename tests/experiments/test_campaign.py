@@ -198,7 +198,8 @@ def test_cli_status_and_an_unknown_campaign(tracking):
     assert rows[0]["run_name"] == "concat-easy-aux-s0-quick" and rows[0]["state"] == "to do"
 
 
-def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_path, monkeypatch):
+def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_path, campaign_lock, monkeypatch):
+    """(`campaign_lock`: a lock of its own, so that a campaign training in this checkout does not refuse the test.)"""
     import os
 
     from typer.testing import CliRunner
@@ -278,7 +279,7 @@ def test_steps_can_be_chosen_by_name_in_the_campaigns_order(tracking, campaigns)
         select_steps(plan, ["first", "thrid"])
 
 
-def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking, tmp_path, monkeypatch):
+def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking, tmp_path, campaign_lock, monkeypatch):
     import os
 
     from typer.testing import CliRunner
