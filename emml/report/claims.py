@@ -55,6 +55,8 @@ class Score:
     frames: int
     learned: bool = True
     """'diagnostic': whether the run learned its training split (sgn_train or eqa_train above chance)."""
+    every: int = 0
+    """'faster': the run's evaluation interval in frames (a crossing is known to that resolution)."""
 
 
 @dataclass
@@ -131,8 +133,9 @@ RULES = [
     "already there are shown.",
     "**faster** (the speed claims): from each run's greedy evaluation curve (metrics.csv, every `eval_every` frames), "
     "the frames at which it first crosses the claim's mark (leaves chance: above chance + the margin below; or "
-    "reaches 0.5 / 0.9); it holds when the row the claim puts faster crosses first in every seed both rows have (a "
-    "run that never crosses counts as slowest), is reversed when the other row crosses first in every seed, and is "
+    "reaches 0.5 / 0.9); it holds when the row the claim puts faster crosses more than one evaluation interval first "
+    "in every seed both rows have (a crossing is known to that resolution; a run that never crosses counts as "
+    "slowest), is reversed when the other row crosses first by as much in every seed, and is "
     "at chance when the faster row never crosses. **diagnostic**: a `diag/*` figure of `emml diagnose`, logged at "
     "every evaluation, read at each run's last; holds when the mean is at or above the claim's value, reversed when "
     "every seed is below it while the run has learned its training split (sgn_train or eqa_train above chance); a "
@@ -252,9 +255,10 @@ def threshold(what: str, row: list[Score], metric: str, value: float) -> Check:
 
 
 def faster(what: str, fast: list[Score], slow: list[Score]) -> Check:
-    """Whether `fast` crosses its mark in fewer frames than `slow` in every seed both have (HOLDS), `slow` first in
-    every seed (REVERSED) or neither; a value is the frames at the crossing, inf for a run that never crosses.
-    `chance`: the faster row never crosses in the seeds compared (it has not learned at this budget)."""
+    """Whether `fast` crosses its mark more than one evaluation interval before `slow` in every seed both have
+    (HOLDS), `slow` first by as much in every seed (REVERSED) or neither; a value is the frames at the crossing, inf
+    for a run that never crosses. `chance`: the faster row never crosses in the seeds compared (it has not learned at
+    this budget)."""
     if not fast or not slow:
         return Check(
             what,
@@ -264,9 +268,11 @@ def faster(what: str, fast: list[Score], slow: list[Score]) -> Check:
     f, s = _pair(fast, slow)
     if not f:
         return Check(what, MISSING, f"no seed in common ({_frames(fast)} against {_frames(slow)})")
-    if all(a.value < b.value for a, b in zip(f, s)):
+    # a crossing is known to one evaluation interval: an ordering counts when the crossings are more than one apart
+    apart = [max(a.every, b.every) for a, b in zip(f, s)]
+    if all(b.value - a.value > gap for a, b, gap in zip(f, s, apart)):
         outcome = HOLDS
-    elif all(b.value < a.value for a, b in zip(f, s)):
+    elif all(a.value - b.value > gap for a, b, gap in zip(f, s, apart)):
         outcome = REVERSED
     else:
         outcome = UNCLEAR
@@ -508,7 +514,8 @@ def _curve_score(claim, metric: str, spec, profile: str, run_root, score: Score,
         crossed = eff.crossings[metric][claim.mark]
         if crossed is None and eff.last + eff.every < score.frames:
             return None
-        return Score(score.run, score.seed, math.inf if crossed is None else float(crossed), 0, eff.last)
+        value = math.inf if crossed is None else float(crossed)
+        return Score(score.run, score.seed, value, 0, eff.last, every=eff.every)
     points = sorted(
         (step, v)
         for step, key, v in read_mirror(path_of(run_root, spec.table, spec.run_name(profile)) / METRICS)

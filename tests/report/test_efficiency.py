@@ -45,9 +45,13 @@ def test_a_speed_claim_is_decided_by_the_frames_to_leave_chance(tmp_path):
     d = decide(claim, PROFILE, results, runs)
     assert d.status == SUPPORTED, d.phrase
     assert any(e["shown"] == {0: "0.45M", 1: "0.45M", 2: "0.45M"} for e in d.evidence)  # 0.3 of 1.5M frames
-    write_curves(tmp_path / "r2", "table3", lambda s: 0.2)  # without shaping it leaves chance first, every seed
+    write_curves(tmp_path / "r2", "table3", lambda s: 0.1)  # without shaping it leaves chance first, every seed
     write_curves(tmp_path / "r2", "table2", lambda s: 0.3)
     assert decide(claim, PROFILE, results, tmp_path / "r2").status == CONTRADICTED
+    write_curves(tmp_path / "r4", "table3", lambda s: 0.4)  # one evaluation (0.15M) later: within the cadence
+    write_curves(tmp_path / "r4", "table2", lambda s: 0.3)
+    d = decide(claim, PROFILE, results, tmp_path / "r4")
+    assert d.status == BUDGET and "0.45M vs 0.60M" in d.phrase
     write_curves(tmp_path / "r3", "table3", lambda s: None)  # nothing leaves chance: not learned at this budget
     write_curves(tmp_path / "r3", "table2", lambda s: None)
     assert decide(claim, PROFILE, results, tmp_path / "r3").status == BUDGET
