@@ -41,8 +41,7 @@ GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_te
         ),
         ('kind = "best"\nrow = "GA"\nmark = "0.5"\n', r"mark='0.5' is not allowed; allowed: kind='faster' only"),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\n', r"kind='diagnostic' needs 'key'"),
-        ('kind = "harder"\nmetrics = ["eqa_test"]\n', r"metrics=\['eqa_test'\]: kind='harder' compares two"),
-        ('kind = "best"\nrow = "GA"\nmetrics = ["eqa_val"]\n', r"'eqa_val' is not a column of table2"),
+        ('kind = "harder"\n', r"metrics=\['sgn_test'\]: kind='harder' compares two, the harder task's first"),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\nkey = "eval/x"\n', r"key='eval/x': kind='diagnostic' only"),
     ],
 )
@@ -59,4 +58,14 @@ def test_a_claim_id_is_unique(tmp_path):
     one = "[[claims]]\n" + GOOD + 'kind = "best"\nrow = "GA"\n'
     path.write_text(one + one)
     with pytest.raises(ValueError, match="id='x' is used twice"):
+        load_claims(path)
+
+
+def test_a_claim_reads_a_test_column_or_its_train_twin_and_nothing_else(tmp_path):
+    path = tmp_path / "claims.toml"
+    head = GOOD.replace('metrics = ["sgn_test"]\n', "") + 'kind = "best"\nrow = "GA"\n'
+    path.write_text("[[claims]]\n" + head + 'metrics = ["eqa_train"]\n')
+    assert load_claims(path)["x"].metrics == ("eqa_train",)
+    path.write_text("[[claims]]\n" + head + 'metrics = ["eqa_val"]\n')
+    with pytest.raises(ValueError, match=r"'eqa_val' is not a column of table2; allowed: sgn_test, eqa_test, sgn_"):
         load_claims(path)
