@@ -161,6 +161,12 @@ class DualAttentionOptions(FusionOptions):
     sigmoid x_I without aux labels: docs/fidelity.md, issue 48). Values are unchanged. Measured in docs/fidelity.md
     (issue 34): retraining a checkpoint's conv offline on EQA frames, the answer loss beside the aux loss holds the
     keys' detectors at AP 0.11-0.33 where the aux loss alone reaches 0.81-0.86. Run name: 'ansgate', 'anscentered'."""
+    answer_gate_frames: int = model_option(0, name="warm{}")
+    """Opt-in, with GA2: the answer loss kept to the GA2 gate (as 'gate') for the run's first N frames, then
+    `answer_grad` (default 'all', the paper's end-to-end loss); 0: off. A warm-up for No Aux (issue 48): while Eq. 2's
+    map is flat, Eq. 5's gradient into x_I is the same at every cell and pins whole channels; once the map attends,
+    it is concentrated where the referent is. The trainer sets it from the frames trained (`EmmlModel.at_frames`),
+    so a resumed run resumes the schedule. Values are unchanged. Run name: 'warm<N>'."""
 
     def check(self) -> None:
         t = self.state_temperature
@@ -180,6 +186,15 @@ class DualAttentionOptions(FusionOptions):
                 raise ValueError(
                     f"ModelConfig.{name}={value!r} {what}: only with {part}=True (got False); allowed: 'all'"
                 )
+        g = self.answer_gate_frames
+        if not isinstance(g, int) or isinstance(g, bool) or g < 0:
+            raise ValueError(f"ModelConfig.answer_gate_frames={g!r} must be a whole number of frames >= 0 (0: off)")
+        if g and (not self.ga2 or self.answer_grad == "gate"):
+            raise ValueError(
+                f"ModelConfig.answer_gate_frames={g!r} keeps the answer loss to the GA2 gate before switching to "
+                f"answer_grad: only with ga2=True and answer_grad 'all' or 'centered' (got ga2={self.ga2!r}, "
+                f"answer_grad={self.answer_grad!r}); allowed otherwise: 0"
+            )
         if self.answer_grad == "centered" and not self.spatial_attention:  # it centres the gradient Eq. 3 passes
             raise ValueError(
                 "ModelConfig.answer_grad='centered' centres the answer's gradient through Eq. 3: only with "
@@ -234,10 +249,14 @@ class DualAttention(Fusion):
         state_temperature: float | None = None,
         eq1_words: str = "all",
         answer_grad: str = "all",
+        answer_gate_frames: int = 0,
     ) -> None:
         super().__init__()
         self.ga1, self.ga2, self.spatial = ga1, ga2, spatial
         self.answer_grad = answer_grad
+        self.answer_gate_frames = answer_gate_frames
+        self.warming = answer_gate_frames > 0
+        """Within the first `answer_gate_frames` frames: the answer loss kept to the GA2 gate (`at_frames` sets it)."""
         # eq1_mask (V,): the words Eq. 1 gates with under eq1_words='content' (a buffer, saved with the weights);
         # None: every word, and no buffer, so that the paper's unit saves what it always saved
         self.register_buffer("eq1_mask", torch.ones(vocab_size) if eq1_words == "content" else None)
@@ -263,7 +282,12 @@ class DualAttention(Fusion):
             state_temperature=o.state_temperature,
             eq1_words=o.eq1_words,
             answer_grad=o.answer_grad,
+            answer_gate_frames=o.answer_gate_frames,
         )
+
+    def at_frames(self, frames: int) -> None:
+        """The frames the run has trained: ends the answer loss's warm-up at `answer_gate_frames`."""
+        self.warming = frames < self.answer_gate_frames
 
     def read_words(self, mask: Tensor) -> None:
         """Set Eq. 1's word mask (V,): 1 for a content word, 0 for a function word (eq1_words='content' only)."""
@@ -324,7 +348,7 @@ class DualAttention(Fusion):
             x_spat = None
             x_sa = x_image  # w/o SA: Eq. 2-3 removed
             state = x_ga1.reshape(n, -1)  # w/o SA: x_S = vec(x_GA1)
-        if self.answer_grad == "gate":  # opt-in: the answer loss trains x_sent only, not the conv
+        if self.answer_grad == "gate" or self.warming:  # opt-in: the answer loss trains x_sent only, not the conv
             x_sa = x_sa.detach()
         x_ga2 = gated_attention(x_sa, x_sent) if self.ga2 else x_sa  # Eq. 4
         answer_logits = x_ga2.sum(dim=(2, 3))  # Eq. 5: sum over H, W (softmax outside)

@@ -228,6 +228,13 @@ class EmmlModel(nn.Module):
             self.fusion.read_words(word_mask(words, content).to(self.fusion.eq1_mask.device))
         return self
 
+    def at_frames(self, frames: int) -> None:
+        """The frames the run has trained, told before each rollout (emml/rl/trainer.py `train_loop`): for a fusion
+        whose training changes with them (`DualAttentionOptions.answer_gate_frames`); a no-op for every other."""
+        hook = getattr(self.fusion, "at_frames", None)
+        if hook is not None:
+            hook(frames)
+
     def vmappable(self) -> EmmlModel:
         """Switch this model to the ops `torch.func.vmap` can batch over stacked copies (emml/rl/packed.py): the
         instruction GRU from linear ops, no acting cache (it keys on host values), the default memory format.

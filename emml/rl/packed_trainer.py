@@ -118,6 +118,10 @@ class PackedLearner:
     def run_model(self, r: int):
         return self.model.unstack(r)
 
+    def at_frames(self, frames: int) -> None:
+        """The frames trained (the same for every packed run), told to the module each run's forward calls."""
+        self.model.template[0].at_frames(frames)
+
     def optimizer_state(self, r: int) -> dict:
         return optimizer_state(self.optimizer, r)
 

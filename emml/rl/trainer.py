@@ -288,6 +288,10 @@ class PlainLearner:
         """Run r's model, to evaluate and save."""
         return self.model
 
+    def at_frames(self, frames: int) -> None:
+        """The frames trained, before each rollout (`EmmlModel.at_frames`)."""
+        self.model.at_frames(frames)
+
     def optimizer_state(self, r: int):
         """Run r's optimizer (or its state_dict), to save."""
         return self.optimizer
@@ -335,6 +339,7 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
         log_mark = start_mark = (time.perf_counter(), frames)
         while update < cfg.num_updates:
             t_start = time.perf_counter()
+            learner.at_frames(frames)  # a schedule over the frames trained (answer_gate_frames) resumes with them
             with conv_precision(model, cfg.precision):
                 sampler.collect(model, buffer)
                 t_learn = time.perf_counter()

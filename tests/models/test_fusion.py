@@ -247,6 +247,46 @@ def test_answer_grad_centered_moves_a_detector_where_the_map_attends_never_a_who
     torch.testing.assert_close(flat_grad, torch.zeros_like(flat_grad), rtol=0, atol=1e-7)
 
 
+def test_answer_gate_frames_keeps_the_answer_loss_to_the_gate_until_the_run_has_trained_them():
+    """`answer_gate_frames` (issue 48, the warm-up): before N frames the answer reaches x_sent and not x_I, as
+    'gate'; from N frames on it reaches x_I as `answer_grad` says; the values never change. The model hears the
+    frames through `EmmlModel.at_frames` (the trainer's call before each rollout)."""
+    x_i = _scene().requires_grad_()
+    bow = torch.tensor([[0.0, 1.0, 1.0, 0.0]])
+    sent = torch.tensor([[0.0, 0.0, 1.0, 1.0]], requires_grad=True)
+    unit, plain = DualAttention(4, 1, 2, answer_gate_frames=100), DualAttention(4, 1, 2)
+    for frames, reaches in ((0, False), (99, False), (100, True), (5000, True)):
+        unit.at_frames(frames)
+        out = unit(x_i, bow, sent)
+        torch.testing.assert_close(out.answer_logits, plain(x_i, bow, sent).answer_logits, rtol=0, atol=0)
+        grad_i, grad_sent = torch.autograd.grad(out.answer_logits[0, 2], (x_i, sent), allow_unused=True)
+        assert (grad_i is not None and grad_i.abs().sum() > 0) == reaches, frames
+        assert grad_sent.abs().sum() > 0
+
+
+def test_answer_gate_frames_is_checked_named_and_told_by_the_model():
+    from emml.config.profiles import profile_config
+    from emml.models import build_model, model_config
+    from emml.runs.rundir import run_name
+
+    cfg = profile_config("smoke", "easy", {"model_options.answer_gate_frames": 300_000})
+    assert run_name(cfg) == "dual_attention-easy-noaux-warm300000-s0-smoke"
+    model = build_model("dual_attention", 22, 36, 36, 30, answer_gate_frames=300_000)
+    assert model.fusion.warming
+    model.at_frames(300_000)
+    assert not model.fusion.warming
+    build_model("concat", 22, 36, 36, 30).at_frames(10)  # a fusion without a schedule: a no-op
+    for over, message in (
+        ({"answer_gate_frames": -1}, r"answer_gate_frames=-1 must be a whole number of frames >= 0"),
+        (
+            {"answer_gate_frames": 10, "answer_grad": "gate"},
+            r"only with ga2=True and answer_grad 'all' or 'centered' \(got ga2=True, answer_grad='gate'\)",
+        ),
+    ):
+        with pytest.raises(ValueError, match=message):
+            model_config("dual_attention", **over)
+
+
 def test_eq1_over_the_content_words_drops_the_function_words_channels_from_the_attention():
     """`eq1_words='content'` (issue 34): a function word's channel, firing on the wrong object, moves the paper's
     x_spat (Eq. 1-2) and not the content-word one's; the mask must be set (or restored) before use."""

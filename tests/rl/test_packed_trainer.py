@@ -73,3 +73,17 @@ def test_a_pack_failing_as_it_opens_ends_every_started_run_failed(tracking, monk
         train_packed([smoke(tracking, seed=s, frames=128, eval_episodes=1) for s in (0, 1)], quiet=True)
     runs = mlflow.search_runs(experiment_names=["test"], output_format="list")
     assert sorted(r.info.status for r in runs) == ["FAILED", "FAILED"]
+
+
+def test_packed_runs_hear_the_frames_trained_through_the_module_their_forward_calls():
+    """`PackedLearner.at_frames`: the stacked runs' forward calls one template module (`StackedModels`), so the
+    schedule of `answer_gate_frames` (issue 48) is told to it, for every run at once."""
+    from emml.models import build_model
+    from emml.rl.packed import StackedModels
+    from emml.rl.packed_trainer import PackedLearner
+
+    runs = [build_model("dual_attention", 22, 36, 36, 30, answer_gate_frames=100) for _ in range(2)]
+    learner = PackedLearner(StackedModels(runs), None, None)
+    assert learner.model.template[0].fusion.warming
+    learner.at_frames(100)
+    assert not learner.model.template[0].fusion.warming

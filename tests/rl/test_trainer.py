@@ -112,6 +112,19 @@ def test_finished_run_is_not_retrained_but_can_be_extended(tracking, no_leftover
     assert [s for s, _ in metric_history(first.run_id, "charts/update")] == [64, 128, 192]
 
 
+def test_the_model_hears_the_frames_trained_before_each_rollout_and_on_resume(tracking, no_leftovers, monkeypatch):
+    """`train_loop` tells the model the frames trained before each rollout (`EmmlModel.at_frames`), resumed runs
+    from where they stopped: what `answer_gate_frames` (issue 48's warm-up) switches on."""
+    from emml.models.fusion import DualAttention
+
+    heard = []
+    monkeypatch.setattr(DualAttention, "at_frames", lambda self, frames: heard.append(frames))
+    over = {"model_options.answer_gate_frames": 128}
+    train(smoke(tracking, frames=128, eval_episodes=1, **over), quiet=True)
+    train(smoke(tracking, frames=192, eval_episodes=1, **over), quiet=True)
+    assert heard == [0, 64, 128]
+
+
 def _train_and_sigkill(tracking, ready, frames: int = 2048) -> tuple[TrainConfig, dict, int]:
     """`emml train` (smoke, 2,048 frames, a checkpoint every 2 updates) in a subprocess, SIGKILLed as soon as
     ``ready(checkpoint, logged_steps)`` holds (``logged_steps()`` reads MLflow); returns the config, the
