@@ -74,11 +74,19 @@ def _estimate(scores: dict, func, runs: int, cells: int, spread: bool, reps: int
 def iqm(cells: list[list[float]], reps: int = REPS, seed: int = SEED) -> Estimate:
     """IQM over every run of every cell (rliable.metrics.aggregate_iqm: the 25%-trimmed mean), with its 95%
     stratified-bootstrap interval (runs resampled within each cell)."""
-    from rliable import metrics
-
     m = _matrix([c for c in cells if len(c)])
-    func = lambda x: np.array([metrics.aggregate_iqm(x)])  # noqa: E731 - rliable's idiom
+    func = lambda x: np.array([interquartile_mean(x)])  # noqa: E731 - rliable's idiom
     return _estimate({"row": m}, func, m.size, m.shape[1], m.shape[0] > 1, reps, seed)
+
+
+def interquartile_mean(scores: np.ndarray) -> float:
+    """rliable.metrics.aggregate_iqm, the same float (tests/report/test_aggregate.py): scipy's 25%-trimmed mean over
+    every score, computed with the same partition and mean, without scipy's dispatch: 16 µs a call where rliable's
+    takes 195 (a 3-run cell), which over a table's bootstrap resamples was more than half of `make reports`."""
+    a = np.ravel(np.asarray(scores))
+    low = int(0.25 * a.size)
+    high = a.size - low
+    return np.mean(np.partition(a, (low, high - 1))[low:high])
 
 
 def probability_of_improvement(

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from rliable import metrics
 
 from emml.experiments.tables import load_table
-from emml.report.aggregate import improvement, iqm, probability_of_improvement, reference_row
+from emml.report.aggregate import improvement, interquartile_mean, iqm, probability_of_improvement, reference_row
 
 CELLS = [[0.92, 0.89, 0.93], [0.1, 0.4, 0.2], [0.5, 0.6, 0.7]]
 
@@ -62,3 +62,19 @@ def test_the_vectorised_improvement_is_rliables_to_the_bit(xy):
     """Ties included (scores on a grid of episodes repeat): the same number as rliable's scipy-based statistic."""
     x, y = np.array(xy[0]), np.array(xy[1])
     assert improvement(x, y) == metrics.probability_of_improvement(x, y)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.integers(1, 7).flatmap(
+        lambda runs: st.lists(
+            st.lists(st.sampled_from([0.0, 0.25, 0.5, 0.75, 1.0]) | st.floats(0, 1), min_size=runs, max_size=runs),
+            min_size=1,
+            max_size=5,
+        )
+    )
+)
+def test_the_interquartile_mean_is_rliables_to_the_bit(cells):
+    """Runs × cells, ties included: the same float as rliable's scipy-based aggregate_iqm."""
+    scores = np.array(cells).T
+    assert interquartile_mean(scores) == metrics.aggregate_iqm(scores)
