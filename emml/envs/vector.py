@@ -13,6 +13,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import time
 from concurrent.futures import ThreadPoolExecutor, wait
+from contextlib import contextmanager
 from dataclasses import asdict
 
 import gymnasium as gym
@@ -135,41 +136,38 @@ class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
                     break
                 if not process.is_alive():
                     self._state = AsyncState.DEFAULT
-                    raise WorkerDied(f"env worker {index} (pid {process.pid}) died with exit code {process.exitcode}")
+                    raise _worker_died(index, process)
                 if deadline is not None and time.monotonic() >= deadline:
                     return False
         return True
 
-    def _died(self, error: Exception) -> WorkerDied:
-        """A pipe that broke (EOF, or a reset when the worker died with our message unread) as the `WorkerDied`
-        it means, naming the dead worker."""
-        self._state = AsyncState.DEFAULT
-        deadline = time.monotonic() + 2  # the pipe breaks as the process ends: give is_alive a moment to agree
-        while time.monotonic() < deadline:
-            dead = [(i, p) for i, p in enumerate(self.processes) if not p.is_alive()]
-            if dead:
-                index, process = dead[0]
-                return WorkerDied(f"env worker {index} (pid {process.pid}) died with exit code {process.exitcode}")
-            time.sleep(0.05)
-        return WorkerDied(f"an env worker's pipe broke ({type(error).__name__}: {error})")
+    @contextmanager
+    def _broken_pipe(self):
+        """A pipe that breaks in the block (EOF, or a reset when the worker died with our message unread) raised as
+        the `WorkerDied` it means, naming the dead worker."""
+        try:
+            yield
+        except (EOFError, ConnectionError) as e:
+            self._state = AsyncState.DEFAULT
+            deadline = time.monotonic() + 2  # the pipe breaks as the process ends: give is_alive a moment to agree
+            while time.monotonic() < deadline:
+                dead = next(((i, p) for i, p in enumerate(self.processes) if not p.is_alive()), None)
+                if dead is not None:
+                    raise _worker_died(*dead) from e
+                time.sleep(0.05)
+            raise WorkerDied(f"an env worker's pipe broke ({type(e).__name__}: {e})") from e
 
     def step_async(self, actions) -> None:
-        try:
+        with self._broken_pipe():
             super().step_async(actions)
-        except (EOFError, ConnectionError) as e:
-            raise self._died(e) from e
 
     def step_wait(self, timeout: float | None = None):
-        try:
+        with self._broken_pipe():
             return super().step_wait(timeout)
-        except (EOFError, ConnectionError) as e:
-            raise self._died(e) from e
 
     def reset_wait(self, timeout: float | None = None):
-        try:
+        with self._broken_pipe():
             return super().reset_wait(timeout)
-        except (EOFError, ConnectionError) as e:
-            raise self._died(e) from e
 
     def close_extras(self, timeout: float | None = None, terminate: bool = False) -> None:
         terminate = terminate or not all(p.is_alive() for p in self.processes)  # a dead one would never answer
@@ -192,6 +190,10 @@ class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
         engine."""
         self._state = AsyncState.DEFAULT  # forget the pending call: its reply may be half read
         self.close(terminate=True)
+
+
+def _worker_died(index: int, process) -> WorkerDied:
+    return WorkerDied(f"env worker {index} (pid {process.pid}) died with exit code {process.exitcode}")
 
 
 class SyncDoomVectorEnv(_Closing, SyncVectorEnv):
