@@ -27,7 +27,7 @@ from emml.cli.common import (
     model_option,
     profile_option,
 )
-from emml.runs.rundir import run_name
+from emml.runs.naming import run_name
 
 
 def train(

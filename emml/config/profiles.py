@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import os
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import tomllib
@@ -73,27 +74,67 @@ def _load_profiles(path: Path) -> dict[str, dict]:
     return profiles
 
 
-def profile_config(profile: str, difficulty: str = "easy", overrides: dict | None = None, **fields) -> TrainConfig:
-    """A TrainConfig for ``profile`` (its frames chosen by difficulty), then dotted ``overrides``; ``fields`` (e.g.
-    run_root) are TrainConfig fields that win over the profile's."""
+@dataclass(frozen=True)
+class Profile:
+    """One profile of the profiles file, read and checked: resolved once where a command starts (`resolve_profile`)
+    and passed down as this value, so that every run's config and name read the same values without rereading the
+    file (a launch's workers and Slurm jobs get it pickled)."""
+
+    name: str
+    """The profile's name (its table in the profiles file; `TrainConfig.profile` of every run it makes)."""
+    values: dict = field(compare=False)
+    """Its TrainConfig fields by dotted name, as the file gives them (less `seeds` and `frames_hard`)."""
+    seeds: tuple[int, ...] = (0,)
+    """The seeds every setting of a table is trained with."""
+    frames_hard: int | None = None
+    """`frames` of a run whose env kind counts its frames as Hard's (§5.1: 50M in Hard; Appendix C: the House);
+    None: the profile's `frames`."""
+    source: str = ""
+    """Where it was read ('<file> [<name>]'), for the errors that name a bad value."""
+
+    def config(self, difficulty: str = "easy", overrides: dict | None = None, **fields) -> TrainConfig:
+        """The TrainConfig of one run: the profile's values (its frames chosen by difficulty), then dotted
+        ``overrides``; ``fields`` (e.g. run_root) are TrainConfig fields that win over the profile's."""
+        values = {k: v for k, v in self.values.items() if k not in fields}  # the caller's fields win
+        kind = ENV_KINDS.get(difficulty)  # an unknown difficulty fails in validate(), naming it
+        if kind is not None and kind.frames_key == "frames_hard" and self.frames_hard is not None:
+            values["frames"] = self.frames_hard
+        cfg = TrainConfig(profile=self.name, **fields)
+        cfg.env = match_env_class(dataclasses.replace(cfg.env, difficulty=difficulty))
+        apply_overrides(cfg, values, source=self.source)
+        apply_overrides(cfg, overrides or {})
+        return cfg
+
+    @property
+    def scratch(self) -> bool:
+        """Whether its numbers are not results: its results_root is under scratch/, not results/."""
+        return Path(self.values.get("results_root", "results")).parts[:1] == (SCRATCH,)
+
+
+def resolve_profile(profile: str | Profile) -> Profile:
+    """The profile named ``profile`` (a `Profile` is returned as it is): ValueError naming the profiles there are
+    when the file has none of that name."""
+    if isinstance(profile, Profile):
+        return profile
     profiles = load_profiles()
     if profile not in profiles:
         raise ValueError(f"profile={profile!r} is unknown; choose one of {', '.join(map(repr, profiles))}")
-    values = {k: v for k, v in profiles[profile].items() if k not in fields}  # the caller's fields win
-    values.pop("seeds", None)
-    hard_frames = values.pop("frames_hard", values.get("frames"))
-    kind = ENV_KINDS.get(difficulty)  # an unknown difficulty fails in validate(), naming it
-    if kind is not None and kind.frames_key == "frames_hard":  # §5.1: 50M frames in Hard; Appendix C: in the House
-        values["frames"] = hard_frames
-    cfg = TrainConfig(profile=profile, **fields)
-    cfg.env = match_env_class(dataclasses.replace(cfg.env, difficulty=difficulty))
-    apply_overrides(cfg, values, source=f"{profiles_file()} [{profile}]")
-    apply_overrides(cfg, overrides or {})
-    return cfg
+    values = dict(profiles[profile])
+    seeds = tuple(values.pop("seeds", [0]))
+    frames_hard = values.pop("frames_hard", None)
+    return Profile(profile, values, seeds, frames_hard, f"{profiles_file()} [{profile}]")
 
 
-def profile_seeds(profile: str) -> list[int]:
-    return list(load_profiles()[profile].get("seeds", [0]))
+def profile_config(
+    profile: str | Profile, difficulty: str = "easy", overrides: dict | None = None, **fields
+) -> TrainConfig:
+    """A TrainConfig for ``profile`` (its frames chosen by difficulty), then dotted ``overrides``; ``fields`` (e.g.
+    run_root) are TrainConfig fields that win over the profile's (`Profile.config`)."""
+    return resolve_profile(profile).config(difficulty, overrides, **fields)
+
+
+def profile_seeds(profile: str | Profile) -> list[int]:
+    return list(resolve_profile(profile).seeds)
 
 
 COMMITTED = ("results", "reports")
@@ -103,23 +144,25 @@ SCRATCH = "scratch"
 results_root point under it in reproduce/profiles.toml, and its reports go to scratch/reports."""
 
 
-def is_scratch(profile: str) -> bool:
+def is_scratch(profile: str | Profile) -> bool:
     """Whether the profile's numbers are not results: its results_root is under scratch/, not results/."""
-    root = load_profiles()[profile].get("results_root", "results")
-    return Path(root).parts[:1] == (SCRATCH,)
+    return resolve_profile(profile).scratch
 
 
-def refuse_committed(profile: str, path: str | Path, what: str) -> None:
+def refuse_committed(profile: str | Profile, path: str | Path, what: str) -> None:
     """ValueError when ``path`` (a results CSV or report being written) lies in the checkout's committed results/
     or reports/ and ``profile`` is a scratch profile: 512-frame smoke numbers are not results."""
     from emml.config.paths import project_path
 
-    if profile not in load_profiles() or not is_scratch(profile):
+    if not isinstance(profile, Profile) and profile not in load_profiles():
+        return
+    profile = resolve_profile(profile)
+    if not profile.scratch:
         return
     path = project_path(path).resolve()
     for folder in COMMITTED:
         if path.is_relative_to(project_path(folder).resolve()):
             raise ValueError(
-                f"{what} {path}: the '{profile}' profile's numbers are not results and are not written under the "
+                f"{what} {path}: the '{profile.name}' profile's numbers are not results and are not written under the "
                 f"committed {folder}/; they go under {SCRATCH}/ (its default), or name another folder"
             )

@@ -333,7 +333,7 @@ def model_option(default, *, name: str | None = None, choices: tuple | None = No
     ``default``: its value unless `TrainConfig.model_options` sets it (the paper's, for the paper's models).
     ``name``: the format of its part of the run name, spelled when a run sets it to another value than the default
     ('ans{}' with 'gate' gives 'ansgate'; a number formats as {:g}: 'xs{}' with 0.25 gives 'xs0.25'); None: a run that
-    sets it is named by `emml.runs.rundir.swept` ('+model_options.NAME=VALUE'), like any other field.
+    sets it is named by `emml.runs.naming.swept` ('+model_options.NAME=VALUE'), like any other field.
     ``choices``: its allowed values (checked by `check_model_options`, naming the field)."""
     metadata = {}
     if name is not None:
@@ -349,28 +349,6 @@ def option_fields(options: type) -> dict[str, Field]:
     """A declared options class's fields (a dataclass type: `ModelConfig`'s shared ones, or a fusion's own), by name;
     `ModelConfig`'s `name` and `options` are not options a run sets."""
     return {f.name: f for f in fields(options) if not (options is ModelConfig and f.name in ("name", "options"))}
-
-
-def named_options(options: type) -> tuple[str, ...]:
-    """The options of ``options`` (a declared options class) that a run's name spells when a run sets them."""
-    return tuple(name for name, f in option_fields(options).items() if NAME_PART in f.metadata)
-
-
-def option_name_parts(options: type, values: dict) -> list[str]:
-    """The run name's parts of the options in ``values`` (`TrainConfig.model_options`) that ``options`` declares with
-    a name (`model_option`) and that ``values`` sets to another value than the default, in declaration order."""
-    parts = []
-    for name, f in option_fields(options).items():
-        spelled = f.metadata.get(NAME_PART)
-        if spelled is None or name not in values or values[name] == f.default:
-            continue
-        value = values[name]
-        parts.append(
-            spelled.replace(
-                "{}", f"{value:g}" if isinstance(value, (int, float)) and not isinstance(value, bool) else str(value)
-            )
-        )
-    return parts
 
 
 def _check_type(label: str, value, hint) -> None:
@@ -693,30 +671,6 @@ class TrainConfig:
     def num_updates(self) -> int:
         """Derived: updates to reach `frames` (rounded up)."""
         return -(-self.frames // self.frames_per_update)
-
-    def spelled_name(self, fusion_options: type | None) -> str:
-        """Derived from the fields that define the experiment: model, difficulty, aux, tasks, shaping, the model
-        options a run sets that are declared with a name (`model_option`: the shared ones of `ModelConfig`, sentence
-        readout and activation, then those of ``fusion_options``, the model's fusion's declared options class, e.g.
-        Dual-Attention's state temperature, Eq. 1 words and answer loss's reach), the aux loss's balance, precision,
-        seed, profile. ``fusion_options`` may be None when `model_options` sets only shared options (the run's owner,
-        `emml.runs.rundir.run_name`, asks the model registry for it only then)."""
-        parts = [self.model, self.env.difficulty, "aux" if self.aux else "noaux"]
-        if self.env.tasks != "both":
-            parts.append(f"{self.env.tasks}only")
-        if not self.env.shaping:
-            parts.append("noshaping")
-        own = {k: v for k, v in self.model_options.items() if k not in SHARED_MODEL_OPTIONS}
-        if own and fusion_options is None:
-            raise ValueError(f"spelled_name: model options {sorted(own)} need the declared options of {self.model!r}")
-        parts += option_name_parts(ModelConfig, self.model_options)  # opt-in: x_sent's readout, activation
-        if fusion_options is not None:  # opt-in: the fusion's, e.g. Dual-Attention's 'xs0.25', 'eq1content', 'ansgate'
-            parts += option_name_parts(fusion_options, own)
-        if self.ppo.aux_balance != "none":  # opt-in: the aux cross-entropy balanced per word
-            parts.append(f"auxbal{self.ppo.aux_balance}")
-        if self.precision != "fp32":  # a bf16 run is another experiment: beside the fp32 run, not resuming it
-            parts.append(self.precision)
-        return "-".join([*parts, f"s{self.seed}", self.profile])
 
     def identity(self) -> dict:
         """`to_dict` less the `RUNTIME` fields: what the run is (emml/runs/rundir.py names and resumes runs by it)."""

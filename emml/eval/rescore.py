@@ -18,8 +18,9 @@ import pandas as pd
 
 from emml.config.schema import TrainConfig
 from emml.runs.checkpoint import load_checkpoint
+from emml.runs.naming import run_name
 from emml.runs.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
-from emml.runs.rundir import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, run_name, save_results
+from emml.runs.rundir import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, save_results
 from emml.runs.runlock import hold_run
 
 

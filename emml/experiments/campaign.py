@@ -33,8 +33,8 @@ import tomllib
 
 from emml.config.paths import PIN_DIR, REPRODUCE_DIR, checkout_root, project_path, project_root
 from emml.experiments.tables import RunSpec
+from emml.runs.naming import run_name
 from emml.runs.records import RecordError, mirror_point, note, read_points, torn_tail
-from emml.runs.rundir import run_name
 from emml.runs.runlock import waiting_lock
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
@@ -200,7 +200,7 @@ def _check_runs(path: Path, where: str, step: Step, selected: dict) -> None:
 
     for spec, _ in selected.values():
         try:
-            with_overrides(spec, step.overrides(), step.profile).to_config(step.profile).validate()
+            with_overrides(spec, step.overrides()).to_config(step.profile).validate()
         except ValueError as e:
             raise ValueError(f"{path}: {where} ({spec.run_name(step.profile)}): {e}") from None
 
@@ -262,10 +262,7 @@ def step_runs(
 
     if states is None:
         states = run_states(step.table, step.profile, run_root, results_root)
-    return [
-        (with_overrides(spec, step.overrides(), step.profile), state)
-        for spec, state in select_runs(states, step.only).values()
-    ]
+    return [(with_overrides(spec, step.overrides()), state) for spec, state in select_runs(states, step.only).values()]
 
 
 def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:

@@ -8,6 +8,7 @@ an interrupted run from its checkpoint and re-records a finished run missing fro
 
 from __future__ import annotations
 
+import copy
 import multiprocessing
 import os
 import traceback
@@ -16,8 +17,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from emml.config.paths import project_path
-from emml.experiments.tables import RunSpec, load_table
-from emml.runs.rundir import run_name
+from emml.config.profiles import Profile, resolve_profile
+from emml.config.schema import TrainConfig, apply_overrides, check_choice
+from emml.experiments.tables import RunSpec, Table, load_table
+from emml.runs.naming import run_name
 
 BACKENDS = ("local", "slurm")
 STATES = ("finished", "unrecorded", "reference", "partial", "missing")
@@ -72,40 +75,78 @@ class LaunchReport:
     """Run name → who trains it: held by another live process (its run lock), so not trained here, nor failed."""
 
 
-def run_states(name: str, profile: str, run_root: str | None = None, results_root: str | None = None) -> dict:
-    """Run name → (RunSpec, state) for every run of table `name` under `profile` (see STATES)."""
+@dataclass(frozen=True)
+class PlannedRun:
+    """One run of a launch: its config built and its name spelled once (`plan_runs`), then handed to whoever trains
+    it (this process, a pool worker, a Slurm job) as it is."""
 
-    from emml.config.profiles import profile_seeds
-    from emml.runs.results import read_results
-    from emml.runs.rundir import CHECKPOINT, finished_run, results_csv, run_dir
+    spec: RunSpec
+    """What the table (and a campaign step's overrides) declares."""
+    cfg: TrainConfig
+    """Its TrainConfig under the launch's profile, with the launch's run_root, results_root, device, threads."""
+    name: str
+    """Its run name (`emml.runs.naming.run_name`)."""
+    state: str
+    """Its launcher state (STATES)."""
 
+
+def plan_runs(
+    name: str,
+    profile: Profile,
+    fields: dict | None = None,
+    only: dict | None = None,
+    overrides: dict | None = None,
+) -> list[PlannedRun]:
+    """Every run of table `name` under `profile`, in training order: `only` selects (`select_runs`), `overrides`
+    (dotted fields of how a run runs, `with_overrides`) apply on top of each run's own; `fields` (run_root,
+    results_root, device, threads) go to every run's TrainConfig."""
+    fields = fields or {}
     table = load_table(name)
-    fields = _roots(run_root, results_root)
-    out: dict[str, tuple[RunSpec, str]] = {}
-    recorded_in: dict[Path, set[str]] = {}  # per results CSV: a row may borrow another table's runs (from_table)
-    for spec in table.runs(profile_seeds(profile)):
+    planned: dict[str, PlannedRun] = {}
+    recorded: dict[Path, set[str]] = {}  # per results CSV: a row may borrow another table's runs (from_table)
+    for spec in table.runs(list(profile.seeds)):
         cfg = spec.to_config(profile, **fields)
-        csv = results_csv(cfg)
-        if csv not in recorded_in:
-            results = read_results(csv)
-            if table.transfer is not None:  # a transfer run is recorded once its scores are in the row
-                from emml.eval.transfer import metric_column
+        rname = run_name(cfg, profile)
+        planned[rname] = PlannedRun(spec, cfg, rname, _state(cfg, rname, table, spec, recorded))
+    chosen = select_runs({r.name: (r.spec, r.state) for r in planned.values()}, only or {})
+    runs = [planned[rname] for rname in chosen]
+    if overrides:
+        runs = [_overridden(r, overrides) for r in runs]
+    return runs
 
-                columns = [metric_column(x) for x in spec.instructions]
-                complete = set(columns) <= set(results.columns)
-                results = results[results[columns].notna().all(axis=1)] if complete else results.iloc[:0]
-            recorded_in[csv] = set(results["run_name"])
-        recorded = recorded_in[csv]
-        rname, rdir = run_name(cfg), run_dir(cfg)
-        done = finished_run(rdir)
-        if rname in recorded:
-            state = "finished" if done else "partial" if (rdir / CHECKPOINT).exists() else "reference"
-        elif (rdir / CHECKPOINT).exists():
-            state = "unrecorded" if done else "partial"
-        else:
-            state = "missing"
-        out[rname] = (spec, state)
-    return out
+
+def _state(cfg: TrainConfig, rname: str, table: Table, spec: RunSpec, recorded: dict[Path, set[str]]) -> str:
+    """The run's launcher state (STATES), from its results CSV (read once per CSV into ``recorded``) and run dir."""
+    from emml.runs.results import read_results
+    from emml.runs.rundir import CHECKPOINT, finished_run, path_of, results_csv
+
+    csv = results_csv(cfg)
+    if csv not in recorded:
+        results = read_results(csv)
+        if table.transfer is not None:  # a transfer run is recorded once its scores are in the row
+            from emml.eval.transfer import metric_column
+
+            columns = [metric_column(x) for x in spec.instructions]
+            complete = set(columns) <= set(results.columns)
+            results = results[results[columns].notna().all(axis=1)] if complete else results.iloc[:0]
+        recorded[csv] = set(results["run_name"])
+    rdir = path_of(cfg.run_root, cfg.table, rname)
+    if rname in recorded[csv]:
+        return "finished" if finished_run(rdir) else "partial" if (rdir / CHECKPOINT).exists() else "reference"
+    if (rdir / CHECKPOINT).exists():
+        return "unrecorded" if finished_run(rdir) else "partial"
+    return "missing"
+
+
+def _overridden(run: PlannedRun, overrides: dict) -> PlannedRun:
+    spec = with_overrides(run.spec, overrides)
+    return replace(run, spec=spec, cfg=apply_overrides(copy.deepcopy(run.cfg), overrides))
+
+
+def run_states(name: str, profile: Profile | str, run_root: str | None = None, results_root: str | None = None) -> dict:
+    """Run name → (RunSpec, state) for every run of table `name` under `profile` (see STATES)."""
+    runs = plan_runs(name, resolve_profile(profile), _roots(run_root, results_root))
+    return {r.name: (r.spec, r.state) for r in runs}
 
 
 ONLY_FIELDS = ("row", "model", "difficulty", "aux", "seed")
@@ -141,37 +182,42 @@ def select_runs(states: dict, only: dict) -> dict:
     return dict(sorted(chosen, key=rank))
 
 
-def with_overrides(spec: RunSpec, overrides: dict, profile: str) -> RunSpec:
-    """`spec` with extra dotted TrainConfig overrides after its own (they may not change its run name)."""
-    out = replace(spec, overrides={**spec.overrides, **overrides})
-    if out.run_name(profile) != spec.run_name(profile):
-        raise ValueError(f"overrides {overrides} change the run's name: declare them as a row of the table instead")
-    return out
+def with_overrides(spec: RunSpec, overrides: dict) -> RunSpec:
+    """`spec` with extra dotted TrainConfig overrides after its own: only fields of how a run runs
+    (`TrainConfig.RUNTIME`, e.g. a campaign step's frames), so that the run stays the one its table names."""
+    other = sorted(k for k in overrides if k.split(".")[0] not in TrainConfig.RUNTIME)
+    if other:
+        allowed = ", ".join(TrainConfig.RUNTIME)
+        raise ValueError(
+            f"overrides {', '.join(other)}: a launch may set only how a table's runs run ({allowed}); "
+            "declare another experiment as a row of the table"
+        )
+    return replace(spec, overrides={**spec.overrides, **overrides})
 
 
 def _roots(run_root: str | None, results_root: str | None) -> dict:
     return {k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None}
 
 
-def _train_one(spec: RunSpec, profile: str, fields: dict, parent_run_id: str | None, train_fn: Callable | None):
+def _train_one(run: PlannedRun, parent_run_id: str | None, train_fn: Callable | None) -> str:
     """Worker body (a pool process, a Slurm job or in-process): train one run; returns its run name."""
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()
     if train_fn is None:
         from emml.rl.trainer import train as train_fn
-    cfg = spec.to_config(profile, **fields).validate()
+    cfg = run.cfg.validate()
     train_fn(cfg, quiet=True, parent_run_id=parent_run_id)
-    if spec.transfer is not None:  # Table 4: append the detectors and score the test instructions (§5.4)
+    if run.spec.transfer is not None:  # Table 4: append the detectors and score the test instructions (§5.4)
         from emml.eval.transfer import record_transfer
 
-        record_transfer(cfg, spec.transfer.words, spec.instructions, spec.transfer.detector)
-    return run_name(cfg)
+        record_transfer(cfg, run.spec.transfer.words, run.spec.instructions, run.spec.transfer.detector)
+    return run.name
 
 
 def run_table(
     name: str,
-    profile: str,
+    profile: Profile | str,
     backend: str = "local",
     jobs: int | None = None,
     run_root: str | None = None,
@@ -199,14 +245,12 @@ def run_table(
     submitit's local executors, for tests); returns after submission unless `wait`. `train_fn` replaces the
     trainer (tests; must be picklable).
     """
-    from emml.config.profiles import load_profiles
     from emml.runs.tracking import parent_run, set_run_status
-    from emml.tasks.language import check_choice
 
     check_choice("backend", backend, BACKENDS)
-    check_choice("profile", profile, tuple(load_profiles()))
+    profile = resolve_profile(profile)  # the one lookup: every run's config and name read this value
     table = load_table(name)
-    report = LaunchReport(name, profile, backend)
+    report = LaunchReport(name, profile.name, backend)
     if table.placeholder:
         report.placeholder = True
         log(f"{name} is a placeholder ({table.path.name}: status = 'placeholder'); no runs are declared yet")
@@ -214,48 +258,46 @@ def run_table(
     jobs = jobs or default_jobs(device)
     if jobs < 1:
         raise ValueError(f"jobs={jobs} must be >= 1")
-    states = select_runs(run_states(name, profile, run_root, results_root), only or {})
-    if overrides:
-        states = {rname: (with_overrides(spec, overrides, profile), state) for rname, (spec, state) in states.items()}
-    report.total = len(states)
-    todo = [spec for spec, state in states.values() if state != "finished"]
-    report.skipped = [rname for rname, (_, state) in states.items() if state == "finished"]
+    fields = {**_roots(run_root, results_root), "device": device}
+    if backend == "local" and jobs > 1:
+        fields["threads"] = max(1, (os.cpu_count() or 1) // jobs)
+    runs = plan_runs(name, profile, fields, only, overrides)
+    report.total = len(runs)
+    todo = [run for run in runs if run.state != "finished"]
+    report.skipped = [run.name for run in runs if run.state == "finished"]
     if todo:  # each run's config, the store, the run and results folders, the results CSV: before the parent run
         from emml.rl.hardware import check_runnable
         from emml.runs.preflight import check_train
 
-        roots = _roots(run_root, results_root)
-        check_train(*(check_runnable(spec.to_config(profile, **roots, device=device).validate()) for spec in todo))
-    log(f"{name} [{profile}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
+        check_train(*(check_runnable(run.cfg.validate()) for run in todo))
+    log(f"{name} [{profile.name}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
     if not todo:
         return report
     from emml.runs.preflight import ensure_store
 
     ensure_store()  # a new store's tables made once, under a lock, whoever starts beside this launch
-    report.parent_run_id = parent_run(name, f"{name}-{profile}", {"table": name, "profile": profile})
-    fields = {**_roots(run_root, results_root), "device": device}
-    if backend == "local" and jobs > 1:
-        fields["threads"] = max(1, (os.cpu_count() or 1) // jobs)
-    args = [(spec, profile, fields, report.parent_run_id, train_fn) for spec in todo]
+    tags = {"table": name, "profile": profile.name}
+    report.parent_run_id = parent_run(name, f"{name}-{profile.name}", tags)
+    args = [(run, report.parent_run_id, train_fn) for run in todo]
     if backend == "slurm":
-        folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile}"
+        folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
         return _submit(report, args, folder, partition, time_min, gpus, cpus, slurm_cluster, wait, log)
     set_run_status(report.parent_run_id, "RUNNING")
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()  # SIGTERM/SIGHUP raise SystemExit here as Ctrl-C raises KeyboardInterrupt
     try:
-        _await_left_behind([spec.to_config(profile, **fields) for spec in todo], log)
+        _await_left_behind([run.cfg for run in todo], log)
         if jobs == 1:
             for a in args:
-                _collect(report, a[0], a[1], lambda a=a: _train_one(*a), log)
+                _collect(report, a[0].name, lambda a=a: _train_one(*a), log)
         else:
             _pool(report, args, jobs, log)
     except (KeyboardInterrupt, SystemExit) as e:  # stop: the parent run ends KILLED, the caller says how to resume
         set_run_status(report.parent_run_id, "KILLED")
         finished = set(report.done) | set(report.failed)
         report.stopped = "Ctrl-C" if isinstance(e, KeyboardInterrupt) else f"signal {_signal_name(e)}"
-        report.unfinished = [spec.run_name(profile) for spec in todo if spec.run_name(profile) not in finished]
+        report.unfinished = [run.name for run in todo if run.name not in finished]
         return report
     except BaseException:  # a broken pool: the parent run ends, never stays RUNNING
         set_run_status(report.parent_run_id, "FAILED")
@@ -314,7 +356,7 @@ def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
             while queue and len(running) < jobs:
                 a = queue.pop(0)
                 receive, send = ctx.Pipe(duplex=False)
-                child = ctx.Process(target=_child, args=(send, a, lifeline), name=f"emml-{a[0].run_name(a[1])}")
+                child = ctx.Process(target=_child, args=(send, a, lifeline), name=f"emml-{a[0].name}")
                 child.start()
                 send.close()
                 running[child.sentinel] = (child, a, receive)
@@ -322,7 +364,7 @@ def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
                 child, a, receive = running.pop(sentinel)
                 child.join()
                 outcome = _received(receive, child)
-                _collect(report, a[0], a[1], lambda outcome=outcome: _outcome(*outcome), log)
+                _collect(report, a[0].name, lambda outcome=outcome: _outcome(*outcome), log)
     except BaseException:
         _end_workers([child for child, _, _ in running.values()])
         raise
@@ -429,11 +471,10 @@ def _signal_name(e: SystemExit) -> str:
         return str(e.code)
 
 
-def _collect(report: LaunchReport, spec: RunSpec, profile: str, result: Callable[[], str], log) -> None:
-    """Record one run's outcome; a failure is kept and the launch goes on."""
+def _collect(report: LaunchReport, rname: str, result: Callable[[], str], log) -> None:
+    """Record the outcome of run ``rname``; a failure is kept and the launch goes on."""
     from emml.runs.runlock import RunLocked
 
-    rname = spec.run_name(profile)
     try:
         result()
     except RunLocked as e:  # another live process trains it: not this launch's run to train, nor a failure
@@ -467,7 +508,7 @@ def _submit(report, args, folder, partition, time_min, gpus, cpus, cluster, wait
     log(f"submitted {len(jobs)} jobs to {cluster} (logs in {folder})")
     if wait:
         for job, a in zip(jobs, args):
-            _collect(report, a[0], a[1], job.result, log)
+            _collect(report, a[0].name, job.result, log)
     return report
 
 

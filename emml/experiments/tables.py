@@ -4,7 +4,7 @@ A table file reads like the paper's table (Chaplot et al. 2019, arXiv:1902.01385
 model, optionally with config overrides), `[columns]` its columns (difficulties × aux × metrics). Each
 (row, difficulty, aux) is a *setting*; a setting is trained once per seed of the profile (reproduce/profiles.toml).
 A row with `metric_overrides` trains one setting per metric (Table 3's "DA Single-Task": SGN cells from SGN-only
-runs, EQA cells from EQA-only runs). Run names derive from the config (`emml.runs.rundir.run_name`), and two runs of a
+runs, EQA cells from EQA-only runs). Run names derive from the config (`emml.runs.naming.run_name`), and two runs of a
 table may not share one. A malformed file fails with the file, the key and what is wrong.
 """
 
@@ -17,8 +17,9 @@ import tomllib
 
 from emml.config.env_kinds import ENV_KINDS
 from emml.config.paths import REPRODUCE_DIR
+from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides
-from emml.runs.rundir import run_name
+from emml.runs.naming import run_name
 
 STATUSES = ("active", "placeholder")
 DIFFICULTIES = tuple(ENV_KINDS)
@@ -79,12 +80,10 @@ class RunSpec:
     """The keys of `overrides` that depart from the paper rather than define the row (a row's `noaux_overrides`):
     the reports list them as deviations, where the row's own overrides are the experiment."""
 
-    def to_config(self, profile: str, **fields) -> TrainConfig:
-        """The run's TrainConfig under `profile` (extra `fields`, e.g. run_root, go to TrainConfig)."""
-        from emml.config.profiles import profile_config
-
-        return profile_config(
-            profile,
+    def to_config(self, profile: Profile | str, **fields) -> TrainConfig:
+        """The run's TrainConfig under `profile` (a name is looked up; extra `fields`, e.g. run_root, go to
+        TrainConfig)."""
+        return resolve_profile(profile).config(
             self.difficulty,
             self.overrides,
             model=self.model,
@@ -94,8 +93,9 @@ class RunSpec:
             **fields,
         )
 
-    def run_name(self, profile: str) -> str:
-        return run_name(self.to_config(profile))
+    def run_name(self, profile: Profile | str) -> str:
+        profile = resolve_profile(profile)
+        return run_name(self.to_config(profile), profile)
 
 
 @dataclass(frozen=True)
@@ -550,8 +550,9 @@ def _parse_transfer_rows(path: Path, data: dict, transfer: Transfer, dataset: st
 def _check_runs(path: Path, table: Table) -> None:
     """Two settings of one table may not share a run name (an override outside the name's fields would collide)."""
     seen: dict[str, tuple] = {}
+    paper = resolve_profile("paper")
     for spec in table.runs([0]):
-        name = spec.run_name("paper")
+        name = spec.run_name(paper)
         setting = (spec.row, sorted(spec.overrides.items()))
         if name in seen and seen[name] != setting:
             raise _err(path, "rows", f"rows {seen[name][0]!r} and {spec.row!r} give the same run name {name!r}")

@@ -8,7 +8,7 @@ from pathlib import Path
 from emml.config.schema import TrainConfig
 from emml.eval.diagnose import SCALARS
 from emml.report.curves import plot_run
-from emml.runs.rundir import run_name
+from emml.runs.naming import run_name
 from emml.runs.tracking import metric_history, portable, portable_uri, tracking_uri
 
 

@@ -9,11 +9,10 @@ A run lives in ``<run_root>/<table>/<run name>/``:
 - ``run.lock``: held while a process trains or re-scores it (emml/runs/runlock.py).
 
 Identity. What a run *is* is `TrainConfig.identity()`: every field but those of how it runs (`TrainConfig.RUNTIME`:
-device, threads, workers, roots, cadences, the frame target). Its name is `TrainConfig.spelled_name()` (the fields a
-reader looks for: model, difficulty, aux, tasks, shaping, precision, seed, profile), followed, when another
-identifying field differs from its profile's value, by those fields (`swept`): a sweep over any identifying
-field (``--set ppo.lr=...``) gets one run dir per value, and a rerun resumes only a run of the same identity
-(`check_resumable`). The results row, the MLflow tags and results.json name a run by `run_identity`.
+device, threads, workers, roots, cadences, the frame target). Its name is `emml.runs.naming.run_name` (the fields a
+reader looks for, then any other identifying field that differs from its profile's value): a sweep over any
+identifying field (``--set ppo.lr=...``) gets one run dir per value, and a rerun resumes only a run of the same
+identity (`check_resumable`). The results row, the MLflow tags and results.json name a run by `run_identity`.
 
 Importing this module imports no torch (reports read runs through it): checkpoints and models are loaded in the
 functions that need them.
@@ -21,7 +20,6 @@ functions that need them.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import subprocess
@@ -29,8 +27,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
-from emml.config.schema import SHARED_MODEL_OPTIONS, ModelConfig, TrainConfig, apply_overrides, named_options
+from emml.config.schema import TrainConfig, apply_overrides
 from emml.runs.diskspace import no_space_names
+from emml.runs.naming import flat, run_name
 
 CHECKPOINT = "checkpoint.pt"
 """The run's state (`save_checkpoint`): written every `checkpoint_every` updates, at a stop, and at the end."""
@@ -44,16 +43,6 @@ EVAL_SEED = 10_000
 ``eval_seed`` beside the score."""
 RUN_FILES = (CHECKPOINT, METRICS, RESULTS)
 """Files any of which makes a folder a run dir."""
-NAMED = ("table", "model", "aux", "seed", "profile", "precision", "env.difficulty", "env.tasks", "env.shaping",
-         "ppo.aux_balance")  # fmt: skip
-"""Identifying fields the run dir's path spells out (its table folder, `TrainConfig.spelled_name`): never repeated by
-`swept`; so are the model options declared with a name part (`named`)."""
-RESOLVED = ("env.vocabulary", "env.aux_words", "env.aux_labels")
-"""Identifying fields that the trainer resolves at start (a vocabulary source becomes its word list, the aux words
-are the dataset's, aux_labels follows aux): compared on resume, never part of the name (it would change when
-resolved)."""
-SWEPT_DIGEST_OVER = 48
-"""Characters above which the swept fields are named by a digest instead of spelled out."""
 
 
 def git_sha() -> str:
@@ -68,73 +57,6 @@ def git_sha() -> str:
 
 
 # --- identity ------------------------------------------------------------------------------------------------------
-def _flat(d: dict, prefix: str = "") -> dict:
-    """{'env': {'height': 60}} -> {'env.height': 60} (tuples as lists: a config read back from JSON has lists)."""
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, dict) and k in ("env", "ppo", "model_options"):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = list(v) if isinstance(v, tuple) else v
-    return out
-
-
-def _baseline(cfg: TrainConfig) -> dict:
-    """The flat identity of the run its profile would give (same model, difficulty, aux, seed): what `swept`
-    compares with. A profile that is not in reproduce/profiles.toml compares with TrainConfig's defaults."""
-    from emml.config.profiles import load_profiles, profile_config
-
-    if cfg.profile in load_profiles():
-        base = profile_config(cfg.profile, cfg.env.difficulty, model=cfg.model, aux=cfg.aux, seed=cfg.seed)
-    else:
-        base = TrainConfig(model=cfg.model, aux=cfg.aux, seed=cfg.seed, profile=cfg.profile)
-    return _flat(base.identity())
-
-
-def fusion_options(cfg: TrainConfig) -> type | None:
-    """The options class the run's model's fusion declares (`emml.models.Fusion.options`); None when `model_options`
-    sets none but the shared ones (`ModelConfig`), so that naming such a run reads no model registry (which imports
-    torch and loads the plugins)."""
-    if not set(cfg.model_options) - set(SHARED_MODEL_OPTIONS):
-        return None
-    from emml.models import fusion_options as declared  # the model registry: a plugin's model needs its plugin
-
-    return declared(cfg.model)
-
-
-def named(cfg: TrainConfig) -> tuple[str, ...]:
-    """The identifying fields (dotted) the run's name spells: `NAMED`, and the model options declared with a name
-    part (`emml.config.schema.model_option`), the shared ones and those of the model's fusion."""
-    options = [*named_options(ModelConfig)]
-    if (declared := fusion_options(cfg)) is not None:
-        options += named_options(declared)
-    return (*NAMED, *(f"model_options.{name}" for name in options))
-
-
-def swept(cfg: TrainConfig) -> dict:
-    """Identifying fields (dotted) that differ from the profile's value and that the readable name does not spell:
-    {field: value}, sorted. Empty for every run a table or profile declares as-is."""
-    base, own = _baseline(cfg), _flat(cfg.identity())
-    skip = set(named(cfg)) | set(RESOLVED)
-    return {k: own[k] for k in sorted(own) if k not in skip and own[k] != base.get(k)}
-
-
-def run_name(cfg: TrainConfig) -> str:
-    """The run's name: `TrainConfig.spelled_name()` (with the options the model's fusion declares), then
-    ``+field=value`` per `swept` field (a digest when long)."""
-    name, extra = cfg.spelled_name(fusion_options(cfg)), swept(cfg)
-    if not extra:
-        return name
-    spelled = "+".join(f"{k}={_short(v)}" for k, v in extra.items())
-    if len(spelled) > SWEPT_DIGEST_OVER or not all(c.isalnum() or c in "+=._-" for c in spelled):
-        spelled = "x" + hashlib.sha256(json.dumps(extra, sort_keys=True).encode()).hexdigest()[:8]
-    return f"{name}+{spelled}"
-
-
-def _short(v) -> str:
-    return f"{v:g}" if isinstance(v, float) else str(v)
-
-
 def run_dir(cfg: TrainConfig) -> Path:
     """``<run_root>/<table>/<run name>`` (the run root relative to the project unless absolute)."""
     return project_path(cfg.run_root) / cfg.table / run_name(cfg)
@@ -213,9 +135,9 @@ def check_resumable(saved: dict, cfg: TrainConfig, path: Path) -> None:
     """A rerun resumes only the same experiment: identifying fields that differ fail by name before anything is
     touched. ``saved``: the checkpoint's config (`TrainConfig.to_dict`); a field added since it was written reads as
     its default (the run it describes is unchanged); how the run runs (`TrainConfig.RUNTIME`) may differ."""
-    defaults = _flat(TrainConfig().identity())
-    old = {**defaults, **{k: v for k, v in _flat(saved).items() if k.split(".")[0] not in TrainConfig.RUNTIME}}
-    new = _flat(cfg.identity())
+    defaults = flat(TrainConfig().identity())
+    old = {**defaults, **{k: v for k, v in flat(saved).items() if k.split(".")[0] not in TrainConfig.RUNTIME}}
+    new = flat(cfg.identity())
     diffs = [k for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]  # an option set on one side only:
     # absent (None) on the other
     if diffs:

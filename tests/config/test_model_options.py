@@ -14,9 +14,8 @@ from emml.config.schema import (
     TrainConfig,
     check_model_options,
     model_option,
-    named_options,
-    option_name_parts,
 )
+from emml.runs.naming import named_options, option_name_parts, spelled_name
 
 
 @dataclass
@@ -63,8 +62,8 @@ def test_the_configs_leave_a_models_own_options_to_its_declaration():
     assert "ga1" not in SHARED_MODEL_OPTIONS and "hidden" in SHARED_MODEL_OPTIONS and "name" not in SHARED_MODEL_OPTIONS
     cfg = TrainConfig(model_options={"gain": 2}).validate()  # the model's fusion declares it or not: the registry's
     with pytest.raises(ValueError, match=r"spelled_name: model options \['gain'\] need the declared options"):
-        cfg.spelled_name(None)
-    assert cfg.spelled_name(Mine) == "dual_attention-easy-noaux-s0-paper"  # declared by none: spelled by none
+        spelled_name(cfg, None)
+    assert spelled_name(cfg, Mine) == "dual_attention-easy-noaux-s0-paper"  # declared by none: spelled by none
     with pytest.raises(ValueError, match="model_options: 'name' is not a model option name"):
         TrainConfig(model_options={"name": "ga"}).validate()
     with pytest.raises(AttributeError, match="ModelConfig of model 'dual_attention' has no option 'ga1'"):

@@ -6,7 +6,7 @@ from typer.testing import CliRunner
 import emml.config.profiles
 from emml.cli import app
 from emml.config.profiles import PROFILES_FILE, ProfileError, load_profiles, profile_config
-from emml.runs.rundir import run_name
+from emml.runs.naming import run_name
 
 
 def test_the_committed_profiles_load_and_keep_their_types():

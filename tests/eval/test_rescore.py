@@ -13,8 +13,9 @@ from emml.eval.evaluate import evaluate_checkpoint
 from emml.eval.rescore import NoProvenance, NotFinished, rescore
 from emml.rl.trainer import train
 from emml.runs.checkpoint import load_checkpoint, save_checkpoint
+from emml.runs.naming import run_name
 from emml.runs.results import read_results
-from emml.runs.rundir import CHECKPOINT, RESULTS, results_csv, run_name
+from emml.runs.rundir import CHECKPOINT, RESULTS, results_csv
 
 
 def _finished_run(tracking, seed: int = 0):

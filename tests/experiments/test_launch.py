@@ -9,7 +9,8 @@ import pytest
 
 from emml.experiments.launch import run_states, run_table
 from emml.runs.checkpoint import save_checkpoint
-from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir, run_name
+from emml.runs.naming import run_name
+from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir
 from emml.runs.tracking import Tracker, find_runs
 
 PROFILE = "smoke"  # one seed: table3 has 16 runs
@@ -260,3 +261,48 @@ def test_a_launch_waits_for_a_run_left_training_by_a_killed_launcher(tracking):
     said.clear()
     _await_left_behind([cfg], said.append, wait_s=30)  # nothing held: no wait, nothing said
     assert said == []
+
+
+def test_a_launch_looks_its_profile_up_once_and_builds_each_run_once(tracking, monkeypatch):
+    """The profile is resolved where the launch starts; planning its 16 runs (each config, name and state) reads
+    no profiles file again, and each run's config is built once."""
+    import emml.config.profiles as profiles
+    import emml.experiments.launch as launcher
+    import emml.runs.naming as naming
+
+    profile, table = profiles.resolve_profile(PROFILE), launcher.load_table("table3")  # reading a table checks it
+    lookups, built = [], []
+    real_config = profiles.Profile.config
+
+    def counted(*a, **kw):
+        lookups.append(a)
+        return {}
+
+    def config(self, *a, **kw):
+        built.append(kw.get("model"))
+        return real_config(self, *a, **kw)
+
+    monkeypatch.setattr(profiles, "load_profiles", counted)
+    monkeypatch.setattr(naming, "load_profiles", counted)
+    monkeypatch.setattr(profiles.Profile, "config", config)
+    monkeypatch.setattr(launcher, "load_table", lambda name: table)
+    runs = launcher.plan_runs("table3", profile, {"run_root": tracking["run_root"], "results_root": tracking["results_root"]})
+    assert len(runs) == 16 and lookups == []
+    assert len(built) == 2 * 16  # each run's config, and the profile's own run beside it (what its name compares to)
+    monkeypatch.undo()
+    assert [r.name for r in runs] == [run_name(r.cfg) for r in runs] and {r.state for r in runs} == {"missing"}
+
+
+def test_a_launch_may_set_only_how_runs_run(tracking):
+    """Overrides on top of a table's runs (a campaign step's frames and cadences) keep each run the table's; any
+    other field is refused by name before any run starts."""
+    from emml.config.profiles import resolve_profile
+    from emml.experiments.launch import plan_runs
+
+    profile = resolve_profile(PROFILE)
+    plain, measured = (plan_runs("table3", profile, overrides=o) for o in (None, {"eval_every": 0, "frames": 2048}))
+    assert [r.name for r in measured] == [r.name for r in plain]
+    assert {(r.cfg.frames, r.cfg.eval_every) for r in measured} == {(2048, 0)}
+    assert {r.spec.overrides.get("frames") for r in measured} == {2048}
+    with pytest.raises(ValueError, match=r"overrides ppo\.lr: a launch may set only how a table's runs run \(frames,"):
+        launch(tracking, jobs=1, overrides={"ppo.lr": 0.1, "frames": 2048})

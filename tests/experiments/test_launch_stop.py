@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from emml.runs.rundir import run_name
+from emml.runs.naming import run_name
 
 LAUNCH = textwrap.dedent(
     """

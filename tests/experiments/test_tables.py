@@ -9,7 +9,7 @@ import pytest
 from emml.config.paths import REPRODUCE_DIR
 from emml.experiments.tables import list_tables, load_table, table_names, table_ref
 from emml.report.tables import paper_numbers
-from emml.runs.rundir import run_name
+from emml.runs.naming import run_name
 
 SEEDS = [0, 1, 2]
 

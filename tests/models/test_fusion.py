@@ -267,7 +267,7 @@ def test_answer_gate_frames_keeps_the_answer_loss_to_the_gate_until_the_run_has_
 def test_answer_gate_frames_is_checked_named_and_told_by_the_model():
     from emml.config.profiles import profile_config
     from emml.models import build_model, model_config
-    from emml.runs.rundir import run_name
+    from emml.runs.naming import run_name
 
     cfg = profile_config("smoke", "easy", {"model_options.answer_gate_frames": 300_000})
     assert run_name(cfg) == "dual_attention-easy-noaux-warm300000-s0-smoke"

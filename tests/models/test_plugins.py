@@ -232,7 +232,7 @@ def test_a_plugin_declares_its_options_in_its_file(sandbox, toy, monkeypatch):
     from emml.config.schema import TrainConfig, apply_overrides
     from emml.models import MODELS, model_config, model_options
     from emml.rl.hardware import check_runnable
-    from emml.runs.rundir import run_name
+    from emml.runs.naming import run_name
 
     monkeypatch.setenv(plugins.ENV_VAR, str(toy))
     assert model_options("toy")["gain"] == 1.0 and model_options("toy_no_indicator")["task_indicator"] is False

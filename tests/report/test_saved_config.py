@@ -8,7 +8,8 @@ import torch
 
 from emml.config.profiles import profile_config
 from emml.report.saved_config import backfill_config, run_dirs
-from emml.runs.rundir import run_name, saved_config
+from emml.runs.naming import run_name
+from emml.runs.rundir import saved_config
 
 
 def fixture_run(root, finished=True, results=True, **fields):

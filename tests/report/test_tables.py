@@ -10,7 +10,7 @@ import pytest
 from emml.config.profiles import profile_seeds
 from emml.experiments.tables import load_table
 from emml.report.tables import MISSING, report_table, reports_dir
-from emml.runs.rundir import run_name
+from emml.runs.naming import run_name
 
 PROFILE = "quick"  # three seeds
 

@@ -10,7 +10,8 @@ from pathlib import Path
 from emml.config.paths import project_root
 from emml.config.profiles import profile_config
 from emml.config.schema import TrainConfig
-from emml.runs.rundir import CHECKPOINT, config_of, path_of, run_dir, run_name, swept, variant_dir
+from emml.runs.naming import run_name, swept
+from emml.runs.rundir import CHECKPOINT, config_of, path_of, run_dir, variant_dir
 
 
 def test_every_committed_run_dir_keeps_its_name():
