@@ -13,7 +13,7 @@ from pathlib import Path
 import tomllib
 
 from emml.config.paths import REPRODUCE_DIR
-from emml.experiments.tables import load_table
+from emml.experiments.tables import METRICS, load_table
 
 CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"
 KINDS = ("best", "below", "level", "at_least", "aux_helps", "faster", "diagnostic", "harder")
@@ -40,7 +40,7 @@ KEYS = (
     "key",
 )
 WHERE_KEYS = ("difficulty", "aux")
-CURVE_METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
+CURVE_METRICS = METRICS
 """What a 'faster' claim may read: the results columns whose greedy evaluation the trainer logs periodically
 (`eval/<metric>` in metrics.csv), whatever the table's own columns."""
 MARKS = ("chance", "0.5", "0.9")

@@ -28,6 +28,14 @@ METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
 """Results columns a cell may read (written by the trainer's greedy evaluation)."""
 TRANSFER_METRICS = ("sgn_transfer",)
 """What a transfer table's cells read: the mean of their instructions' `sgn_transfer:<instruction>` columns."""
+METRIC_LABELS = {
+    "sgn_test": "SGN test",
+    "eqa_test": "EQA test",
+    "sgn_train": "SGN train",
+    "eqa_train": "EQA train",
+    "sgn_transfer": "SGN",
+}
+"""How the reports head each metric's column (the paper's Tables 2-5: 'SGN', 'EQA'; train and test apart)."""
 TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows", "transfer")
 COLUMN_KEYS = ("difficulties", "aux", "metrics")
 ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "noaux_overrides", "from_table")

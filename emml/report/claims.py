@@ -491,7 +491,7 @@ def decide(claim, profile: str, results_root: str | Path | None = None, run_root
 
 def _metric_label(claim, metric: str) -> str:
     """How the evidence names what it reads: 'SGN test', 'SGN train: frames to leave chance', 'diag/detector_ap'."""
-    from emml.report.tables import METRIC_LABELS
+    from emml.experiments.tables import METRIC_LABELS
 
     if claim.kind == "diagnostic":
         return claim.key
@@ -545,7 +545,7 @@ def _involved(claim, table) -> set[str]:
 
 def _checks(claim, table, scores: dict[tuple, list[Score]]) -> list[Check]:
     from emml.config.env_kinds import env_label
-    from emml.report.tables import METRIC_LABELS
+    from emml.experiments.tables import METRIC_LABELS
 
     out = []
     keys = sorted({(d, a, m) for (_, d, a, m) in scores}, key=lambda k: (claim.metrics.index(k[2]), k[0], not k[1]))
@@ -608,7 +608,7 @@ def _checks(claim, table, scores: dict[tuple, list[Score]]) -> list[Check]:
 
 def _tag(check: Check, setting: str, metric: str, subject: str) -> Check:
     """The check with its setting, metric and higher row named (the phrase groups by setting)."""
-    from emml.report.tables import METRIC_LABELS
+    from emml.experiments.tables import METRIC_LABELS
 
     check.setting, check.metric, check.subject = setting, METRIC_LABELS.get(metric, metric), subject
     return check

@@ -14,13 +14,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from emml.experiments.tables import METRICS
+
 CHANCE = {"sgn": 0.2, "eqa": 1 / 3}
 """Chance per task: SGN, walking to one of the 5 objects (docs/fidelity.md); EQA, the paper's Text only row, which
 sees no frame, scores 0.33 in every column of its Table 2 (ours reads the test split's answer priors: 0.45)."""
 LEAVE = 0.1
 """A run has left chance when its accuracy is above chance + LEAVE (SGN 0.30, EQA 0.43): the binomial noise of a 500
 episode evaluation is about 0.02, of a 100 episode one about 0.045."""
-CURVE_METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
+CURVE_METRICS = METRICS
 """The results columns whose greedy evaluation is logged periodically as `eval/<metric>`."""
 MARKS = ("chance", "0.5", "0.9")
 """The crossings per metric: leaving chance (above chance + LEAVE), reaching 0.5, reaching 0.9."""
@@ -119,7 +121,7 @@ def frames_text(frames: int | None, last: int) -> str:
 def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS) -> str:
     """The page's sample-efficiency section: one line per run, per metric its three crossings."""
     from emml.config.env_kinds import env_label
-    from emml.report.tables import METRIC_LABELS
+    from emml.experiments.tables import METRIC_LABELS
 
     runs = [r for r in runs]
     if not runs:

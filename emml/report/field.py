@@ -76,7 +76,7 @@ def setting_data(table, cells) -> list[dict]:
 def plot_field(table, profile: str, cells, out: Path) -> list[Path]:
     """The three figures per setting in one figure (a row of panels per setting); [] for a transfer table (every
     row reads the same runs) or when no row has runs."""
-    from emml.report.tables import METRIC_LABELS
+    from emml.experiments.tables import METRIC_LABELS
 
     if table.transfer is not None:
         return []

@@ -19,7 +19,7 @@ import pandas as pd
 
 from emml.config.env_kinds import ENV_KINDS, env_label
 from emml.config.paths import REPRODUCE_DIR, project_path, project_root
-from emml.experiments.tables import Table, list_tables, load_table, table_ref
+from emml.experiments.tables import METRIC_LABELS, Table, list_tables, load_table, table_ref
 from emml.runs.results import read_results
 
 MISSING = "—"
@@ -28,13 +28,6 @@ EXTRA_MARK = "†"
 DIFFICULTY_LABELS = {k.name: k.label for k in ENV_KINDS.values()}
 """How a difficulty column is headed (emml/config/env_kinds.py)."""
 AUX_LABELS = {False: "No Aux", True: "Aux"}
-METRIC_LABELS = {
-    "sgn_test": "SGN test",
-    "eqa_test": "EQA test",
-    "sgn_train": "SGN train",
-    "eqa_train": "EQA train",
-    "sgn_transfer": "SGN",
-}
 
 
 @dataclass
