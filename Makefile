@@ -51,13 +51,15 @@ ui: setup
 	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///mlflow.db
 
 # The paper's tables (reproduce/tableN.toml): every run under PROFILE, skipping finished ones, resuming the rest.
-# BACKEND=slurm submits one submitit job per run (pip install -e ".[slurm]"; PARTITION, TIME_MIN, GPUS below).
+# BACKEND=slurm submits submitit jobs of PACK runs each, requeued at TIME_MIN until their runs finish
+# (pip install -e ".[slurm]"; PARTITION, TIME_MIN, GPUS, PACK below; README "On a Slurm cluster").
 PARTITION ?=
 TIME_MIN ?= 1440
 GPUS ?= 0
+PACK ?= 1
 # ONLY="difficulty=easy seed=0" trains a subset of a table's runs (emml run --only)
 ONLY ?=
-RUN_OPTS = --profile $(PROFILE) --backend $(BACKEND) $(if $(PARTITION),--partition $(PARTITION)) --time-min $(TIME_MIN) --gpus $(GPUS) $(foreach o,$(ONLY),--only $(o))
+RUN_OPTS = --profile $(PROFILE) --backend $(BACKEND) $(if $(PARTITION),--partition $(PARTITION)) --time-min $(TIME_MIN) --gpus $(GPUS) --pack $(PACK) $(foreach o,$(ONLY),--only $(o))
 TABLES := table2 table3 table4 table5
 
 table2: setup

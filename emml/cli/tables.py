@@ -61,15 +61,18 @@ def run_table(
         "(reproduce/experiments/<name>.toml), or a table file of your own (x.toml).",
     ),
     profile: str = profile_option(),
-    backend: Backend = typer.Option("local", help="local: a process pool here; slurm: one submitit job per run."),
+    backend: Backend = typer.Option(
+        "local", help="local: a process pool here; slurm: submitit jobs of --pack runs each, requeued at their limit."
+    ),
     jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores; cuda: and what GPU memory holds)."),
     device: str = device_option(),
     run_root: str = typer.Option(None, help=RUN_ROOT_HELP),
     results_root: str = typer.Option(None, help=RESULTS_ROOT_HELP),
     partition: str = typer.Option(None, help="Slurm partition."),
-    time_min: int = typer.Option(24 * 60, help="Slurm time limit per run, minutes."),
+    time_min: int = typer.Option(24 * 60, help="Slurm time limit per job, minutes (then it saves and requeues)."),
     gpus: int = typer.Option(0, help="GPUs per Slurm job."),
-    cpus: int = typer.Option(8, help="CPUs per Slurm job."),
+    cpus: int = typer.Option(8, help="CPUs per Slurm job (shared by its --pack runs)."),
+    pack: int = typer.Option(1, min=1, help="Slurm: runs per job, side by side on its GPU (e.g. 8 on one H100)."),
     wait: bool = typer.Option(False, help="Slurm: wait for the jobs to end."),
     only: list[str] = typer.Option(
         [], "--only", help="Only the runs whose FIELD=VALUE (row, model, difficulty, aux, seed), e.g. difficulty=easy."
@@ -108,6 +111,7 @@ def run_table(
             device=device,
             partition=partition,
             time_min=time_min,
+            pack=pack,
             gpus=gpus,
             cpus=cpus,
             wait=wait,

@@ -9,16 +9,15 @@ an interrupted run from its checkpoint and re-records a finished run missing fro
 from __future__ import annotations
 
 import copy
-import multiprocessing
 import os
-import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 from emml.config.paths import project_path
 from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides, check_choice
+from emml.experiments.pool import STOP_GRACE_S, LaunchReport, PlannedRun, collect, run_pool, train_one
 from emml.experiments.tables import RunSpec, Table, load_table
 from emml.runs.naming import run_name
 
@@ -44,50 +43,6 @@ def default_jobs(device: str = "cpu") -> int:
         free, _ = torch.cuda.mem_get_info(torch.device(device))
         jobs = max(1, min(jobs, free // GPU_MEMORY_PER_RUN))
     return jobs
-
-
-@dataclass
-class LaunchReport:
-    """What `run_table` did."""
-
-    table: str
-    profile: str
-    backend: str
-    total: int = 0
-    """Runs the table declares under the profile."""
-    skipped: list[str] = field(default_factory=list)
-    """Already finished (recorded in the results CSV): not launched."""
-    done: list[str] = field(default_factory=list)
-    """Trained (or resumed, or re-recorded) to the end in this launch."""
-    failed: dict[str, str] = field(default_factory=dict)
-    """Run name → error (the others went on)."""
-    submitted: list[str] = field(default_factory=list)
-    """Slurm job ids (backend slurm)."""
-    parent_run_id: str | None = None
-    placeholder: bool = False
-    """The table is a placeholder: nothing to run."""
-    stopped: str | None = None
-    """Why the launch stopped early (Ctrl-C, SIGTERM): no queued run started, the runs in progress ended KILLED;
-    None when it ran to the end."""
-    unfinished: list[str] = field(default_factory=list)
-    """After a stop: the runs it left unfinished, stopped or never started (the next launch trains them)."""
-    busy: dict[str, str] = field(default_factory=dict)
-    """Run name → who trains it: held by another live process (its run lock), so not trained here, nor failed."""
-
-
-@dataclass(frozen=True)
-class PlannedRun:
-    """One run of a launch: its config built and its name spelled once (`plan_runs`), then handed to whoever trains
-    it (this process, a pool worker, a Slurm job) as it is."""
-
-    spec: RunSpec
-    """What the table (and a campaign step's overrides) declares."""
-    cfg: TrainConfig
-    """Its TrainConfig under the launch's profile, with the launch's run_root, results_root, device, threads."""
-    name: str
-    """Its run name (`emml.runs.naming.run_name`)."""
-    state: str
-    """Its launcher state (STATES)."""
 
 
 def plan_runs(
@@ -199,22 +154,6 @@ def _roots(run_root: str | None, results_root: str | None) -> dict:
     return {k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None}
 
 
-def _train_one(run: PlannedRun, parent_run_id: str | None, train_fn: Callable | None) -> str:
-    """Worker body (a pool process, a Slurm job or in-process): train one run; returns its run name."""
-    from emml.envs.engine import install_signal_handlers
-
-    install_signal_handlers()
-    if train_fn is None:
-        from emml.rl.trainer import train as train_fn
-    cfg = run.cfg.validate()
-    train_fn(cfg, quiet=True, parent_run_id=parent_run_id)
-    if run.spec.transfer is not None:  # Table 4: append the detectors and score the test instructions (§5.4)
-        from emml.eval.transfer import record_transfer
-
-        record_transfer(cfg, run.spec.transfer.words, run.spec.instructions, run.spec.transfer.detector)
-    return run.name
-
-
 def run_table(
     name: str,
     profile: Profile | str,
@@ -224,7 +163,7 @@ def run_table(
     results_root: str | None = None,
     device: str = "cpu",
     partition: str | None = None,
-    time_min: int = 24 * 60,
+    time_min: float = 24 * 60,
     gpus: int = 0,
     cpus: int = 8,
     slurm_cluster: str = "slurm",
@@ -233,6 +172,8 @@ def run_table(
     log: Callable[[str], None] = print,
     only: dict | None = None,
     overrides: dict | None = None,
+    pack: int = 1,
+    signal_delay_s: int = 120,
 ) -> LaunchReport:
     """Train every unfinished run of table `name` under `profile` (`only`: those whose RunSpec fields match, e.g.
     {'difficulty': 'easy', 'seed': '0'}: a table's Easy column on a machine that cannot afford Hard; a list of values
@@ -240,14 +181,18 @@ def run_table(
     apply to every run on top of its table's: a campaign's step trains the paper profile to fewer frames.
 
     backend 'local': `jobs` concurrent runs (default: half the cores), each in its own forkserver process with
-    cores // jobs torch threads; jobs=1 runs in this process. backend 'slurm': one submitit job per run on
-    `partition` with `time_min` minutes, `gpus` GPUs and `cpus` CPUs each (`slurm_cluster`='local'/'debug' runs
-    submitit's local executors, for tests); returns after submission unless `wait`. `train_fn` replaces the
+    cores // jobs torch threads; jobs=1 runs in this process. backend 'slurm' (emml/experiments/slurm.py): one
+    submitit job per `pack` runs on `partition` with `time_min` minutes, `gpus` GPUs and `cpus` CPUs each (its runs
+    side by side, cpus // pack threads each), requeued at its time limit (USR2 `signal_delay_s` before it) until its
+    runs finish (`slurm_cluster`='local'/'debug' runs submitit's local executors, for tests); returns after
+    submission unless `wait`. `train_fn` replaces the
     trainer (tests; must be picklable).
     """
     from emml.runs.tracking import parent_run, set_run_status
 
     check_choice("backend", backend, BACKENDS)
+    if type(pack) is not int or pack < 1:
+        raise ValueError(f"pack={pack!r} must be a whole number of runs per Slurm job, >= 1")
     profile = resolve_profile(profile)  # the one lookup: every run's config and name read this value
     table = load_table(name)
     report = LaunchReport(name, profile.name, backend)
@@ -261,6 +206,8 @@ def run_table(
     fields = {**_roots(run_root, results_root), "device": device}
     if backend == "local" and jobs > 1:
         fields["threads"] = max(1, (os.cpu_count() or 1) // jobs)
+    if backend == "slurm":  # a job's runs share its CPUs (the node may have more than the job holds)
+        fields["threads"] = max(1, cpus // pack)
     runs = plan_runs(name, profile, fields, only, overrides)
     report.total = len(runs)
     todo = [run for run in runs if run.state != "finished"]
@@ -278,21 +225,38 @@ def run_table(
     ensure_store()  # a new store's tables made once, under a lock, whoever starts beside this launch
     tags = {"table": name, "profile": profile.name}
     report.parent_run_id = parent_run(name, f"{name}-{profile.name}", tags)
-    args = [(run, report.parent_run_id, train_fn) for run in todo]
     if backend == "slurm":
         folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
-        return _submit(report, args, folder, partition, time_min, gpus, cpus, slurm_cluster, wait, log)
+        from emml.experiments.slurm import submit
+
+        return submit(
+            report,
+            todo,
+            report.parent_run_id,
+            train_fn,
+            folder,
+            pack,
+            partition,
+            time_min,
+            gpus,
+            cpus,
+            slurm_cluster,
+            wait,
+            log,
+            signal_delay_s,
+        )
     set_run_status(report.parent_run_id, "RUNNING")
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()  # SIGTERM/SIGHUP raise SystemExit here as Ctrl-C raises KeyboardInterrupt
+    args = [(run, report.parent_run_id, train_fn) for run in todo]
     try:
         _await_left_behind([run.cfg for run in todo], log)
         if jobs == 1:
             for a in args:
-                _collect(report, a[0].name, lambda a=a: _train_one(*a), log)
+                collect(report, a[0].name, lambda a=a: train_one(*a), log)
         else:
-            _pool(report, args, jobs, log)
+            run_pool(report, args, jobs, log)
     except (KeyboardInterrupt, SystemExit) as e:  # stop: the parent run ends KILLED, the caller says how to resume
         set_run_status(report.parent_run_id, "KILLED")
         finished = set(report.done) | set(report.failed)
@@ -306,9 +270,6 @@ def run_table(
     return report
 
 
-STOP_GRACE_S = 8.0
-"""Seconds the pool's workers get to end their runs (checkpoint, MLflow run KILLED, engines) after a stop, before
-they are killed; a second Ctrl-C kills them at once."""
 LEFT_BEHIND_WAIT_S = STOP_GRACE_S + 12.0
 """Seconds a launch waits for the runs it is to train that another process still holds: a run process whose
 launcher was killed outright saves and ends within `STOP_GRACE_S` of noticing (`_watch_launcher`), and the rerun
@@ -336,132 +297,6 @@ def _await_left_behind(cfgs: list, log, wait_s: float | None = None) -> None:
         held = {d: who for d, who in held.items() if holder(d) is not None}
 
 
-def _pool(report: LaunchReport, args: list, jobs: int, log) -> None:
-    """Train `args`, at most `jobs` at a time, each run in a fresh forkserver process (nothing is queued in a worker
-    ahead of time, so a stop starts nothing more). On a stop (KeyboardInterrupt, SystemExit) every running child
-    gets SIGTERM (its run ends KILLED, its engines by pid) and those alive after STOP_GRACE_S, or at a second
-    Ctrl-C, are killed."""
-    from multiprocessing.connection import wait
-
-    from emml.envs.engine import private_mp_tempdir
-
-    private_mp_tempdir()
-    ctx = multiprocessing.get_context("forkserver")
-    queue, running = list(args), {}
-    # the lifeline: only this process holds its writing end, so every child sees it close however this process
-    # ends, `kill -9` included, and ends its run (`_watch_launcher`) instead of training on without a launcher
-    lifeline, alive = ctx.Pipe(duplex=False)
-    try:
-        while queue or running:
-            while queue and len(running) < jobs:
-                a = queue.pop(0)
-                receive, send = ctx.Pipe(duplex=False)
-                child = ctx.Process(target=_child, args=(send, a, lifeline), name=f"emml-{a[0].name}")
-                child.start()
-                send.close()
-                running[child.sentinel] = (child, a, receive)
-            for sentinel in wait(list(running)):
-                child, a, receive = running.pop(sentinel)
-                child.join()
-                outcome = _received(receive, child)
-                _collect(report, a[0].name, lambda outcome=outcome: _outcome(*outcome), log)
-    except BaseException:
-        _end_workers([child for child, _, _ in running.values()])
-        raise
-    finally:
-        alive.close()
-        lifeline.close()
-
-
-def _child(send, a, lifeline=None) -> None:
-    """A run's process: Ctrl-C is left to the launcher (which stops children by SIGTERM), and so is its life (the
-    run ends when the launcher does, `_watch_launcher`); the outcome goes back as ('done', run name), ('stopped',
-    why), ('busy', who holds the run) or ('failed', error and traceback)."""
-    import signal
-
-    from emml.runs.runlock import RunLocked
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if lifeline is not None:
-        _watch_launcher(lifeline)
-    try:
-        outcome = ("done", _train_one(*a))
-    except (KeyboardInterrupt, SystemExit) as e:
-        outcome = ("stopped", type(e).__name__)
-    except RunLocked as e:
-        outcome = ("busy", str(e))
-    except BaseException as e:  # noqa: BLE001 - reported to the launcher, which goes on with the table
-        outcome = ("failed", f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=3)}")
-    try:
-        send.send(outcome)
-    except OSError:  # the launcher is gone (killed): nobody to tell, the run dir says it all
-        pass
-
-
-def _watch_launcher(lifeline) -> None:
-    """A daemon thread that waits for the launcher's end (the lifeline's writing end closed: its process ended,
-    however), then stops this run as a stop from the launcher would: SIGTERM to itself (the run saves its finished
-    updates, ends KILLED in MLflow, its engines and workers end), and SIGKILL after `STOP_GRACE_S` if it has not
-    ended by then. Its run lock goes with it, and a rerun of the launch resumes the run."""
-    import signal
-    import threading
-    import time
-
-    def watch() -> None:
-        try:
-            lifeline.recv()  # nothing is ever sent: returns only by EOF
-        except (EOFError, OSError):
-            pass
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(STOP_GRACE_S)
-        os.kill(os.getpid(), signal.SIGKILL)
-
-    threading.Thread(target=watch, name="emml-launcher-watch", daemon=True).start()
-
-
-def _received(receive, child) -> tuple[str, str]:
-    """What a finished child sent, or ('failed', why) when it died without sending (killed, or dead before its
-    target ran: the pipe is then at its end, which `poll` also reports as readable)."""
-    try:
-        if receive.poll():
-            return receive.recv()
-    except (EOFError, OSError):
-        pass
-    return ("failed", f"its process died (exit {child.exitcode})")
-
-
-def _outcome(kind: str, detail: str) -> str:
-    from emml.runs.runlock import RunLocked
-
-    if kind == "stopped":
-        raise KeyboardInterrupt
-    if kind == "busy":
-        raise RunLocked(detail)
-    if kind == "failed":
-        raise RuntimeError(detail)
-    return detail
-
-
-def _end_workers(workers: list) -> None:
-    """SIGTERM to each live worker, a grace period to end its run, then SIGKILL (a second Ctrl-C: at once)."""
-    import signal
-    import time
-
-    for w in workers:
-        if w.is_alive():
-            os.kill(w.pid, signal.SIGTERM)
-    try:
-        deadline = time.monotonic() + STOP_GRACE_S
-        for w in workers:
-            w.join(max(0.0, deadline - time.monotonic()))
-    except KeyboardInterrupt:
-        pass
-    for w in workers:
-        if w.is_alive():
-            w.kill()
-            w.join(1.0)
-
-
 def _signal_name(e: SystemExit) -> str:
     import signal
 
@@ -469,47 +304,6 @@ def _signal_name(e: SystemExit) -> str:
         return signal.Signals(int(e.code) - 128).name
     except (TypeError, ValueError):
         return str(e.code)
-
-
-def _collect(report: LaunchReport, rname: str, result: Callable[[], str], log) -> None:
-    """Record the outcome of run ``rname``; a failure is kept and the launch goes on."""
-    from emml.runs.runlock import RunLocked
-
-    try:
-        result()
-    except RunLocked as e:  # another live process trains it: not this launch's run to train, nor a failure
-        report.busy[rname] = str(e)
-        log(f"  not trained here: {e}")
-        return
-    except Exception as e:  # noqa: BLE001 - one failed run must not stop the table
-        report.failed[rname] = f"{type(e).__name__}: {e}"
-        log(f"  FAILED {rname}: {e}\n{traceback.format_exc(limit=3)}")
-        return
-    report.done.append(rname)
-    log(f"  done {rname} ({len(report.done)}/{report.total - len(report.skipped)})")
-
-
-def _submit(report, args, folder, partition, time_min, gpus, cpus, cluster, wait, log) -> LaunchReport:
-    """One submitit job per run (a Slurm job array), logs in `folder` (runs/slurm/<table>-<profile>/)."""
-    try:
-        import submitit
-    except ImportError as e:
-        raise ValueError("backend='slurm' needs submitit: pip install -e '.[slurm]'") from e
-    executor = submitit.AutoExecutor(folder=folder, cluster=cluster)
-    params = {"name": f"emml-{report.table}-{report.profile}", "timeout_min": time_min, "cpus_per_task": cpus}
-    if gpus:
-        params["gpus_per_node"] = gpus
-    if partition:
-        params["slurm_partition"] = partition
-    executor.update_parameters(**params)
-    with executor.batch():
-        jobs = [executor.submit(_train_one, *a) for a in args]
-    report.submitted = [str(j.job_id) for j in jobs]
-    log(f"submitted {len(jobs)} jobs to {cluster} (logs in {folder})")
-    if wait:
-        for job, a in zip(jobs, args):
-            _collect(report, a[0].name, job.result, log)
-    return report
 
 
 def stopped_line(report, again: str) -> str:

@@ -202,7 +202,7 @@ def test_a_child_that_died_without_sending_is_a_failed_run_not_a_broken_launch()
     import multiprocessing
     from types import SimpleNamespace
 
-    from emml.experiments.launch import _received
+    from emml.experiments.pool import _received
 
     receive, send = multiprocessing.Pipe(duplex=False)
     send.close()
@@ -286,7 +286,9 @@ def test_a_launch_looks_its_profile_up_once_and_builds_each_run_once(tracking, m
     monkeypatch.setattr(naming, "load_profiles", counted)
     monkeypatch.setattr(profiles.Profile, "config", config)
     monkeypatch.setattr(launcher, "load_table", lambda name: table)
-    runs = launcher.plan_runs("table3", profile, {"run_root": tracking["run_root"], "results_root": tracking["results_root"]})
+    runs = launcher.plan_runs(
+        "table3", profile, {"run_root": tracking["run_root"], "results_root": tracking["results_root"]}
+    )
     assert len(runs) == 16 and lookups == []
     assert len(built) == 2 * 16  # each run's config, and the profile's own run beside it (what its name compares to)
     monkeypatch.undo()
