@@ -98,7 +98,26 @@ def shm_files() -> list[str]:
             continue
         if "+viz_instance_id" in argv[:-1]:
             foreign.add(argv[argv.index("+viz_instance_id") + 1])
+    foreign |= _foreign_records()
     return [p for p in files if not any(i in p for i in foreign)]
+
+
+def _foreign_records() -> set[str]:
+    """Instance ids of engines another live process (a training, another xdist worker) started and has not ended
+    yet (`emml.envs.engine.records_dir`): an engine that crashed or was killed leaves its shm files until its owner
+    ends it, and they are that owner's, not this session's leftovers."""
+    from emml.envs.engine import records_dir
+
+    me, out = os.getpid(), set()
+    for record in records_dir().glob("*-*"):
+        try:
+            owner = int(record.name.split("-")[0])
+            instance = record.read_text().split()[1]
+        except (OSError, ValueError, IndexError):
+            continue
+        if instance != "-" and _stat(owner) and me not in _ancestors(owner):
+            out.add(instance)
+    return out
 
 
 @pytest.fixture

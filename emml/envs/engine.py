@@ -256,13 +256,14 @@ def _end(engine: Engine, grace: float = 1.0) -> None:
                 pass
         with _LOCK:
             _LIVE.pop(engine.pid, None)
-        _unrecord(engine.pid)
     if engine.instance_id:
         for path in glob.glob(os.path.join(SHM_DIR, f"ViZDoom*{engine.instance_id}")):
             try:
                 os.unlink(path)
             except FileNotFoundError:
                 pass
+    if engine.pid is not None:  # the record goes last: while an engine's shm files exist, its record names its owner
+        _unrecord(engine.pid)
 
 
 class RestartBudget:
