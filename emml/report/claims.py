@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emml.config.profiles import Profile, resolve_profile
 from emml.report.efficiency import CHANCE, LEAVE, MARK_LABELS, frames_text
 
 SUPPORTED, CONTRADICTED, BUDGET, UNTESTABLE = (
@@ -402,7 +403,6 @@ def decide(claim, profile: str, results_root: str | Path | None = None, run_root
     """The claim decided from the results of `profile` (results/<table>/<profile>.csv and the tables it borrows
     from), by the rules of RULES; 'faster' and 'diagnostic' claims read the runs' metrics.csv under `run_root`
     (default: the profile's)."""
-    from emml.config.profiles import profile_config, profile_seeds
     from emml.experiments.tables import load_table
     from emml.report.tables import build_cells, paper_numbers, table_results
 
@@ -410,9 +410,10 @@ def decide(claim, profile: str, results_root: str | Path | None = None, run_root
     results = table_results(table, profile, results_root)
     cells = build_cells(table, profile, results, paper_numbers(table.name))
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    runs = table.runs(profile_seeds(profile))
-    specs = {spec.run_name(profile): spec for spec in runs}
-    run_root = run_root if run_root is not None else profile_config(profile).run_root
+    prof = resolve_profile(profile)  # once: every run name below reads it
+    runs = table.runs(list(prof.seeds))
+    specs = {spec.run_name(prof): spec for spec in runs}
+    run_root = run_root if run_root is not None else prof.config().run_root
     curve = claim.kind in ("faster", "diagnostic")
     columns = set(table.metrics.values())
 
@@ -444,7 +445,7 @@ def decide(claim, profile: str, results_root: str | Path | None = None, run_root
                     value = float(row[m])
                 score = Score(name, int(row["seed"]), value, int(row["eval_episodes"]) * per, int(row["frames"]))
                 if curve:
-                    score = _curve_score(claim, m, specs[name], profile, run_root, score, row)
+                    score = _curve_score(claim, m, specs[name], prof, run_root, score, row)
                     if score is None:
                         missing.append(f"{name} (no complete metrics.csv here)")
                         continue
@@ -457,7 +458,7 @@ def decide(claim, profile: str, results_root: str | Path | None = None, run_root
                     shown[score.seed] = f"{value:.3f}"
                 found.append(score)
             scores[(c.row, c.difficulty, c.aux, m)] = found
-            declared = [s.run_name(profile) for s in table.cell_runs(c.row, c.difficulty, c.aux, c.metric, runs)]
+            declared = [s.run_name(prof) for s in table.cell_runs(c.row, c.difficulty, c.aux, c.metric, runs)]
             missing += [n for n in declared if n not in c.runs and n not in missing]
             evidence.append(
                 {
@@ -499,7 +500,7 @@ def _metric_label(claim, metric: str) -> str:
     return f"{label}: frames until it {MARK_LABELS[claim.mark]}" if claim.kind == "faster" else label
 
 
-def _curve_score(claim, metric: str, spec, profile: str, run_root, score: Score, row: dict) -> Score | None:
+def _curve_score(claim, metric: str, spec, profile: Profile, run_root, score: Score, row: dict) -> Score | None:
     """A run's number for a 'faster' claim (the frames at its first crossing of the mark, inf when it never crosses
     by its last evaluation) or a 'diagnostic' one (the key at its last evaluation), from its metrics.csv; None when
     the file is not here or stops short of the run's frames (a crossing after it cannot be ruled out)."""

@@ -11,6 +11,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from emml.config.profiles import resolve_profile  # noqa: E402
 from emml.report.savefig import save  # noqa: E402
 from emml.runs.tracking import metric_history  # noqa: E402
 
@@ -105,7 +106,7 @@ def plot_table(
     import matplotlib.transforms as mtransforms
     from matplotlib.lines import Line2D
 
-    from emml.config.profiles import profile_config, profile_seeds
+    from emml.config.profiles import profile_config
     from emml.experiments.tables import load_table
     from emml.report import deviations
     from emml.report.efficiency import chance
@@ -124,7 +125,8 @@ def plot_table(
     paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
     metrics = list(dict.fromkeys(table.metrics.values()))
     keys = list(dict.fromkeys(curve_key(m)[0] for m in metrics))
-    specs = table.runs(profile_seeds(profile))
+    prof = resolve_profile(profile)  # once: every run name below reads it
+    specs = table.runs(list(prof.seeds))
     cache: dict[str, dict] = {}
     drawn: dict = {}  # run name → RunSpec of every run with a curve in the figure
     panels: dict[tuple, list] = {}  # (metric, difficulty, aux) → [(row index, row, curves)]
@@ -139,7 +141,7 @@ def plot_table(
                             continue
                         if table.transfer is None and spec not in table.cell_runs(row, difficulty, aux, metric, specs):
                             continue  # DA Single-Task: its SGN-only run draws SGN, its EQA-only run EQA
-                        rname = spec.run_name(profile)
+                        rname = spec.run_name(prof)
                         if rname not in run_ids:
                             continue
                         if rname not in cache:

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml.config.env_kinds import env_label
+from emml.config.profiles import Profile
 from emml.experiments import fidelity
 
 SAVED, NO_CONFIG, REFERENCE, DECLARED = "saved", "no saved config", "reference", "declared"
@@ -34,7 +35,9 @@ class ShownRun:
     (reproduce/experiments/) set what the paper does not, and their reports name it."""
 
 
-def shown_run(spec, profile: str, run_root: str | Path, row: dict | None = None, declared: bool = False) -> ShownRun:
+def shown_run(
+    spec, profile: Profile | str, run_root: str | Path, row: dict | None = None, declared: bool = False
+) -> ShownRun:
     """A run of the registry with its config: from runs/<table>/<run>/results.json when there, else the config its
     RunSpec gives under ``profile`` (saying why). ``row``: its results CSV row, whose `eval_episodes` is the size
     of the evaluation its score came from (a re-scored run's differs from its config's)."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from emml.config.profiles import Profile, resolve_profile
 from emml.experiments.tables import METRICS
 
 CHANCE = {"sgn": 0.2, "eqa": 1 / 3}
@@ -81,7 +82,7 @@ def curves(path: Path) -> dict[str, list[tuple[int, float]]]:
     return {m: sorted(points.items()) for m, points in out.items()}
 
 
-def run_efficiency(spec, profile: str, run_root: str | Path) -> RunEfficiency:
+def run_efficiency(spec, profile: Profile | str, run_root: str | Path) -> RunEfficiency:
     """The crossings of one declared run (a RunSpec) from its run dir under `run_root`."""
     from emml.runs.rundir import METRICS, path_of
 
@@ -103,14 +104,10 @@ def run_efficiency(spec, profile: str, run_root: str | Path) -> RunEfficiency:
 
 def table_efficiency(table, profile: str, names: list[str], run_root: str | Path) -> list[RunEfficiency]:
     """The crossings of the named runs of `table` (the runs its page shows), in the table's run order."""
-    from emml.config.profiles import profile_seeds
-
+    prof = resolve_profile(profile)  # once: every run name below reads it
     wanted = set(names)
-    return [
-        run_efficiency(spec, profile, run_root)
-        for spec in table.runs(profile_seeds(profile))
-        if spec.run_name(profile) in wanted
-    ]
+    runs = table.runs(list(prof.seeds))
+    return [run_efficiency(spec, prof, run_root) for spec in runs if spec.run_name(prof) in wanted]
 
 
 def frames_text(frames: int | None, last: int) -> str:

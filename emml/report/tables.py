@@ -19,6 +19,7 @@ import pandas as pd
 
 from emml.config.env_kinds import ENV_KINDS, env_label
 from emml.config.paths import REPRODUCE_DIR, project_path, project_root
+from emml.config.profiles import resolve_profile
 from emml.experiments.tables import METRIC_LABELS, Table, list_tables, load_table, table_ref
 from emml.runs.results import read_results
 
@@ -80,7 +81,6 @@ def paper_numbers(name: str, directory: Path = REPRODUCE_DIR / "paper") -> pd.Da
 
 def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.DataFrame) -> list[Cell]:
     """Every cell of the table (the paper's cells for a placeholder table, with no runs of ours)."""
-    from emml.config.profiles import profile_seeds
 
     lookup = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper.itertuples()}
     by_name = results.set_index("run_name") if not results.empty else pd.DataFrame()
@@ -89,7 +89,8 @@ def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.Dat
         for r in paper.itertuples():
             cells.append(Cell(r.row, r.difficulty, r.aux, r.metric, 0, paper=r.value))
         return cells
-    runs = table.runs(profile_seeds(profile))
+    prof = resolve_profile(profile)  # once: every run name below reads it
+    runs = table.runs(list(prof.seeds))
     for row in table.rows:
         for difficulty, aux, metric in table.columns():
             specs = table.cell_runs(row.label, difficulty, aux, metric, runs)
@@ -98,7 +99,7 @@ def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.Dat
             )
             columns = table.cell_columns(row.label, metric)  # [metric], or a transfer row's instructions
             for spec in specs:
-                name = spec.run_name(profile)
+                name = spec.run_name(prof)
                 if name in by_name.index and set(columns) <= set(by_name.columns):
                     found = [by_name.at[name, c] for c in columns]
                     if all(pd.notna(v) for v in found):
@@ -211,24 +212,23 @@ def shown_runs(
 ) -> list:
     """The runs behind the table's cells with their configs (emml/report/deviations.py); every declared run when none
     has finished (its deviations as declared); [] for a placeholder."""
-    from emml.config.profiles import profile_config, profile_seeds
     from emml.report.deviations import shown_run
 
     if table.placeholder:
         return []
-    run_root = run_root if run_root is not None else profile_config(profile).run_root
-    specs = {spec.run_name(profile): spec for spec in table.runs(profile_seeds(profile))}
+    prof = resolve_profile(profile)  # once: every run name and declared config below reads it
+    run_root = run_root if run_root is not None else prof.config().run_root
+    specs = {spec.run_name(prof): spec for spec in table.runs(list(prof.seeds))}
     names = list(dict.fromkeys(name for c in cells for name in c.runs))
     if not names:
-        return [shown_run(spec, profile, run_root, declared=True) for spec in specs.values()]
+        return [shown_run(spec, prof, run_root, declared=True) for spec in specs.values()]
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    return [shown_run(specs[name], profile, run_root, rows.get(name)) for name in names]
+    return [shown_run(specs[name], prof, run_root, rows.get(name)) for name in names]
 
 
 def _run_names(table: Table, profile: str) -> set[str]:
-    from emml.config.profiles import profile_seeds
-
-    return {spec.run_name(profile) for spec in table.runs(profile_seeds(profile))}
+    prof = resolve_profile(profile)
+    return {spec.run_name(prof) for spec in table.runs(list(prof.seeds))}
 
 
 def _tex_escape(text: str) -> str:

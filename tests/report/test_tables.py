@@ -109,7 +109,13 @@ def test_one_seed_of_three_says_so_and_one_of_one_shows_the_value(tmp_path, monk
     fake_results("table3", tmp_path / "results", drop=tuple(f"da_no_sa-easy-aux-s{s}-quick" for s in (1, 2)))
     md = (report("table3", tmp_path), (tmp_path / "reports" / "table3-quick.md").read_text())[1]
     assert "0.10 (n=1/3)" in md
-    monkeypatch.setattr("emml.config.profiles.profile_seeds", lambda profile: [0])
+    import dataclasses
+
+    import emml.report.tables as tables_module
+    from emml.config.profiles import resolve_profile
+
+    monkeypatch.setattr("emml.config.profiles.profile_seeds", lambda profile: [0])  # a profile of one seed
+    monkeypatch.setattr(tables_module, "resolve_profile", lambda p: dataclasses.replace(resolve_profile(p), seeds=(0,)))
     rep = report("table3", tmp_path)
     assert all(c["n"] == 1 for c in rep["cells"])
     line = next(x for x in (tmp_path / "reports" / "table3-quick.md").read_text().splitlines() if "| w/o GA1" in x)
