@@ -230,21 +230,9 @@ def run_table(
         from emml.experiments.slurm import submit
 
         return submit(
-            report,
-            todo,
-            report.parent_run_id,
-            train_fn,
-            folder,
-            pack,
-            partition,
-            time_min,
-            gpus,
-            cpus,
-            slurm_cluster,
-            wait,
-            log,
-            signal_delay_s,
-        )
+            report, todo, report.parent_run_id, train_fn, folder, pack=pack, partition=partition, time_min=time_min,
+            gpus=gpus, cpus=cpus, cluster=slurm_cluster, wait=wait, log=log, signal_delay_s=signal_delay_s,
+        )  # fmt: skip
     set_run_status(report.parent_run_id, "RUNNING")
     from emml.envs.engine import install_signal_handlers
 
@@ -285,7 +273,7 @@ def _await_left_behind(cfgs: list, log, wait_s: float | None = None) -> None:
     from emml.runs.rundir import run_dir
     from emml.runs.runlock import describe, holder
 
-    held = {run_dir(c): holder(run_dir(c)) for c in cfgs}
+    held = {d: holder(d) for d in map(run_dir, cfgs)}
     held = {d: who for d, who in held.items() if who is not None and who.get("pid") != os.getpid()}
     if not held:
         return

@@ -10,6 +10,7 @@ import os
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from emml.config.schema import TrainConfig
 from emml.experiments.tables import RunSpec
@@ -57,6 +58,13 @@ class PlannedRun:
     """Its run name (`emml.runs.naming.run_name`)."""
     state: str
     """Its launcher state (STATES)."""
+
+    @property
+    def directory(self) -> Path:
+        """Its run dir (`emml.runs.rundir.path_of`: from the name already spelled, not spelled again)."""
+        from emml.runs.rundir import path_of
+
+        return path_of(self.cfg.run_root, self.cfg.table, self.name)
 
 
 STOP_GRACE_S = 8.0

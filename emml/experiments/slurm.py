@@ -40,10 +40,10 @@ class Pack:
     """The live run processes (sentinel → (process, args, pipe)): what `checkpoint` stops."""
 
     def __call__(self) -> dict:
-        from emml.runs.rundir import finished_run, run_dir
+        from emml.runs.rundir import finished_run
 
         report = LaunchReport("pack", "", "slurm")
-        todo = [run for run in self.runs if not finished_run(run_dir(run.cfg))]  # a requeued job: what is left
+        todo = [run for run in self.runs if not finished_run(run.directory)]  # a requeued job: what is left
         report.total = len(todo)
         parent = self.parent_run_id if self.store is None else None
         args = [(run, parent, self.train_fn, self.store) for run in todo]  # the job's own store: no other job writes it
@@ -153,9 +153,9 @@ def submit(
 def _import_finished(runs: list[PlannedRun], log) -> None:
     """The jobs' finished run dirs into the launcher's store (`emml import-runs`)."""
     from emml.runs.import_runs import import_runs
-    from emml.runs.rundir import finished_run, run_dir
+    from emml.runs.rundir import finished_run
 
-    dirs = [run_dir(run.cfg) for run in runs if finished_run(run_dir(run.cfg))]
+    dirs = [run.directory for run in runs if finished_run(run.directory)]
     if dirs:
         results = import_runs(dirs)
         log(f"imported {sum(r.outcome == 'imported' for r in results)} finished runs into this store")
