@@ -163,6 +163,7 @@ def bench_train_cmd(
     sets: list[str] = typer.Option([], "--set", help=SET_HELP),
     part: BenchPart = typer.Option("both", help="both: model-only, end-to-end and their ratio; or one of them."),
     stack: int = typer.Option(1, min=1, help="N seeds stacked in one model and process (vmap), vs one run."),
+    graphs: bool = typer.Option(False, "--graphs", help="One run plain, then as CUDA graphs (--runs N: captured)."),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """Training frames/s, model-only against end to end, in one run.
@@ -182,7 +183,21 @@ def bench_train_cmd(
         _fail(f"--part {part!r}: allowed values are {', '.join(PARTS)}")
     _use_tcmalloc()
     _own_engines(defer=False)
-    r = bench_train(cfg, updates, runs, part=part, stack=stack)
+    r = bench_train(cfg, updates, runs, part=part, stack=stack, graphs=graphs)
+    if graphs:
+        lines = [
+            f"{model} at {r['width']}x{r['height']} on {r['device']}, {key.replace('_', ' ')}: plain "
+            f"{g['plain_fps']:.0f} frames/s, CUDA graphs {g['graphs_fps']:.0f} (×{g['gain']})"
+            for key, g in r["graphs"].items()
+        ]
+        if "packed" in r:
+            p = r["packed"]
+            lines.append(
+                f"{p['runs']} runs packed, captured: {p['aggregate_fps']:.0f} frames/s in all, "
+                f"{100 * p['fraction_of_limit']:.0f}% of the simulator limit ({p['simulator_limit_fps']:.0f})"
+            )
+        _echo(r, as_json, "\n".join(lines))
+        return
     if stack > 1:
         lines = [
             f"{model} at {r['width']}x{r['height']} on {r['device']}, {name}: one run {r[f'{key}_fps']:.0f} frames/s, "

@@ -538,6 +538,11 @@ class TrainConfig:
     168x300; docs/throughput.md). 'on' (refused before any compute where it cannot run: a CPU without a C++
     compiler), 'off', or 'auto' (on where measured faster: a CPU with a C++ compiler; off on CUDA until measured
     there)."""
+    cuda_graphs: bool = False
+    """Acting and the PPO update replayed as CUDA graphs (emml/rl/graphs.py): the same computation, launched as one
+    graph instead of hundreds of kernels per call. The paper's single batch only (`ppo.minibatches` = 1). On a CPU
+    the same fixed-tensor calls run uncaptured (no faster; what the CPU tests compare with the plain path). Off by
+    default until measured on a GPU (docs/throughput.md)."""
     threads: int = 0
     """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
     asynchronous: bool = True
@@ -592,6 +597,7 @@ class TrainConfig:
         "engine_restart_window",
         "device",
         "compile",
+        "cuda_graphs",
         "run_root",
         "results_root",
     )
@@ -648,6 +654,15 @@ class TrainConfig:
             raise ValueError(f"score={self.score!r} must be true or false")
         if self.compile not in COMPILE:
             raise ValueError(f"compile={self.compile!r}: allowed values are {', '.join(COMPILE)}")
+        if not isinstance(self.cuda_graphs, bool):
+            raise ValueError(f"cuda_graphs={self.cuda_graphs!r} must be true or false")
+        if self.cuda_graphs and self.ppo.minibatches != 1:
+            raise ValueError(
+                f"cuda_graphs=true captures the paper's single batch: it needs ppo.minibatches=1, "
+                f"got {self.ppo.minibatches} (or set cuda_graphs=false)"
+            )
+        if self.cuda_graphs and self.compile == "on" and self.device.startswith("cuda"):
+            raise ValueError("cuda_graphs=true with compile='on' on CUDA is not measured: use compile='off' or 'auto'")
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision={self.precision!r}: allowed values are {', '.join(PRECISIONS)}")
         control = self.model_options.get("control", "none")

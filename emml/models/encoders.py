@@ -141,6 +141,9 @@ class TextEncoder(nn.Module):
         self.unrolled = False
         """Run the GRU as its equations in linear ops (`gru_scan`) rather than the fused `nn.GRU` kernel: what
         `torch.func.vmap` can batch over stacked runs (emml/rl/packed.py). Same values within float tolerance."""
+        self.dedupe = True
+        """Encode each distinct instruction of a large batch once (`DEDUPE_FROM`); off where a CUDA graph captures
+        the update (its shape depends on the tokens: `EmmlModel.capturable`). Same values either way."""
         if sentence:
             self.embedding = nn.Embedding(vocab_size + 1, embed_dim, padding_idx=0)
             self.gru = nn.GRU(embed_dim, gru, batch_first=True)
@@ -176,7 +179,7 @@ class TextEncoder(nn.Module):
         bow = self.bag_of_words(tokens)
         if not self.sentence:
             return bow, None
-        if tokens.shape[0] >= DEDUPE_FROM and not self.unrolled:  # vmap cannot batch torch.unique
+        if tokens.shape[0] >= DEDUPE_FROM and self.dedupe and not self.unrolled:  # vmap cannot batch torch.unique
             unique, inverse = torch.unique(tokens, dim=0, return_inverse=True)
             if unique.shape[0] < tokens.shape[0]:
                 return bow, self.sentence_embedding(unique)[inverse]

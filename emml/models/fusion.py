@@ -81,6 +81,12 @@ class Fusion(nn.Module):
         no option read."""
         return cls(vocab_size, height, width)
 
+    def trace_key(self) -> tuple:
+        """Its Python-level switches that change what its forward or backward computes during a run (a schedule over
+        the frames trained): a CUDA graph captured under one value is not replayed under another
+        (emml/rl/graphs.py). None by default."""
+        return ()
+
     @classmethod
     def state_formula(cls, cfg) -> str:
         """x_S as the code computes it under `cfg`, for `emml models` (it fills '{x_S}' in a registry entry's
@@ -288,6 +294,10 @@ class DualAttention(Fusion):
     def at_frames(self, frames: int) -> None:
         """The frames the run has trained: ends the answer loss's warm-up at `answer_gate_frames`."""
         self.warming = frames < self.answer_gate_frames
+
+    def trace_key(self) -> tuple:
+        """The answer loss's warm-up (`at_frames`): its gate detaches the conv from the answer loss in the update."""
+        return (self.warming,)
 
     def read_words(self, mask: Tensor) -> None:
         """Set Eq. 1's word mask (V,): 1 for a content word, 0 for a function word (eq1_words='content' only)."""

@@ -245,6 +245,19 @@ class EmmlModel(nn.Module):
         self.image_encoder.channels_last = False
         return self
 
+    def capturable(self) -> EmmlModel:
+        """Switch this model to calls a CUDA graph can capture (emml/rl/graphs.py): no host read in its forward
+        (the acting cache keys on the tokens' values; the update's instruction dedupe has a shape that depends on
+        them). The same outputs as the plain model (tests/rl/test_graphs.py); returns ``self``."""
+        self.text_cache = None
+        self.text_encoder.dedupe = False
+        return self
+
+    def trace_key(self) -> tuple:
+        """The Python-level switches a captured call freezes (emml/rl/graphs.py): the conv precision and the
+        fusion's own (`Fusion.trace_key`: the answer loss's warm-up). A graph is captured anew when they change."""
+        return (self.image_encoder.bf16, *self.fusion.trace_key())
+
     @property
     def reads_labels(self) -> bool:
         """Whether acting needs the env's privileged aux labels (a diagnostic control, or detectors that read

@@ -145,10 +145,13 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     from emml.envs.labels import channel_mask, default_aux_words
     from emml.models import build_model
     from emml.rl.compiled import compile_model, wants_compile
-    from emml.rl.packed import StackedModels, packed_ppo_update
-    from emml.rl.ppo import make_optimizer, model_forward, ppo_update
+    from emml.rl.graphs import acting, captures
+    from emml.rl.packed import StackedModels
+    from emml.rl.packed_trainer import PackedLearner
+    from emml.rl.ppo import make_optimizer
     from emml.rl.precision import conv_precision
     from emml.rl.rollout import RolloutBuffer
+    from emml.rl.trainer import PlainLearner
     from emml.tasks.language import Vocabulary, load_dataset
 
     env, device = cfg.env, torch.device(cfg.device)
@@ -165,8 +168,11 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     model = (StackedModels(models) if stack > 1 else models[0]).to(device)
     if wants_compile(cfg.compile, device) and stack == 1:
         compile_model(model)
+    if cfg.cuda_graphs:
+        model.capturable()
     params = model.parameters_in_order() if stack > 1 else list(model.parameters())
-    optimizer = make_optimizer(params, cfg.ppo)
+    optimizer = make_optimizer(params, cfg.ppo, captures(cfg))
+    learner = (PackedLearner if stack > 1 else PlainLearner)(model, optimizer, cfg)  # the trainer's update
     shapes = {
         "image": ((3, env.height, env.width), torch.uint8),
         "tokens": ((env.max_words,), torch.int64),
@@ -191,16 +197,12 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
         buffer.set_initial_state(state)
         state = model.acting_state(state)  # as the sampler acts (a frame window's conv cache)
         with torch.no_grad():
-            for t in range(T):  # acting: one batched step at a time, as in a rollout
-                out, state = model(
-                    {k: v[t : t + 1] for k, v in buffer.obs.items()}, state, buffer.episode_starts[t : t + 1]
-                )
+            for t in range(T):  # acting: one batched step at a time, as in a rollout (through a graph: the sampler's)
+                obs = {k: v[t : t + 1] for k, v in buffer.obs.items()}
+                out, state = acting(learner.graphs, model, obs, state, buffer.episode_starts[t : t + 1])
                 buffer.values[t] = out.value[0]
         buffer.compute_returns(torch.zeros(B, device=device), cfg.ppo.gamma, cfg.ppo.gae_lambda)
-        if stack > 1:
-            packed_ppo_update(model, optimizer, buffer, cfg.ppo, mask, use_aux=cfg.aux)
-        else:
-            ppo_update(model_forward(model), optimizer, params, buffer, cfg.ppo, mask, use_aux=cfg.aux)
+        learner.update(buffer, mask)
 
     def sync():
         if device.type == "cuda":
@@ -288,15 +290,22 @@ PARTS = ("both", "model", "e2e")
 
 
 def bench_train(
-    cfg, updates: int = 5, runs: int = 0, limit_steps: int = 5000, part: str = "both", stack: int = 1
+    cfg,
+    updates: int = 5,
+    runs: int = 0,
+    limit_steps: int = 5000,
+    part: str = "both",
+    stack: int = 1,
+    graphs: bool = False,
 ) -> dict:
     """Model-only vs end-to-end training frames/s for one config, measured in one run, with the end-to-end time
     split (simulate / infer / learn) per update; with double buffering on, the lockstep loop too. With ``runs``
     N > 0: N end-to-end runs packed side by side (each with cores/N torch threads), their aggregate frames/s, and
     the raw simulator limit of all cores. With ``stack`` N > 1: one run, then N seeds stacked in one model and one
-    process (emml/rl/packed.py), measured in turn, their aggregate frames/s beside the one run's."""
+    process (emml/rl/packed.py), measured in turn, their aggregate frames/s beside the one run's. With ``graphs``: one
+    run plain, then with acting and the update captured as CUDA graphs (`TrainConfig.cuda_graphs`), in turn, and
+    ``runs`` N > 0 packed runs captured."""
     import dataclasses
-    import os
 
     from emml.rl import alloc
     from emml.rl.compiled import wants_compile
@@ -318,6 +327,20 @@ def bench_train(
         "compiled": wants_compile(cfg.compile, cfg.device),
         "updates": updates,
     }
+    if graphs:  # one run plain, then captured, measured in turn; the packed runs captured
+        plain, captured = (dataclasses.replace(cfg, cuda_graphs=on) for on in (False, True))
+        out["graphs"] = {}
+        for key, name, measure in (
+            ("model_only", "model", _model_only),
+            ("end_to_end", "e2e", lambda c, u: _end_to_end(c, u)[0]),
+        ):
+            if part in ("both", name):
+                before, after = measure(plain, updates), measure(captured, updates)
+                out["graphs"][key] = {"plain_fps": round(before, 1), "graphs_fps": round(after, 1)}
+                out["graphs"][key]["gain"] = round(after / before, 3)
+        if runs:
+            out["packed"] = _packed(captured, updates, runs, limit_steps)
+        return out
     if stack > 1:  # one run, then N seeds packed in one process, measured in turn
         out["stack"] = stack
         if part in ("both", "model"):
@@ -352,21 +375,31 @@ def bench_train(
         out["lockstep_fps"] = round(lockstep, 1)
         out["double_buffer_gain"] = round(e2e / lockstep, 3)
     if runs:
-        cores = os.cpu_count() or 1
-        packed = dataclasses.replace(cfg, threads=max(1, cores // runs))
-        with _pool(runs) as pool:
-            per_run = [fps for fps, _ in pool.map(_end_to_end, [packed] * runs, [updates] * runs)]
-        limit = simulator_limit(cfg.env, cores, limit_steps)
-        out["packed"] = {
-            "runs": runs,
-            "threads_per_run": packed.threads,
-            "per_run_fps": [round(f, 1) for f in per_run],
-            "aggregate_fps": round(sum(per_run), 1),
-            "simulator_limit_fps": round(limit, 1),
-            "fraction_of_limit": round(sum(per_run) / limit, 3),
-            "cores": cores,
-        }
+        out["packed"] = _packed(cfg, updates, runs, limit_steps)
     return out
+
+
+def _packed(cfg, updates: int, runs: int, limit_steps: int) -> dict:
+    """``runs`` end-to-end runs side by side (each with cores/N torch threads): their aggregate frames/s against the
+    raw simulator limit of all cores."""
+    import dataclasses
+    import os
+
+    cores = os.cpu_count() or 1
+    packed = dataclasses.replace(cfg, threads=max(1, cores // runs))
+    with _pool(runs) as pool:
+        per_run = [fps for fps, _ in pool.map(_end_to_end, [packed] * runs, [updates] * runs)]
+    limit = simulator_limit(cfg.env, cores, limit_steps)
+    return {
+        "runs": runs,
+        "threads_per_run": packed.threads,
+        "cuda_graphs": cfg.cuda_graphs,
+        "per_run_fps": [round(f, 1) for f in per_run],
+        "aggregate_fps": round(sum(per_run), 1),
+        "simulator_limit_fps": round(limit, 1),
+        "fraction_of_limit": round(sum(per_run) / limit, 3),
+        "cores": cores,
+    }
 
 
 def allocator_envs() -> dict[str, dict[str, str]]:

@@ -71,6 +71,13 @@ class StackedModels(nn.Module):
     def initial_state(self, batch_size: int, device=None) -> dict[str, Tensor]:
         return self.template[0].initial_state(batch_size, device=device)
 
+    def trace_key(self) -> tuple:
+        return self.template[0].trace_key()
+
+    def capturable(self) -> StackedModels:
+        """Already: its template is `vmappable`, which reads nothing on the host (emml/rl/graphs.py)."""
+        return self
+
     def acting_state(self, state: dict[str, Tensor]) -> dict[str, Tensor]:
         """``state`` itself: stacked runs recompute a frame window's conv at each step (no acting cache)."""
         return state
@@ -175,46 +182,71 @@ def packed_ppo_update(
             f"packed runs train with PPOConfig.minibatches=1 (the paper's single batch), got {cfg.minibatches}"
         )
     n = stacked.runs
-    params = stacked.parameters_in_order()
-    labels_all = buffer.obs.get("aux") if use_aux else None
     sums = [dict() for _ in range(n)]
-
-    def run_slice(x: Tensor, r: int) -> Tensor:
-        return _split(x, n, 1)[:, :, r]
-
     for _ in range(cfg.epochs):
-        out, _ = stacked.forward_runs(buffer.obs, buffer.initial_state, buffer.episode_starts)
-        total = 0.0
-        per_run = []
-        for r in range(n):
-            terms = ppo_losses(
-                cfg,
-                logits=out["logits"][r],
-                values=out["value"][r],
-                actions=run_slice(buffer.actions, r),
-                old_logprobs=run_slice(buffer.logprobs, r),
-                old_values=run_slice(buffer.values, r),
-                advantages=run_slice(buffer.advantages, r),
-                returns=run_slice(buffer.returns, r),
-                answer_logits=out["answer_logits"][r],
-                answer_targets=run_slice(buffer.answer_targets, r),
-                aux_logits=out["aux_logits"][r] if labels_all is not None else None,
-                aux_labels=run_slice(labels_all, r) if labels_all is not None else None,
-                aux_channel_mask=aux_channel_mask,
-            )
-            total = total + terms["total"]
-            per_run.append(terms)
-        optimizer.zero_grad(set_to_none=True)
-        total.backward()
-        norms = clip_grad_norm_per_run(params, cfg.max_grad_norm)
-        optimizer.step()
-        for r, terms in enumerate(per_run):
+        for r, terms in enumerate(
+            packed_ppo_step(stacked, optimizer, buffer, buffer.initial_state, cfg, aux_channel_mask, use_aux)
+        ):
             for k, v in terms.items():  # summed on the device and read once, after the last epoch (as ppo_update)
-                sums[r][k] = sums[r].get(k, 0.0) + v.detach()
-            sums[r]["grad_norm"] = sums[r].get("grad_norm", 0.0) + norms[r].detach()
+                sums[r][k] = sums[r].get(k, 0.0) + v
     stats = []
     for r in range(n):
         s = {k: float(v) / cfg.epochs for k, v in sums[r].items()}
-        s["explained_variance"] = explained_variance(run_slice(buffer.values, r), run_slice(buffer.returns, r))
+        s["explained_variance"] = run_explained_variance(buffer, n, r)
         stats.append(s)
     return stats
+
+
+def run_explained_variance(buffer: RolloutBuffer, n: int, r: int) -> float:
+    """Run r's explained variance of its rollout's returns (`emml.rl.ppo.explained_variance`)."""
+    return explained_variance(_run_slice(buffer.values, n, r), _run_slice(buffer.returns, n, r))
+
+
+def _run_slice(x: Tensor, n: int, r: int) -> Tensor:
+    """Run r's actors of an interleaved (T, B·N, ...) tensor."""
+    return _split(x, n, 1)[:, :, r]
+
+
+def packed_ppo_step(
+    stacked: StackedModels,
+    optimizer: torch.optim.Optimizer,
+    buffer: RolloutBuffer,
+    state: dict[str, Tensor],
+    cfg: PPOConfig,
+    aux_channel_mask: Tensor | None = None,
+    use_aux: bool = True,
+) -> list[dict[str, Tensor]]:
+    """One optimiser step of every packed run on the whole buffer, replayed from ``state``: per run its loss terms
+    and ``grad_norm`` (pre-clip), tensors on the device. As `emml.rl.ppo.ppo_step`, capturable as one CUDA graph
+    (emml/rl/graphs.py)."""
+    n = stacked.runs
+    params = stacked.parameters_in_order()
+    labels_all = buffer.obs.get("aux") if use_aux else None
+    out, _ = stacked.forward_runs(buffer.obs, state, buffer.episode_starts)
+    total = 0.0
+    per_run = []
+    for r in range(n):
+        terms = ppo_losses(
+            cfg,
+            logits=out["logits"][r],
+            values=out["value"][r],
+            actions=_run_slice(buffer.actions, n, r),
+            old_logprobs=_run_slice(buffer.logprobs, n, r),
+            old_values=_run_slice(buffer.values, n, r),
+            advantages=_run_slice(buffer.advantages, n, r),
+            returns=_run_slice(buffer.returns, n, r),
+            answer_logits=out["answer_logits"][r],
+            answer_targets=_run_slice(buffer.answer_targets, n, r),
+            aux_logits=out["aux_logits"][r] if labels_all is not None else None,
+            aux_labels=_run_slice(labels_all, n, r) if labels_all is not None else None,
+            aux_channel_mask=aux_channel_mask,
+        )
+        total = total + terms["total"]
+        per_run.append(terms)
+    optimizer.zero_grad(set_to_none=True)
+    total.backward()
+    norms = clip_grad_norm_per_run(params, cfg.max_grad_norm)
+    optimizer.step()
+    return [
+        {**{k: v.detach() for k, v in terms.items()}, "grad_norm": norms[r].detach()} for r, terms in enumerate(per_run)
+    ]

@@ -15,7 +15,15 @@ import dataclasses
 from contextlib import ExitStack
 
 from emml.config.schema import TrainConfig
-from emml.rl.packed import StackedModels, load_optimizer_state, optimizer_state, packed_ppo_update
+from emml.rl.graphs import Graphs, Kept, captures, mean_stats
+from emml.rl.packed import (
+    StackedModels,
+    load_optimizer_state,
+    optimizer_state,
+    packed_ppo_step,
+    packed_ppo_update,
+    run_explained_variance,
+)
 from emml.rl.ppo import make_optimizer
 from emml.rl.trainer import Trainer, train_loop
 from emml.runs.rundir import RunResult
@@ -80,7 +88,9 @@ class PackedTrainer:
         try:  # from the first MLflow run started (open), a failure ends every started run, never leaves it RUNNING
             opened = [t.open(build=False) for t in self.trainers]
             stacked = StackedModels([o[0] for o in opened]).to(self.device)
-            optimizer = make_optimizer(stacked.parameters_in_order(), self.cfg.ppo)
+            if self.cfg.cuda_graphs:
+                stacked.capturable()
+            optimizer = make_optimizer(stacked.parameters_in_order(), self.cfg.ppo, captures(self.cfg))
             for r, o in enumerate(opened):
                 if o[1] is not None:
                     load_optimizer_state(optimizer, r, o[1])
@@ -110,10 +120,26 @@ class PackedLearner:
 
     def __init__(self, stacked: StackedModels, optimizer, cfg: TrainConfig):
         self.model, self.optimizer, self.cfg = stacked, optimizer, cfg
+        self.graphs = Graphs(cfg.device) if cfg.cuda_graphs else None
+        """The captured calls of acting and the update (`TrainConfig.cuda_graphs`, emml/rl/graphs.py), or None."""
 
     def update(self, buffer, mask) -> list[dict]:
         """Every run's PPO update on its actors' rollout; their losses, one dict per run."""
-        return packed_ppo_update(self.model, self.optimizer, buffer, self.cfg.ppo, mask, use_aux=self.cfg.aux)
+        stacked, optimizer, cfg = self.model, self.optimizer, self.cfg
+        if self.graphs is None:
+            return packed_ppo_update(stacked, optimizer, buffer, cfg.ppo, mask, use_aux=cfg.aux)
+
+        def step(state):  # every run's optimiser step on the whole rollout: replayed once per epoch
+            return packed_ppo_step(stacked, optimizer, buffer, state, cfg.ppo, mask, use_aux=cfg.aux)
+
+        key = ("update", id(buffer), stacked.trace_key())
+        kept = Kept(stacked.parameters_in_order(), optimizer)
+        outs = self.graphs.step(key, step, buffer.initial_state, cfg.ppo.epochs, kept)
+        n = stacked.runs
+        return [
+            mean_stats([o[r] for o in outs]) | {"explained_variance": run_explained_variance(buffer, n, r)}
+            for r in range(n)
+        ]
 
     def run_model(self, r: int):
         return self.model.unstack(r)

@@ -211,9 +211,10 @@ def model_forward(model: torch.nn.Module) -> ForwardFn:
     return forward
 
 
-def make_optimizer(params: Iterable[torch.nn.Parameter], cfg: PPOConfig) -> torch.optim.Adam:
-    """Adam with the paper's learning rate and our epsilon."""
-    return torch.optim.Adam(params, lr=cfg.lr, eps=cfg.adam_eps)
+def make_optimizer(params: Iterable[torch.nn.Parameter], cfg: PPOConfig, capturable: bool = False) -> torch.optim.Adam:
+    """Adam with the paper's learning rate and our epsilon; ``capturable``: its step count kept on the device, so
+    that a CUDA graph can capture its step (emml/rl/graphs.py; the same updates)."""
+    return torch.optim.Adam(params, lr=cfg.lr, eps=cfg.adam_eps, capturable=capturable)
 
 
 def ppo_update(
@@ -239,7 +240,6 @@ def ppo_update(
     if num_envs % cfg.minibatches != 0:
         raise ValueError(f"PPOConfig.minibatches={cfg.minibatches} must divide num_envs={num_envs}")
     per_mb = num_envs // cfg.minibatches
-    labels_all = buffer.obs.get("aux") if use_aux else None
     sums: dict[str, torch.Tensor] = {}
     count = 0
     for _ in range(cfg.epochs):
@@ -248,32 +248,52 @@ def ppo_update(
         for start in range(0, num_envs, per_mb):
             # the paper's single batch is a slice (views, no copy of the rollout's frames); minibatches a selection
             idx = slice(None) if cfg.minibatches == 1 else order[start : start + per_mb]
-            obs = {k: v[:, idx] for k, v in buffer.obs.items()}
             state = {k: v[idx] for k, v in buffer.initial_state.items()}
-            out = forward(obs, state, buffer.episode_starts[:, idx])
-            terms = ppo_losses(
-                cfg,
-                logits=out["logits"],
-                values=out["value"],
-                actions=buffer.actions[:, idx],
-                old_logprobs=buffer.logprobs[:, idx],
-                old_values=buffer.values[:, idx],
-                advantages=buffer.advantages[:, idx],
-                returns=buffer.returns[:, idx],
-                answer_logits=out["answer_logits"],
-                answer_targets=buffer.answer_targets[:, idx],
-                aux_logits=out.get("aux_logits") if labels_all is not None else None,
-                aux_labels=labels_all[:, idx] if labels_all is not None else None,
-                aux_channel_mask=aux_channel_mask,
-            )
-            optimizer.zero_grad(set_to_none=True)
-            terms["total"].backward()
-            grad_norm = torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
-            optimizer.step()
+            terms = ppo_step(forward, optimizer, params, buffer, state, cfg, aux_channel_mask, use_aux, idx)
             for k, v in terms.items():  # summed on the device: read once, after the last step
                 sums[k] = sums.get(k, 0.0) + v.detach()
-            sums["grad_norm"] = sums.get("grad_norm", 0.0) + grad_norm.detach()
             count += 1
     stats = {k: float(v) / count for k, v in sums.items()}
     stats["explained_variance"] = explained_variance(buffer.values, buffer.returns)
     return stats
+
+
+def ppo_step(
+    forward: ForwardFn,
+    optimizer: torch.optim.Optimizer,
+    params: list[torch.nn.Parameter],
+    buffer: RolloutBuffer,
+    state: Mapping[str, torch.Tensor],
+    cfg: PPOConfig,
+    aux_channel_mask: torch.Tensor | None = None,
+    use_aux: bool = True,
+    idx: slice | torch.Tensor = slice(None),
+) -> dict[str, torch.Tensor]:
+    """One optimiser step of `ppo_update` on the actors ``idx`` of the buffer (all: the paper's single batch), their
+    sequences replayed from ``state``: the loss terms and ``grad_norm`` (pre-clip), as tensors on the device.
+
+    No host sync and no shape that depends on the data: with the whole batch it can be captured as one CUDA graph
+    (emml/rl/graphs.py), reading the buffer's storage and ``state`` in place."""
+    labels_all = buffer.obs.get("aux") if use_aux else None
+    obs = {k: v[:, idx] for k, v in buffer.obs.items()}
+    out = forward(obs, state, buffer.episode_starts[:, idx])
+    terms = ppo_losses(
+        cfg,
+        logits=out["logits"],
+        values=out["value"],
+        actions=buffer.actions[:, idx],
+        old_logprobs=buffer.logprobs[:, idx],
+        old_values=buffer.values[:, idx],
+        advantages=buffer.advantages[:, idx],
+        returns=buffer.returns[:, idx],
+        answer_logits=out["answer_logits"],
+        answer_targets=buffer.answer_targets[:, idx],
+        aux_logits=out.get("aux_logits") if labels_all is not None else None,
+        aux_labels=labels_all[:, idx] if labels_all is not None else None,
+        aux_channel_mask=aux_channel_mask,
+    )
+    optimizer.zero_grad(set_to_none=True)
+    terms["total"].backward()
+    terms["grad_norm"] = torch.nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
+    optimizer.step()
+    return {k: v.detach() for k, v in terms.items()}

@@ -31,6 +31,7 @@ from emml.envs.doom import ANSWER
 from emml.envs.engine import RestartBudget, WorkerDied
 from emml.envs.vector import make_vector_env
 from emml.eval.evaluate import obs_to_torch
+from emml.rl.graphs import Graphs, acting
 
 log = logging.getLogger(__name__)
 
@@ -38,8 +39,10 @@ log = logging.getLogger(__name__)
 class Sampler:
     """Owns the actors' envs, their current observations and the policy's recurrent state between rollouts."""
 
-    def __init__(self, cfg: TrainConfig, device: torch.device, runs: int = 1):
+    def __init__(self, cfg: TrainConfig, device: torch.device, runs: int = 1, graphs: Graphs | None = None):
         self.cfg = cfg
+        self.graphs = graphs
+        """Acting through captured CUDA graphs (`TrainConfig.cuda_graphs`, emml/rl/graphs.py); None: plain calls."""
         self.device = device
         self.groups = cfg.env_groups
         self.runs = runs
@@ -165,7 +168,8 @@ class Sampler:
         t0 = time.perf_counter()
         obs_t = self._to_torch(g, self.obs[g])
         state = {k: v[sl] for k, v in self.state.items()}
-        out, state = model(obs_t, state, self.episode_start[sl].unsqueeze(0))
+        # through a graph, the outputs are the graph's: read (sampled, stored) below, before the next group's call
+        out, state = acting(self.graphs, model, obs_t, state, self.episode_start[sl].unsqueeze(0))
         for k, v in state.items():
             self.state[k][sl] = v
         move, log_prob = sample_moves(out.logits[0])

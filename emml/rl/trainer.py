@@ -28,8 +28,9 @@ from emml.models import build_model
 from emml.rl import alloc
 from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
+from emml.rl.graphs import Graphs, Kept, captures, mean_stats
 from emml.rl.hardware import check_runnable
-from emml.rl.ppo import make_optimizer, model_forward, ppo_update
+from emml.rl.ppo import explained_variance, make_optimizer, model_forward, ppo_step, ppo_update
 from emml.rl.precision import conv_precision
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
@@ -149,7 +150,9 @@ class Trainer:
             cfg.model, len(self.vocab), env_cfg.height, env_cfg.width, env_cfg.max_steps, **cfg.model_options
         ).to(self.device)
         model.read_words(self.vocab.words, load_dataset(env_cfg.dataset).content_words())
-        optimizer = make_optimizer(model.parameters(), cfg.ppo) if build else None
+        if cfg.cuda_graphs:
+            model.capturable()
+        optimizer = make_optimizer(model.parameters(), cfg.ppo, captures(cfg)) if build else None
         update, frames = 0, 0
         if saved is not None:
             model.load_state_dict(saved["model"])
@@ -190,7 +193,8 @@ class Trainer:
                 _say(f"training {self.name}: {total:,} frames ({cfg.profile} profile, {cfg.device}) in {self.dir}")
         if saved is None:  # at once, so that a run killed before its first update resumes this MLflow run, not a second
             try:
-                self._checkpoint(model, optimizer or make_optimizer(model.parameters(), cfg.ppo), update, frames, False)
+                first = optimizer or make_optimizer(model.parameters(), cfg.ppo, captures(cfg))
+                self._checkpoint(model, first, update, frames, False)
             except BaseException as e:  # a full disk, a run dir gone read-only: the run ends FAILED, not RUNNING
                 self.tracker.abort(e)
                 raise
@@ -277,12 +281,22 @@ class PlainLearner:
 
     def __init__(self, model, optimizer, cfg: TrainConfig):
         self.model, self.optimizer, self.cfg = model, optimizer, cfg
+        self.graphs = Graphs(cfg.device) if cfg.cuda_graphs else None
+        """The captured calls of acting and the update (`TrainConfig.cuda_graphs`, emml/rl/graphs.py), or None."""
 
     def update(self, buffer: RolloutBuffer, mask: torch.Tensor) -> list[dict]:
         """One PPO update on the rollout (Appendix A); its losses, one dict per run."""
-        model, cfg = self.model, self.cfg
-        forward, params = model_forward(model), model.parameters()
-        return [ppo_update(forward, self.optimizer, params, buffer, cfg.ppo, mask, use_aux=cfg.aux)]
+        model, cfg, optimizer = self.model, self.cfg, self.optimizer
+        forward, params = model_forward(model), list(model.parameters())
+        if self.graphs is None:
+            return [ppo_update(forward, optimizer, params, buffer, cfg.ppo, mask, use_aux=cfg.aux)]
+
+        def step(state):  # the paper's single batch, one optimiser step: replayed once per epoch
+            return ppo_step(forward, optimizer, params, buffer, state, cfg.ppo, mask, use_aux=cfg.aux)
+
+        key = ("update", id(buffer), model.trace_key())
+        outs = self.graphs.step(key, step, buffer.initial_state, cfg.ppo.epochs, Kept(params, optimizer))
+        return [mean_stats(outs) | {"explained_variance": explained_variance(buffer.values, buffer.returns)}]
 
     def run_model(self, r: int):
         """Run r's model, to evaluate and save."""
@@ -315,7 +329,7 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
     quiet = trainers[0].quiet
     mask = torch.as_tensor(channel_mask(trainers[0].vocab, tuple(cfg.env.aux_words)), device=device)
     model = learner.model
-    with Sampler(cfg, device, runs=n) as sampler:
+    with Sampler(cfg, device, runs=n, graphs=learner.graphs) as sampler:
         shapes = {k: (s.shape, _dtype(s)) for k, s in sampler.single_observation_space.spaces.items()}
         buffer = RolloutBuffer(T, B * n, shapes, device=device)
         sampler.reset(model, seed=env_seeds([t.cfg.seed for t in trainers], update, B))

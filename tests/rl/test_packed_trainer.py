@@ -83,7 +83,9 @@ def test_packed_runs_hear_the_frames_trained_through_the_module_their_forward_ca
     from emml.rl.packed_trainer import PackedLearner
 
     runs = [build_model("dual_attention", 22, 36, 36, 30, answer_gate_frames=100) for _ in range(2)]
-    learner = PackedLearner(StackedModels(runs), None, None)
+    from emml.config.schema import TrainConfig
+
+    learner = PackedLearner(StackedModels(runs), None, TrainConfig())
     assert learner.model.template[0].fusion.warming
     learner.at_frames(100)
     assert not learner.model.template[0].fusion.warming

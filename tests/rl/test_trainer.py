@@ -247,6 +247,8 @@ def test_eval_of_a_checkpoint_reproduces_its_numbers(tracking, no_leftovers):
         ({"table": "../x"}, r"table='../x' must be a plain name"),
         ({"table": ""}, r"table='' must be a plain name"),
         ({"frames": 63}, r"frames=63 is less than one update \(num_envs × num_steps = 64\); the minimum is 64"),
+        ({"cuda_graphs": True, "ppo.minibatches": 2}, r"cuda_graphs=true .* needs ppo.minibatches=1, got 2"),
+        ({"cuda_graphs": "yes"}, r"'cuda_graphs': expected true or false, got 'yes'"),
     ],
 )
 def test_bad_config_fails_before_any_compute(over, field, tracking, no_leftovers):
