@@ -196,14 +196,17 @@ PAPER: tuple[PaperValue, ...] = (
     ),
     PaperValue(
         "answer loss trains",
-        ("model.answer_grad",),
-        lambda c: ("all",),
+        ("model.answer_grad", "model.answer_gate_frames"),
+        lambda c: ("all", 0),
         "§3: Eq. 1-5 trained end to end",
-        lambda v: {
-            "all": "the conv and x_sent",
-            "gate": "x_sent only (x_SA's gradient stopped in Eq. 4)",
-            "centered": "the conv and x_sent, its gradient into x_I centred over the cells (Eq. 3)",
-        }.get(v[0], v[0]),
+        lambda v: (
+            {
+                "all": "the conv and x_sent",
+                "gate": "x_sent only (x_SA's gradient stopped in Eq. 4)",
+                "centered": "the conv and x_sent, its gradient into x_I centred over the cells (Eq. 3)",
+            }.get(v[0], v[0])
+            + (f", after {v[1]:,} frames of x_sent only (x_SA's gradient stopped in Eq. 4)" if v[1] else "")
+        ),
         lambda c: c["model.name"] == "dual_attention" and c["model.ga2"],
     ),
     PaperValue(

@@ -77,6 +77,12 @@ def test_a_changed_field_is_a_deviation_unless_the_row_sets_it():
             "answer loss trains x_sent only (x_SA's gradient stopped in Eq. 4) (paper the conv and x_sent, §3: Eq. "
             "1-5 trained end to end)",
         ),
+        (
+            {"answer_gate_frames": 400000},
+            "answer loss",
+            "answer loss trains the conv and x_sent, after 400,000 frames of x_sent only (x_SA's gradient stopped in "
+            "Eq. 4) (paper the conv and x_sent, §3: Eq. 1-5 trained end to end)",
+        ),
     ],
 )
 def test_an_opt_in_model_option_is_named_where_a_run_uses_it(options, absent, named):

@@ -50,7 +50,7 @@ def test_table3_expands_to_ablations_and_single_task_runs():
     assert len(runs) == 16
     assert {r.difficulty for r in runs} == {"easy"}
     names = {r.run_name("quick") for r in runs}
-    assert "dual_attention-easy-noaux-noshaping-ansgate-s0-quick" in names  # No Aux: the answer loss to GA2 (48)
+    assert "dual_attention-easy-noaux-noshaping-warm400000-s0-quick" in names  # No Aux: 400k to GA2 first (48)
     assert "da_no_ga2-easy-noaux-s0-quick" in names  # no GA2 gate to keep it to
     assert "da_no_sa-easy-noaux-s0-quick" in names  # its policy reads x_I per cell: no collapse, the paper's loss
     assert "dual_attention-easy-aux-sgnonly-s0-quick" in names and "dual_attention-easy-aux-eqaonly-s0-quick" in names
@@ -60,26 +60,27 @@ def test_table3_expands_to_ablations_and_single_task_runs():
     assert cfg.env.shaping is False and cfg.model == "dual_attention"
     multi = [r for r in runs if r.row == "DA Multi-Task"]  # Table 2's Dual-Attention runs, not trained twice
     assert {(r.table, r.run_name("quick")) for r in multi} == {
-        ("table2", "dual_attention-easy-noaux-ansgate-s0-quick"),
+        ("table2", "dual_attention-easy-noaux-warm400000-s0-quick"),
         ("table2", "dual_attention-easy-aux-s0-quick"),
     }
     assert {r.table for r in runs if r.row != "DA Multi-Task"} == {"table3"}
 
 
 def test_noaux_overrides_reach_the_no_aux_runs_only():
-    """Issue 48: Dual-Attention's No Aux runs keep the answer loss to the GA2 gate; its Aux runs are the paper's."""
+    """Issue 48: Dual-Attention's No Aux runs keep the answer loss to the GA2 gate for their first 400k frames; its Aux
+    runs are the paper's."""
     runs = [r for r in load_table("table2").runs([0]) if r.model == "dual_attention" and r.difficulty == "easy"]
     by_aux = {r.aux: r.to_config("quick") for r in runs}
-    assert by_aux[False].model_options["answer_grad"] == "gate" and "answer_grad" not in by_aux[True].model_options
+    assert by_aux[False].model_options == {"answer_gate_frames": 400000} and not by_aux[True].model_options
     assert {r.aux: r.run_name("quick") for r in runs} == {
-        False: "dual_attention-easy-noaux-ansgate-s0-quick",
+        False: "dual_attention-easy-noaux-warm400000-s0-quick",
         True: "dual_attention-easy-aux-s0-quick",
     }
-    assert {r.aux: r.departures for r in runs} == {False: ("model_options.answer_grad",), True: ()}
+    assert {r.aux: r.departures for r in runs} == {False: ("model_options.answer_gate_frames",), True: ()}
     baselines = [r for r in load_table("table2").runs([0]) if r.model != "dual_attention" and not r.aux]
-    assert all("model_options.answer_grad" not in r.overrides for r in baselines)
+    assert all("model_options.answer_gate_frames" not in r.overrides for r in baselines)
     house = [r for r in load_table("table5").runs([0]) if r.model == "dual_attention"]
-    assert [r.run_name("quick") for r in house] == ["dual_attention-house-noaux-ansgate-s0-quick"]
+    assert [r.run_name("quick") for r in house] == ["dual_attention-house-noaux-warm400000-s0-quick"]
 
 
 def test_a_bad_noaux_override_fails_naming_the_row(tmp_path):

@@ -22,7 +22,7 @@ def test_mean_band_averages_seeds_on_a_common_grid():
 def test_plot_table_skips_runs_without_history(tracking, tmp_path):
     rows = []
     for seed in (0, 1, 2):
-        name = f"dual_attention-easy-noaux-ansgate-s{seed}-quick"  # DA Multi-Task No Aux (issue 48)
+        name = f"dual_attention-easy-noaux-warm400000-s{seed}-quick"  # DA Multi-Task No Aux (issue 48)
         tracker = Tracker()
         run_id = tracker.start("table3", name)
         for step in (1024, 2048, 3072):

@@ -141,7 +141,7 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
     assert devs["frames 1.5M (paper 10M, §5.1)"] == "all 48 runs"
     assert "- x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5): all but the w/o SA runs (42 of 48)" in md
     assert "48 runs from their saved config" in md and "reward shaping" not in md  # the w/o RS row is the experiment
-    gated = [line for line in devs if line.startswith("answer loss trains x_sent only")]  # No Aux's departure (48)
+    gated = [line for line in devs if line.startswith("answer loss trains the conv and x_sent, after 400,000")]  # (48)
     assert len(gated) == 1 and devs[gated[0]].startswith("18 of 48 runs"), devs
     choices = dict(rep["deviations"]["choices"])
     assert choices["wrong-object/answer reward 0 (paper silent: §5.1 names only +1 and -0.001 per step)"] == (
@@ -166,9 +166,8 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
     assert devs["input 84×150 (paper 168×300, App. A)"].startswith("46 of 48 runs: ")
     assert devs["x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5)"].startswith("40 of 48 runs: ")
     wrong = "wrong-object/answer reward -0.2 (paper silent: §5.1 names only +1 and -0.001 per step)"
-    assert (
-        choices[wrong] == "2 of 48 runs: dual_attention-easy-aux-s0-quick, dual_attention-easy-noaux-ansgate-s0-quick"
-    )
+    two = "dual_attention-easy-aux-s0-quick, dual_attention-easy-noaux-warm400000-s0-quick"
+    assert choices[wrong] == f"2 of 48 runs: {two}"
     assert wrong in (tmp_path / "reports" / "table3-quick.md").read_text()
 
 
@@ -223,7 +222,7 @@ def test_the_aggregate_compares_like_with_like_issue_49(tmp_path):
     P(DA > row) '1.00 [1.00, 1.00] (n=4)' from one cell; now each setting is compared apart, one run per cell has no
     interval, and the difference is shown beside P."""
     sgn = {"DA Multi-Task": 0.934, "w/o GA2": 0.91, "w/o Task Indicator": 0.93, "w/o Reward Shaping": 0.90}
-    keep = {"dual_attention-easy-noaux-ansgate-s0-quick"}
+    keep = {"dual_attention-easy-noaux-warm400000-s0-quick"}
 
     def value(spec):
         if spec.row == "DA Multi-Task" and not spec.aux:

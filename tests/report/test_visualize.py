@@ -141,9 +141,9 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
         model, cfg = load_model(ckpt)
         cfg.table, cfg.run_root, cfg.results_root = "table2", str(tmp_path / "runs"), str(tmp_path / "results")
         cfg.profile = "demo"
-        if not aux:  # Table 2's No Aux Dual-Attention keeps the answer loss to the GA2 gate (issue 48)
-            cfg.model_options = {**cfg.model_options, "answer_grad": "gate"}
-        name = f"dual_attention-easy-{'aux' if aux else 'noaux-ansgate'}-s0-demo"
+        if not aux:  # Table 2's No Aux Dual-Attention keeps the answer loss to the GA2 gate for 400k frames (issue 48)
+            cfg.model_options = {**cfg.model_options, "answer_gate_frames": 400000}
+        name = f"dual_attention-easy-{'aux' if aux else 'noaux-warm400000'}-s0-demo"
         shutil.copytree(ckpt.parent, tmp_path / "runs" / "table2" / name)
         payload = {
             "run_name": name,
