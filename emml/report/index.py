@@ -77,10 +77,27 @@ def best_checkpoint(
 
 def finished_no_aux(checkpoint: Path, run_root: str | Path) -> Path | None:
     """The checkpoint of the No-Aux run beside ``checkpoint``'s run when that run has finished
-    (emml.runs.rundir.finished_run),
-    else None: an interrupted run's checkpoint is not a result, and the figures show results only."""
-    other = variant_dir(config_of(checkpoint.parent), run_root, aux=False)
+    (emml.runs.rundir.finished_run), else None: an interrupted run's checkpoint is not a result, and the figures show
+    results only. For a run its table declares, the No-Aux run that table declares beside it (its `noaux_overrides`
+    included: issue 48's warm-up); for any other, the same run with ``aux=False``."""
+    cfg = config_of(checkpoint.parent)
+    other = declared_no_aux(cfg, run_root) or variant_dir(cfg, run_root, aux=False)
     return other / CHECKPOINT if finished_run(other) else None
+
+
+def declared_no_aux(cfg, run_root: str | Path) -> Path | None:
+    """The run dir of the No-Aux run that ``cfg``'s table declares in the same row, difficulty and seed as ``cfg``'s
+    run; None where that table is not a declared one or ``cfg``'s run is not one of its runs."""
+    from emml.experiments.tables import load_table, table_names
+    from emml.runs.naming import run_name
+
+    if cfg.table not in table_names():
+        return None
+    specs = load_table(cfg.table).runs([cfg.seed])
+    name, same = run_name(cfg), (cfg.env.difficulty, cfg.seed)
+    rows = {s.row for s in specs if s.aux and (s.difficulty, s.seed) == same and s.run_name(cfg.profile) == name}
+    twin = [s for s in specs if not s.aux and s.row in rows and (s.difficulty, s.seed) == same]
+    return path_of(run_root, twin[0].table, twin[0].run_name(cfg.profile)) if twin else None
 
 
 def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tuple[int, ...] = (0, 1)) -> list[Path]:

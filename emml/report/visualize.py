@@ -9,6 +9,7 @@ is recomputed for the figure.
 from __future__ import annotations
 
 import dataclasses
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -143,6 +144,12 @@ def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure
     return fig
 
 
+def _wrapped(title: str, width: int = 30) -> str:
+    """A panel title over lines of ``width``: a model's label names its run ('no aux (dual_attention-easy-noaux-…)'),
+    which on one line runs into the next column's title."""
+    return "\n".join(textwrap.wrap(title, width)) or title
+
+
 def channels_figure(
     models: list[tuple[str, object]],
     env_cfg: DoomConfig,
@@ -168,7 +175,7 @@ def channels_figure(
         for c, (title, arr) in enumerate(panels):
             ax = axes[r, c]
             im = ax.imshow(arr, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-            ax.set_title(title if r == 0 else "", fontsize=9)
+            ax.set_title(_wrapped(title) if r == 0 else "", fontsize=9)
             ax.set_xticks([]), ax.set_yticks([])
             ax.spines[:].set_visible(True)  # a frame round every map: a white (all 1) channel is not a blank
         axes[r, 0].set_ylabel(word, fontsize=10)

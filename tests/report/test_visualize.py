@@ -170,6 +170,31 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
         assert f"({link})" in text and (tmp_path / "reports" / link).exists()
 
 
+def test_the_channel_figure_compares_with_the_no_aux_run_the_table_declares(checkpoints, tmp_path):
+    """Table 2's No Aux Dual-Attention run is `…-noaux-warm400000-…` (its `noaux_overrides`, issue 48), not the same
+    run with aux=False (the collapsed `…-noaux-…` run, which stays in runs/ as evidence)."""
+    import json
+    import shutil
+
+    from emml.config.profiles import profile_config
+    from emml.report.index import finished_no_aux
+    from emml.runs.rundir import RESULTS
+
+    runs = tmp_path / "runs"
+    aux_cfg = profile_config("demo", "easy", {"table": "table2"}, model="dual_attention", aux=True)
+    names = {True: "dual_attention-easy-aux-s0-demo", False: "dual_attention-easy-noaux-warm400000-s0-demo"}
+    for aux, ckpt in checkpoints.items():
+        shutil.copytree(ckpt.parent, runs / "table2" / names[aux])
+    collapsed = runs / "table2" / "dual_attention-easy-noaux-s0-demo"
+    shutil.copytree(checkpoints[False].parent, collapsed)
+    aux_dir = runs / "table2" / names[True]
+    saved = json.loads((aux_dir / RESULTS).read_text())
+    (aux_dir / RESULTS).write_text(json.dumps({**saved, "config": aux_cfg.to_dict()}))  # the table's aux run
+    assert finished_no_aux(aux_dir / CHECKPOINT, runs) == runs / "table2" / names[False] / CHECKPOINT
+    shutil.rmtree(runs / "table2" / names[False])  # not finished (not there): no column, not the collapsed run's
+    assert finished_no_aux(aux_dir / CHECKPOINT, runs) is None
+
+
 def test_the_channel_figure_compares_only_with_a_finished_no_aux_run(checkpoints, tmp_path):
     import shutil
 
