@@ -110,7 +110,9 @@ def video(
     out: Path = typer.Option(Path("reports"), help="Folder for the GIFs."),
     seed: int = typer.Option(0, help="Seed of the first episode (episode i plays seed + i)."),
 ):
-    """A captioned GIF per greedy episode: the sentence, each action, the outcome."""
+    """A captioned GIF per greedy episode: the sentence, each action, the outcome.
+
+    Written as TABLE-RUN-TASK-sSEED.gif (named by the run's table and run)."""
     from emml.report.visualize import episode_gif, record_episode
 
     ((_, model, cfg),) = _models(checkpoint)
@@ -120,7 +122,7 @@ def video(
     for task in tasks:
         for i in range(episodes):
             ep = record_episode(model, cfg.env, task, seed + i)
-            path = episode_gif(ep, out / f"{checkpoint.parent.name}-{task}-s{seed + i}.gif")
+            path = episode_gif(ep, out / f"{cfg.table}-{checkpoint.parent.name}-{task}-s{seed + i}.gif")
             typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'})")
 
 
@@ -130,13 +132,16 @@ def visualize_channels(
     out: Path = typer.Option(Path("reports"), help="Folder for the PNG."),
     seed: int = typer.Option(0, help="Seed of the episode whose first frame is shown."),
 ):
-    """The channel figure: per word, its aux label, each model's conv3 channel, and the frame."""
+    """The channel figure: per word, its aux label, each model's conv3 channel, and the frame.
+
+    Written as channels-TABLE-RUN.png: named by the run's table and run (two tables may have runs of one name)."""
+    from emml.report.index import figure_name
     from emml.report.visualize import channels_figure
 
     models = _models(checkpoint, *([compare] if compare else []))
     _own_engines()
     out = _out(out)
-    path = out / f"channels-{checkpoint.parent.name}.png"
+    path = out / figure_name("channels", models[0][2].table, checkpoint.parent.name)
     channels_figure([(label, m) for label, m, _ in models], models[0][2].env, path, seed=seed)
     typer.echo(f"wrote {path}")
 
@@ -148,7 +153,10 @@ def visualize_attention(
     seed: int = typer.Option(0, help="Seed of the episode."),
     rows: int = typer.Option(6, min=1, help="Steps shown, spread over the episode."),
 ):
-    """The attention figure: one greedy episode, rows over time (frame, x_spat, x_Ans, action), x_sent on top."""
+    """The attention figure: one greedy episode, rows over time (frame, x_spat, x_Ans, action), x_sent on top.
+
+    Written as attention-TASK-TABLE-RUN-sSEED.png (named by the run's table and run)."""
+    from emml.report.index import figure_name
     from emml.report.visualize import attention_figure, record_episode
     from emml.tasks.language import check_choice
 
@@ -160,7 +168,7 @@ def visualize_attention(
     _own_engines()
     out = _out(out)
     ep = record_episode(model, cfg.env, task, seed)
-    path = out / f"attention-{task}-{checkpoint.parent.name}-s{seed}.png"
+    path = out / figure_name(f"attention-{task}", cfg.table, checkpoint.parent.name, f"-s{seed}")
     attention_figure(ep, path, rows)
     typer.echo(f"wrote {path} ('{ep.sentence}': {'success' if ep.success else 'failure'} in {len(ep.frames)} steps)")
 

@@ -100,26 +100,42 @@ def declared_no_aux(cfg, run_root: str | Path) -> Path | None:
     return path_of(run_root, twin[0].table, twin[0].run_name(cfg.profile)) if twin else None
 
 
-def figures(checkpoint: Path, out: Path, compare: Path | None = None, seeds: tuple[int, ...] = (0, 1)) -> list[Path]:
-    """The channel figure (beside ``compare``, the No-Aux run, when given) and SGN/EQA attention figures."""
+def figure_name(kind: str, table: str, run: str, suffix: str = "", ext: str = "png") -> str:
+    """A run's figure's file name, named by its table and its run (issue 60: Table 3 and Table 4 both have a run
+    `dual_attention-easy-aux-sgnonly-s0-quick`, and their figures named by run alone overwrote one another):
+    ``channels-table3-<run>.png``, ``attention-sgn-table3-<run>-s0.png`` (``kind`` 'attention-sgn', ``suffix``
+    '-s0')."""
+    return f"{kind}-{table}-{run}{suffix}.{ext}"
+
+
+def figures(
+    checkpoint: Path,
+    out: Path,
+    compare: Path | None = None,
+    seeds: tuple[int, ...] = (0, 1),
+    table: str | None = None,
+) -> list[Path]:
+    """The channel figure (beside ``compare``, the No-Aux run, when given) and SGN/EQA attention figures, named by
+    the run's table (``table``, else its config's) and its run (`figure_name`)."""
     from emml.report.visualize import attention_figure, channels_figure, record_episode
     from emml.runs.rundir import load_model
 
     model, cfg = load_model(checkpoint)
     name = checkpoint.parent.name
+    table = table or cfg.table
     paths = []
     models = [("aux" if cfg.aux else "no aux", model)]
     if compare is not None:
         other, other_cfg = load_model(compare)
         models.append(("aux" if other_cfg.aux else "no aux", other))
-    path = out / f"channels-{name}.png"
+    path = out / figure_name("channels", table, name)
     channels_figure(models, cfg.env, path)
     paths.append(path)
     tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
     for task in tasks:
         for seed in seeds:
             ep = record_episode(model, cfg.env, task, seed)
-            path = out / f"attention-{task}-{name}-s{seed}.png"
+            path = out / figure_name(f"attention-{task}", table, name, f"-s{seed}")
             attention_figure(ep, path)
             paths.append(path)
     return paths
@@ -168,7 +184,7 @@ def write_reports(
     lines[2:2] = claims_lines(
         profiles_with_results(results_root), out, results_root, run_root
     )  # the page leads with them
-    drawn: set[str] = set()  # the best runs whose figures are drawn: a table borrowing one draws it once
+    drawn: set[tuple[str, str]] = set()  # the best runs (table, run) whose figures are drawn: each once
     for profile, tables in profiles_with_results(results_root).items():
         lines += [f"## Profile `{profile}`", ""]
         for table in tables:
@@ -188,7 +204,9 @@ def write_reports(
     return index
 
 
-def _table_lines(table: str, profile: str, out: Path, results_root, run_root, drawn: set[str], log) -> list[str]:
+def _table_lines(
+    table: str, profile: str, out: Path, results_root, run_root, drawn: set[tuple[str, str]], log
+) -> list[str]:
     """Write one table's report, curves and best run's figures; returns its lines of the index. A run dir whose
     files cannot be read is named and its figures left out, never the table's report."""
     import matplotlib.pyplot as plt
@@ -218,11 +236,11 @@ def _table_lines(table: str, profile: str, out: Path, results_root, run_root, dr
     lines += [f"  - note: {n}" for n in notes if n not in missing]
     log(f"{table} [{profile}]: {len(paths)} files")
     best = best_checkpoint(table, profile, results_root=results_root, run_root=run_root)
-    if best is not None and best[1] not in drawn:
+    if best is not None and (table, best[1]) not in drawn:
         ckpt, name = best
-        drawn.add(name)
+        drawn.add((table, name))
         try:
-            figs = figures(ckpt, out, finished_no_aux(ckpt, run_root))
+            figs = figures(ckpt, out, finished_no_aux(ckpt, run_root), table=table)
         except (RunDirError, CheckpointError) as e:
             log(f"{table} [{profile}]: no figures of {name}: {e}")
             return [*lines, f"  - note: no figures of `{name}` here: {e}"]

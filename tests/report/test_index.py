@@ -1,6 +1,8 @@
 """reports/index.md: what a reader should read first, the experiments beyond the paper after its tables, and never
 smoke numbers."""
 
+from pathlib import Path
+
 from emml.experiments.tables import load_table
 from emml.report.index import profiles_with_results
 
@@ -67,3 +69,35 @@ def test_no_committed_report_names_a_folder_of_the_machine_that_wrote_it():
             assert machine not in text, f"{path.name} names {machine!r}"
     assert portable_uri(f"sqlite:///{here}/mlflow.db") == "sqlite:///mlflow.db"  # what the demo report prints
     assert portable(f"{here}/runs/demo/x") == "runs/demo/x"
+
+
+def test_figures_are_named_by_table_and_run_so_tables_sharing_a_run_name_keep_both(tmp_path, monkeypatch):
+    """Issue 60: Table 3 and Table 4 both have `dual_attention-easy-aux-sgnonly-s0-quick` (other vocabularies, other
+    code); `channels-<run>.png` of one overwrote the other's. Each figure now names its table and its run."""
+    from types import SimpleNamespace
+
+    import emml.report.visualize as visualize
+    import emml.runs.rundir as rundir
+    from emml.report.index import figure_name, figures
+
+    run = "dual_attention-easy-aux-sgnonly-s0-quick"
+    drawn = {}
+
+    def draw(table):
+        def figure(*args, **kw):
+            path = [a for a in (*args, *kw.values()) if isinstance(a, Path)][0]
+            path.write_text(table)  # which table's run drew it
+
+        return figure
+
+    for table in ("table3", "table4"):
+        cfg = SimpleNamespace(table=table, aux=True, env=SimpleNamespace(tasks="sgn"))
+        monkeypatch.setattr(rundir, "load_model", lambda path, cfg=cfg: (None, cfg))
+        monkeypatch.setattr(visualize, "channels_figure", draw(table))
+        monkeypatch.setattr(visualize, "attention_figure", draw(table))
+        monkeypatch.setattr(visualize, "record_episode", lambda *a: None)
+        drawn[table] = figures(tmp_path / "runs" / table / run / "checkpoint.pt", tmp_path, seeds=(0,))
+    assert [p.name for p in drawn["table3"]] == [f"channels-table3-{run}.png", f"attention-sgn-table3-{run}-s0.png"]
+    assert [p.name for p in drawn["table4"]] == [f"channels-table4-{run}.png", f"attention-sgn-table4-{run}-s0.png"]
+    assert all(p.read_text() == table for table, paths in drawn.items() for p in paths)  # neither overwritten
+    assert figure_name("attention-eqa", "table2", "r", "-s1") == "attention-eqa-table2-r-s1.png"

@@ -165,7 +165,7 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
     assert "## Profile `demo`" in text and "**table2** (2 runs, frames 64)" in text
     assert "[table2-demo.md](table2-demo.md)" in text
     assert "figures of the best Dual-Attention run `dual_attention-easy-aux-s0-demo`" in text
-    run = "dual_attention-easy-aux-s0-demo"
+    run = "table2-dual_attention-easy-aux-s0-demo"  # named by table and run (issue 60)
     for link in (f"channels-{run}.png", f"attention-sgn-{run}-s0.png", f"attention-eqa-{run}-s1.png"):
         assert f"({link})" in text and (tmp_path / "reports" / link).exists()
 
