@@ -297,6 +297,7 @@ def report_table(
     from emml.report import deviations, efficiency
     from emml.report.aggregate import summary
     from emml.report.field import plot_field
+    from emml.runs.segments import commits_note
 
     table = load_table(name)
     name = table.name  # a table file's path (a table of one's own, an experiment) reports under its stem
@@ -323,6 +324,8 @@ def report_table(
     if devs is not None:
         md += [deviations.markdown(devs), ""]
     md += [flat.to_markdown(), ""]
+    root = run_root if run_root is not None else resolve_profile(profile).config().run_root
+    md += commits_note(results, list(dict.fromkeys(n for c in cells for n in c.runs)), root)  # the runs' commits
     if agg is not None:
         md += [pd.DataFrame(agg[0]).to_markdown(index=False), "", agg[1], ""]
     names = list(dict.fromkeys(n for c in cells for n in c.runs))

@@ -55,6 +55,7 @@ from emml.runs.rundir import (
     save_results,
 )
 from emml.runs.runlock import hold_run
+from emml.runs.segments import begin_segment
 from emml.runs.tracking import Tracker, read_mirror
 from emml.tasks.language import load_dataset, resolve_vocabulary
 
@@ -198,6 +199,7 @@ class Trainer:
             except BaseException as e:  # a full disk, a run dir gone read-only: the run ends FAILED, not RUNNING
                 self.tracker.abort(e)
                 raise
+        begin_segment(self.dir, self.git_sha, frames)  # this session's commit and first frame (issue 60)
         return model, optimizer, update, frames, saved is not None
 
     # --- the loop ---------------------------------------------------------------------------------------------

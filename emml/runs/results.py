@@ -17,8 +17,9 @@ from emml.runs.diskspace import no_space_names
 from emml.runs.records import note, torn_tail
 from emml.runs.runlock import waiting_lock
 
-# identity and provenance columns (read as written); every other column is a metric (float). started_at and ended_at
-# are results.json's (emml.runs.rundir.TIMES), not written to rows: declared so that a row that has them reads
+# identity and provenance columns (read as written); every other column is a metric (float). started_at, ended_at
+# and segments are results.json's (emml.runs.rundir.TIMES, JSON_ONLY), not written to rows: declared so that a row
+# that has them (written by code from before them, which copies every key of results.json) reads
 TEXT = (
     "run_name",
     "table",
@@ -34,6 +35,7 @@ TEXT = (
     "transfer_detector",
     "started_at",
     "ended_at",
+    "segments",
 )
 INTEGER = ("seed", "frames", "eval_episodes")
 LATE_INTEGER = ("eval_seed",)

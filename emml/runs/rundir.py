@@ -6,7 +6,9 @@ A run lives in ``<run_root>/<table>/<run name>/``:
 - ``metrics.csv``: every metric point, step,key,value (emml.runs.tracking.Tracker.mirror_to);
 - ``results.json``: the final score with its provenance and config (`save_results`), its row in
   ``<results_root>/<table>/<profile>.csv`` (`record_result`);
-- ``run.lock``: held while a process trains or re-scores it (emml/runs/runlock.py).
+- ``run.lock``: held while a process trains or re-scores it (emml/runs/runlock.py);
+- ``segments.json``: each session's commit and the frame it started from (emml/runs/segments.py), read into
+  results.json's ``segments``.
 
 Identity. What a run *is* is `TrainConfig.identity()`: every field but those of how it runs (`TrainConfig.RUNTIME`:
 device, threads, workers, roots, cadences, the frame target). Its name is `emml.runs.naming.run_name` (the fields a
@@ -231,14 +233,19 @@ def write_json(path: Path, payload: dict) -> None:
 def results_payload(
     cfg: TrainConfig, metrics: dict, frames: int, git_sha: str, run_id: str, times: dict | None = None
 ) -> dict:
-    """What results.json holds: the run's identity, its provenance, when it trained (``times``: `TIMES`), how its
-    score was measured, the score and the config it trained with (reports state its deviations from the paper)."""
+    """What results.json holds: the run's identity, its provenance (``git_sha``: the commit that finished it;
+    ``segments``: each commit it trained under with its frames, emml/runs/segments.py), when it trained (``times``:
+    `TIMES`), how its score was measured, the score and the config it trained with (reports state its deviations from
+    the paper)."""
+    from emml.runs.segments import run_segments
+
     return {
         **run_identity(cfg),
         "frames": frames,
         "git_sha": git_sha,
         "run_id": run_id,
         **(times or {}),
+        "segments": run_segments(path_of(cfg.run_root, cfg.table, run_name(cfg)), frames, git_sha),
         "eval_episodes": cfg.final_eval_episodes,  # the score's: the final evaluation's
         "eval_seed": EVAL_SEED,
         "metrics": metrics,
@@ -267,14 +274,19 @@ session and the end of its final evaluation; the MLflow run's own start and end 
 unknown column as a metric."""
 
 
+JSON_ONLY = ("segments",)
+"""Keys of results.json that are not columns of the results row (as `TIMES`: a pinned campaign's reader from before
+them would read an unknown column as a metric): the commits a run trained under (emml/runs/segments.py)."""
+
+
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
     """Upsert the run's row (keyed by run name) in its results CSV (emml.runs.results): results.json's keys but the
-    metrics and config, then `ROW_ONLY`, then the metrics."""
+    metrics, config, `TIMES` and `JSON_ONLY`, then `ROW_ONLY`, then the metrics."""
     from emml.config.profiles import refuse_committed
     from emml.runs.results import upsert_result
 
     refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results
-    row = {k: v for k, v in payload.items() if k not in ("metrics", "config", *TIMES)}
+    row = {k: v for k, v in payload.items() if k not in ("metrics", "config", *TIMES, *JSON_ONLY)}
     row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, precision=cfg.precision, **payload["metrics"])
     return upsert_result(results_csv(cfg), row)
 
