@@ -81,13 +81,18 @@ def diagnose(
 
 
 def _saturation_line(result: dict) -> str:
-    """x_I's saturation (emml.eval.diagnose.x_image_saturation): how many channels are pinned, and which."""
+    """x_I's saturation (emml.eval.diagnose.x_image_saturation): how many of the channels counted are pinned, and
+    which; the words counted (an Aux run's all-zero labels train their channels to 0: not a collapse, issue 61)."""
+    from emml.eval.diagnose import counted_words
+
     channels = result["x_image_channels"]
-    pinned = [w for w, c in channels.items() if c["pinned"]]
+    counted = [w for w, c in channels.items() if c.get("counted", True)]
+    pinned = [w for w in counted if channels[w]["pinned"]]
     return (
-        f"x_I saturation: {len(pinned)}/{len(channels)} channels pinned on every cell"
+        f"x_I saturation: {len(pinned)}/{len(counted)} channels counted pinned on every cell"
         + (f" ({', '.join(pinned)})" if pinned else "")
-        + f"; spatial std of x_I {result['x_image_spatial_std']:.3f} (per channel: "
+        + f"; counted: {counted_words(result)}"
+        + f"; spatial std of x_I {result['x_image_spatial_std']:.3f} over them (per channel: "
         + ", ".join(f"{w} {c['spatial_std']:.3f}" for w, c in channels.items())
         + ")"
     )

@@ -439,6 +439,16 @@ class ModelConfig:
     non-negative but never 0, so that no gate channel can die. Measured in docs/fidelity.md (issue 34): under ReLU a
     channel whose pre-activation is negative for every question gets no gradient from the answer loss and its word
     can never be answered (seed 0: 'blue' with the last readout; 'torch', 'skullkey' and 'blue' with the mean)."""
+    answer_gate_frames: int = model_option(0, name="warm{}")
+    """The No Aux warm-up (issue 48, made one rule for every model by issue 61): for the run's first N frames the
+    answer's gradient is kept off the image encoder (the conv) and every path from it, then the answer loss trains
+    end to end as the paper has it; 0: off (the paper's loss from the start). Values are unchanged. Where the fusion
+    has a GA2 gate (Dual-Attention), the answer loss keeps to that gate and x_sent; where it has none (the baselines,
+    Dual-Attention w/o GA2), to its text side and answer head. Every fusion of the paper whose answer reads x_I takes
+    it (`emml.models.Fusion.answer_warmup`); Text only's answer reads no image, and refuses it. Why: without aux
+    labels, end to end from the start, the answer loss pins whole conv3 channels within ~100k frames (Dual-Attention,
+    GA, FiLM: docs/fidelity.md, "No Aux"). The trainer sets it from the frames trained (`EmmlModel.at_frames`), so a
+    resumed run resumes the schedule. Run name: 'warm<N>'."""
     x_image: str = model_option("sigmoid", choices=("sigmoid", "relu"))
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
@@ -471,6 +481,9 @@ class ModelConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"ModelConfig.{name}={value!r} must be a positive integer (>= 1)")
+        g = self.answer_gate_frames
+        if isinstance(g, bool) or not isinstance(g, int) or g < 0:
+            raise ValueError(f"ModelConfig.answer_gate_frames={g!r} must be a whole number of frames >= 0 (0: off)")
         check_model_options(ModelConfig, {name: getattr(self, name) for name in option_fields(ModelConfig)})
         return self
 

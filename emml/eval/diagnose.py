@@ -14,7 +14,10 @@ for any checkpoint (`emml diagnose CHECKPOINT`).
   no gradient passes (issue 48: without the aux task the conv collapsed to a constant code): under the sigmoid of
   Appendix A, |z| > `SATURATED_LOGIT` everywhere; under the ReLU of §3.1, z <= 0 everywhere (a dead channel);
   ``x_image_spatial_std`` — the spatial std of x_I per frame, the mean over frames and channels (0: x_I says nothing
-  of where anything is, and Eq. 2's map is uniform). Each channel's under ``x_image_channels``.
+  of where anything is, and Eq. 2's map is uniform). Each channel's under ``x_image_channels``. Both count collapse
+  only (issue 61): in a run with aux labels, the channels of the words whose labels are all zero (the function words,
+  'go', 'the', 'what', ...: they describe no object) are trained to 0 by the aux loss, pinned as they should be, and
+  not counted; ``x_image_counted`` names the words counted, ``x_image_uncounted`` those left out.
 
 Frames come from the model's own sampled actions (a seeded generator), so that the views are the ones it meets
 in training; the referent's cells come from the env's privileged label buffer.
@@ -52,14 +55,17 @@ SATURATION_WARNING = 0.5
 """The trainer warns in its log when at least this fraction of the channels is pinned (`x_image_saturated`)."""
 
 
-def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid") -> dict:
+def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid", counted: np.ndarray | None = None) -> dict:
     """How far x_I is from a constant code, on conv3 logits z of real frames (F, V, h, w), under the model's
-    ``x_image`` ('sigmoid' or 'relu', `ModelConfig.x_image`): the fraction of channels pinned on every cell of every
-    frame (sigmoid: |z| > SATURATED_LOGIT; relu: z <= 0), the mean spatial std of x_I, and each channel's figures
-    (index → {"pinned", "spatial_std", "mean"})."""
+    ``x_image`` ('sigmoid' or 'relu', `ModelConfig.x_image`): the fraction of the ``counted`` channels (bool (V,);
+    None: all) pinned on every cell of every frame (sigmoid: |z| > SATURATED_LOGIT; relu: z <= 0), their mean spatial
+    std of x_I, and each channel's figures (index → {"pinned", "spatial_std", "mean", "counted"})."""
     z = np.asarray(logits, dtype=np.float64)
     if z.ndim != 4 or z.shape[0] == 0:
         raise ValueError(f"x_image_saturation: logits must be (frames, V, h, w) with frames >= 1, got {z.shape}")
+    counted = np.ones(z.shape[1], dtype=bool) if counted is None else np.asarray(counted, dtype=bool)
+    if counted.shape != (z.shape[1],) or not counted.any():
+        raise ValueError(f"x_image_saturation: counted must be a bool ({z.shape[1]},) mask of at least one channel")
     if x_image == "sigmoid":
         pinned, x = (np.abs(z) > SATURATED_LOGIT).all(axis=(0, 2, 3)), 1.0 / (1.0 + np.exp(-z))
     elif x_image == "relu":
@@ -68,14 +74,27 @@ def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid") -> dict:
         raise ValueError(f"x_image={x_image!r} is unknown; allowed: sigmoid, relu")
     spatial_std = x.reshape(*x.shape[:2], -1).std(-1).mean(0)  # (V,): per frame over cells, then over frames
     channels = {
-        int(c): {"pinned": bool(pinned[c]), "spatial_std": float(spatial_std[c]), "mean": float(x[:, c].mean())}
+        int(c): {
+            "pinned": bool(pinned[c]),
+            "spatial_std": float(spatial_std[c]),
+            "mean": float(x[:, c].mean()),
+            "counted": bool(counted[c]),
+        }
         for c in range(z.shape[1])
     }
     return {
-        "x_image_saturated": float(pinned.mean()),
-        "x_image_spatial_std": float(spatial_std.mean()),
+        "x_image_saturated": float(pinned[counted].mean()),
+        "x_image_spatial_std": float(spatial_std[counted].mean()),
         "x_image_channels": channels,
     }
+
+
+def zero_label_channels(env: DoomEnv) -> np.ndarray:
+    """bool (V,): the channels whose aux labels are all zero by construction: supervised by the aux loss
+    (`DoomEnv.aux_mask`) but the word of no object (`Dataset.actors`: the function words, 'go', 'the', 'what', ...),
+    so that the aux loss trains them to 0 everywhere. Not a collapse (issue 61)."""
+    fire = {w for actor in env.dataset.actors.values() for w in actor.words()}
+    return np.array([bool(m) and w not in fire for w, m in zip(env.vocab.words, env.aux_mask, strict=True)])
 
 
 def conv3_drift(model, cfg) -> dict:
@@ -100,14 +119,36 @@ def conv3_drift(model, cfg) -> dict:
     return {"conv3_one_way": float(one_way.median()), "conv3_shift": float(delta.sum(1).abs().median())}
 
 
+def counted_words(result: dict) -> str:
+    """The words whose channels the collapse figures count (`diagnose`'s ``x_image_counted``), in words: 'all 22
+    words', or 'the 14 words ... (not the 8 whose aux labels are all zero, trained to 0 by the aux loss: ...)'."""
+    counted, left = result.get("x_image_counted") or [], result.get("x_image_uncounted") or []
+    if not left:
+        return f"all {len(counted)} words" if counted else "every channel"
+    return (
+        f"the {len(counted)} words whose aux labels can be 1: {', '.join(counted)} (not the {len(left)} whose aux "
+        f"labels are all zero, which the aux loss trains to 0: {', '.join(left)})"
+    )
+
+
 def saturation_warning(result: dict) -> str | None:
-    """The training log's warning when x_I has collapsed (`SATURATION_WARNING`), else None."""
+    """The training log's warning when x_I has collapsed (`SATURATION_WARNING` of the channels counted: not those an
+    Aux run's all-zero labels train to 0), naming the words counted and those pinned; else None."""
     frac = result.get("x_image_saturated")
     if frac is None or frac < SATURATION_WARNING:
         return None
+    channels = result.get("x_image_channels") or {}
+    counted = [w for w, c in channels.items() if c.get("counted", True)]
+    pinned = [w for w in counted if channels[w]["pinned"]]
+    how_many = (
+        f"{len(pinned)} of the {len(counted)} conv3 channels counted ({frac:.0%})"
+        if counted
+        else (f"{frac:.0%} of the conv3 channels")
+    )
     return (
-        f"WARNING: {frac:.0%} of the conv3 channels are pinned on every cell (x_I a constant code, no gradient "
-        f"through it; spatial std {result['x_image_spatial_std']:.3f}): see docs/fidelity.md, 'No Aux'"
+        f"WARNING: {how_many} are pinned on every cell (x_I a constant code, no gradient through it; "
+        f"spatial std {result['x_image_spatial_std']:.3f}){': ' + ', '.join(pinned) if pinned else ''}; counted: "
+        f"{counted_words(result)}. See docs/fidelity.md, 'No Aux'"
     )
 
 
@@ -174,6 +215,7 @@ def diagnose(
                 obs, _, terminated, truncated, _ = env.step(np.array([move, 0]))
                 done = terminated or truncated
         aux_mask = env.aux_mask
+        zero = zero_label_channels(env)
         words = env.vocab.words
         fixed = ENV_KINDS[env_cfg.difficulty].fixed_spawn and step0_episodes  # a fixed spawn: slots are comparable
         step0 = _step0(model, env, step0_episodes, seed + episodes, device) if fixed else None
@@ -197,8 +239,12 @@ def diagnose(
     result["detector_ap"] = float(np.mean(list(per_word.values()))) if per_word else None
     result["detector_ap_words"] = per_word
     result.update(step0 or {"actor_sensitivity": None, "step0_moves": {}})
-    saturation = x_image_saturation(z, model.cfg.x_image)
+    # collapse only (issue 61): in a run with aux labels, the channels its all-zero labels train to 0 are not counted
+    counted = ~zero if env_cfg.aux_labels else np.ones(len(words), dtype=bool)
+    saturation = x_image_saturation(z, model.cfg.x_image, counted)
     saturation["x_image_channels"] = {words[c]: v for c, v in saturation["x_image_channels"].items()}
+    saturation["x_image_counted"] = [w for w, c in zip(words, counted, strict=True) if c]
+    saturation["x_image_uncounted"] = [w for w, c in zip(words, counted, strict=True) if not c]
     result.update(saturation)
     return result
 

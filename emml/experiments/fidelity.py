@@ -20,6 +20,11 @@ PAPER_MAX_STEPS = {k.name: k.paper_max_steps for k in ENV_KINDS.values()}
 """§5.1: episodes of at most 210 steps; App. C: 420 in the House (emml/config/env_kinds.py)."""
 
 
+WARMUP = "answer kept off the image encoder"
+"""The label of the No Aux warm-up's deviation (`ModelConfig.answer_gate_frames`, issue 61): the reports state it once
+per table with the rows it applies to (emml/report/deviations.py, `noaux_schedule`)."""
+
+
 def count(n) -> str:
     """1500000 → '1.5M', 163840 → '163,840', 512 → '512'."""
     n = int(n)
@@ -196,18 +201,22 @@ PAPER: tuple[PaperValue, ...] = (
     ),
     PaperValue(
         "answer loss trains",
-        ("model.answer_grad", "model.answer_gate_frames"),
-        lambda c: ("all", 0),
+        ("model.answer_grad",),
+        lambda c: ("all",),
         "§3: Eq. 1-5 trained end to end",
-        lambda v: (
-            {
-                "all": "the conv and x_sent",
-                "gate": "x_sent only (x_SA's gradient stopped in Eq. 4)",
-                "centered": "the conv and x_sent, its gradient into x_I centred over the cells (Eq. 3)",
-            }.get(v[0], v[0])
-            + (f", after {v[1]:,} frames of x_sent only (x_SA's gradient stopped in Eq. 4)" if v[1] else "")
-        ),
+        lambda v: {
+            "all": "the conv and x_sent",
+            "gate": "x_sent only (x_SA's gradient stopped in Eq. 4)",
+            "centered": "the conv and x_sent, its gradient into x_I centred over the cells (Eq. 3)",
+        }.get(v[0], v[0]),
         lambda c: c["model.name"] == "dual_attention" and c["model.ga2"],
+    ),
+    PaperValue(
+        WARMUP,
+        ("model.answer_gate_frames",),
+        lambda c: (0,),
+        "§3 and App. 'Baseline details': every model trained end to end",
+        lambda v: f"for the first {v[0]:,} frames, then end to end" if v[0] else "never",
     ),
     PaperValue(
         "aux loss",

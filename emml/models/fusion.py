@@ -11,6 +11,9 @@ representation x_S and answer logits (x_Ans = softmax(answer logits)):
   "Baseline details"; their answer head is x_Ans = softmax(ReLU(Linear(x_S))).
 * `Pacman` -- QA attention of Das et al. 2018 over the last K frames.
 
+The No Aux warm-up (`ModelConfig.answer_gate_frames`, issue 61: one rule for every model whose answer reads x_I) is
+the base class's schedule (`Fusion.at_frames`, `Fusion.warming`); each fusion keeps its answer off x_I while it runs.
+
 Each is a `Fusion`: what it needs (x_BoW, x_sent, a window of K frames) is declared as class attributes, which the
 model registry (emml/models/registry.py) and `EmmlModel` read, and so are its own options (`Fusion.options`: a
 dataclass of `model_option` fields, e.g. `DualAttentionOptions`, its ablation switches and opt-ins).
@@ -71,6 +74,17 @@ class Fusion(nn.Module):
     options: type = FusionOptions
     """Its own options: a dataclass type (`FusionOptions`) whose fields are the options a run may set beside the
     ones every model shares (`ModelConfig`); `from_config` reads their values as ``cfg.options``."""
+    answer_warmup: bool = False
+    """Its answer reads x_I, and it keeps the answer off x_I while `warming` (the No Aux warm-up,
+    `ModelConfig.answer_gate_frames`): its forward computes the answer logits from x_I with the gradient stopped then,
+    so that the answer loss (and the policy through x_Ans) trains its text side and head but not the conv. True for
+    every fusion of the paper but Text only (whose answer reads no image); a plugin's fusion that declares it must do
+    the same (a run of one that does not is refused the option)."""
+    answer_gate_frames: int = 0
+    """The warm-up's length in frames trained (`ModelConfig.answer_gate_frames`, set by the model registry's
+    `build_fusion` or `warm_up`); 0: none."""
+    warming: bool = False
+    """Within the warm-up: the answer kept off x_I (`at_frames` sets it from the frames trained)."""
     state_dim: int
     """D, the size of x_S (N, D) it hands the policy module (set by ``__init__``)."""
 
@@ -81,11 +95,25 @@ class Fusion(nn.Module):
         no option read."""
         return cls(vocab_size, height, width)
 
+    def warm_up(self, frames: int) -> Fusion:
+        """Keep the answer off x_I for the run's first ``frames`` frames (`ModelConfig.answer_gate_frames`; 0: never);
+        the run starts inside the warm-up until `at_frames` says otherwise. Returns ``self``."""
+        if frames and not self.answer_warmup:
+            raise ValueError(f"{type(self).__qualname__} has no answer warm-up (answer_warmup=False)")
+        self.answer_gate_frames = frames
+        self.warming = frames > 0
+        return self
+
+    def at_frames(self, frames: int) -> None:
+        """The frames the run has trained (the trainer's call before each rollout, `EmmlModel.at_frames`): ends the
+        warm-up at `answer_gate_frames`."""
+        self.warming = frames < self.answer_gate_frames
+
     def trace_key(self) -> tuple:
         """Its Python-level switches that change what its forward or backward computes during a run (a schedule over
         the frames trained): a CUDA graph captured under one value is not replayed under another
-        (emml/rl/graphs.py). None by default."""
-        return ()
+        (emml/rl/graphs.py). The base class's: the answer's warm-up (`warming`)."""
+        return (self.warming,)
 
     @classmethod
     def state_formula(cls, cfg) -> str:
@@ -167,12 +195,6 @@ class DualAttentionOptions(FusionOptions):
     sigmoid x_I without aux labels: docs/fidelity.md, issue 48). Values are unchanged. Measured in docs/fidelity.md
     (issue 34): retraining a checkpoint's conv offline on EQA frames, the answer loss beside the aux loss holds the
     keys' detectors at AP 0.11-0.33 where the aux loss alone reaches 0.81-0.86. Run name: 'ansgate', 'anscentered'."""
-    answer_gate_frames: int = model_option(0, name="warm{}")
-    """Opt-in, with GA2: the answer loss kept to the GA2 gate (as 'gate') for the run's first N frames, then
-    `answer_grad` (default 'all', the paper's end-to-end loss); 0: off. A warm-up for No Aux (issue 48): while Eq. 2's
-    map is flat, Eq. 5's gradient into x_I is the same at every cell and pins whole channels; once the map attends,
-    it is concentrated where the referent is. The trainer sets it from the frames trained (`EmmlModel.at_frames`),
-    so a resumed run resumes the schedule. Values are unchanged. Run name: 'warm<N>'."""
 
     def check(self) -> None:
         t = self.state_temperature
@@ -192,15 +214,6 @@ class DualAttentionOptions(FusionOptions):
                 raise ValueError(
                     f"ModelConfig.{name}={value!r} {what}: only with {part}=True (got False); allowed: 'all'"
                 )
-        g = self.answer_gate_frames
-        if not isinstance(g, int) or isinstance(g, bool) or g < 0:
-            raise ValueError(f"ModelConfig.answer_gate_frames={g!r} must be a whole number of frames >= 0 (0: off)")
-        if g and (not self.ga2 or self.answer_grad == "gate"):
-            raise ValueError(
-                f"ModelConfig.answer_gate_frames={g!r} keeps the answer loss to the GA2 gate before switching to "
-                f"answer_grad: only with ga2=True and answer_grad 'all' or 'centered' (got ga2={self.ga2!r}, "
-                f"answer_grad={self.answer_grad!r}); allowed otherwise: 0"
-            )
         if self.answer_grad == "centered" and not self.spatial_attention:  # it centres the gradient Eq. 3 passes
             raise ValueError(
                 "ModelConfig.answer_grad='centered' centres the answer's gradient through Eq. 3: only with "
@@ -225,7 +238,8 @@ class DualAttention(Fusion):
     a checkpoint. Opt-in, ``answer_grad='gate'``: Eq. 4 reads x_SA with its gradient stopped, so that the answer loss
     trains x_sent only; ``answer_grad='centered'``: Eq. 3 reads x_I with its gradient centred over
     the cells (`centered_grad`), so that the answer loss moves a detector where the map attends against where it
-    does not, never a whole channel (issue 48); every value is unchanged under both.
+    does not, never a whole channel (issue 48); every value is unchanged under both. The No Aux warm-up
+    (`ModelConfig.answer_gate_frames`, `Fusion.warming`) reads x_SA as 'gate' does for its first N frames.
 
     Ablation switches (Section 4, "Ablation tests"):
 
@@ -242,6 +256,7 @@ class DualAttention(Fusion):
 
     ablations = ("spatial_attention", "ga1", "ga2")
     options = DualAttentionOptions
+    answer_warmup = True
 
     def __init__(
         self,
@@ -260,9 +275,7 @@ class DualAttention(Fusion):
         super().__init__()
         self.ga1, self.ga2, self.spatial = ga1, ga2, spatial
         self.answer_grad = answer_grad
-        self.answer_gate_frames = answer_gate_frames
-        self.warming = answer_gate_frames > 0
-        """Within the first `answer_gate_frames` frames: the answer loss kept to the GA2 gate (`at_frames` sets it)."""
+        self.warm_up(answer_gate_frames)  # the No Aux warm-up (`Fusion.warming`): Eq. 4 reads x_SA detached
         # eq1_mask (V,): the words Eq. 1 gates with under eq1_words='content' (a buffer, saved with the weights);
         # None: every word, and no buffer, so that the paper's unit saves what it always saved
         self.register_buffer("eq1_mask", torch.ones(vocab_size) if eq1_words == "content" else None)
@@ -288,16 +301,7 @@ class DualAttention(Fusion):
             state_temperature=o.state_temperature,
             eq1_words=o.eq1_words,
             answer_grad=o.answer_grad,
-            answer_gate_frames=o.answer_gate_frames,
         )
-
-    def at_frames(self, frames: int) -> None:
-        """The frames the run has trained: ends the answer loss's warm-up at `answer_gate_frames`."""
-        self.warming = frames < self.answer_gate_frames
-
-    def trace_key(self) -> tuple:
-        """The answer loss's warm-up (`at_frames`): its gate detaches the conv from the answer loss in the update."""
-        return (self.warming,)
 
     def read_words(self, mask: Tensor) -> None:
         """Set Eq. 1's word mask (V,): 1 for a content word, 0 for a function word (eq1_words='content' only)."""
@@ -358,7 +362,9 @@ class DualAttention(Fusion):
             x_spat = None
             x_sa = x_image  # w/o SA: Eq. 2-3 removed
             state = x_ga1.reshape(n, -1)  # w/o SA: x_S = vec(x_GA1)
-        if self.answer_grad == "gate" or self.warming:  # opt-in: the answer loss trains x_sent only, not the conv
+        # opt-in 'gate', and the No Aux warm-up (`warming`): the answer loss trains x_sent only, not the conv (w/o GA2:
+        # nothing; the map of Eq. 1-3 reads x_I alone, so x_SA's every path to a weight is the conv's)
+        if self.answer_grad == "gate" or self.warming:
             x_sa = x_sa.detach()
         x_ga2 = gated_attention(x_sa, x_sent) if self.ga2 else x_sa  # Eq. 4
         answer_logits = x_ga2.sum(dim=(2, 3))  # Eq. 5: sum over H, W (softmax outside)
@@ -380,7 +386,13 @@ class AnswerHead(nn.Module):
 
 
 class _Baseline(Fusion):
-    """Shared plumbing: subclasses define `state()`, the head is `AnswerHead`."""
+    """Shared plumbing: subclasses define `state()`, the head is `AnswerHead`.
+
+    The No Aux warm-up (`Fusion.warming`): the head reads x_S computed again from x_I with its gradient stopped, so that
+    the answer loss trains the head and the text side (x_BoW's and x_sent's encoders, FiLM's gamma and beta) and not
+    the conv, while the policy reads x_S as always."""
+
+    answer_warmup = True
 
     def __init__(self, vocab_size: int, state_dim: int) -> None:
         super().__init__()
@@ -392,14 +404,16 @@ class _Baseline(Fusion):
 
     def forward(self, x_image: Tensor, x_bow: Tensor | None, x_sent: Tensor | None) -> FusionOutput:
         state = self.state(x_image, x_bow, x_sent)
-        return FusionOutput(state=state, answer_logits=self.answer(state))
+        read = self.state(x_image.detach(), x_bow, x_sent) if self.warming else state  # the warm-up: off the conv
+        return FusionOutput(state=state, answer_logits=self.answer(read))
 
 
 class TextOnly(_Baseline):
-    """Text only: x_S = [x_BoW, x_sent]."""
+    """Text only: x_S = [x_BoW, x_sent]. Its answer reads no image: no warm-up (`answer_warmup` False)."""
 
     uses_bow = True
     uses_sent = True
+    answer_warmup = False
 
     def __init__(self, vocab_size: int, height: int, width: int) -> None:
         super().__init__(vocab_size, 2 * vocab_size)
@@ -485,11 +499,15 @@ class Pacman(Fusion):
     * similarity s_k = <proj_k, x_sent>, attention a = softmax_k(s);
     * x_S = sum_k a_k vec(x_I,k) (attention-weighted image features);
     * answer logits = Linear([sum_k a_k proj_k, x_sent] -> V) (softmax classifier).
+
+    The No Aux warm-up (`Fusion.warming`): the answer's attention and projections are computed again from the frames'
+    x_I with its gradient stopped (the projection, the classifier and x_sent still learn from the answer).
     """
 
     uses_sent = True
     frame_window = "pacman_frames"
     options = PacmanOptions
+    answer_warmup = True
 
     def __init__(self, vocab_size: int, height: int, width: int) -> None:
         super().__init__()
@@ -506,6 +524,8 @@ class Pacman(Fusion):
     def forward(self, frames: Tensor, x_bow: Tensor | None, x_sent: Tensor) -> FusionOutput:
         weights, proj = self.frame_attention(frames, x_sent)
         state = torch.einsum("nk,nkd->nd", weights, frames.flatten(2))  # attended vec(x_I)
+        if self.warming:  # the No Aux warm-up: the answer from the frames' x_I with its gradient stopped
+            weights, proj = self.frame_attention(frames.detach(), x_sent)
         attended = torch.einsum("nk,nkv->nv", weights, proj)
         answer_logits = self.classifier(torch.cat([attended, x_sent], dim=1))
         return FusionOutput(state=state, answer_logits=answer_logits)

@@ -229,8 +229,8 @@ class EmmlModel(nn.Module):
         return self
 
     def at_frames(self, frames: int) -> None:
-        """The frames the run has trained, told before each rollout (emml/rl/trainer.py `train_loop`): for a fusion
-        whose training changes with them (`DualAttentionOptions.answer_gate_frames`); a no-op for every other."""
+        """The frames the run has trained, told before each rollout (emml/rl/trainer.py `train_loop`): the fusion's
+        schedule over them (`Fusion.at_frames`: the No Aux warm-up, `ModelConfig.answer_gate_frames`)."""
         hook = getattr(self.fusion, "at_frames", None)
         if hook is not None:
             hook(frames)

@@ -222,7 +222,8 @@ def fusion_options(model: str) -> type:
 def check_architecture(cfg):
     """The registry's check of a `ModelConfig` (validated for its shared options' values): its name is a registered
     fusion, its ``options`` that fusion's declared options class (its defaults filled in where None) with values
-    that pass their checks (`emml.config.schema.check_model_options`), and the type_gate control meets a GA2 gate;
+    that pass their checks (`emml.config.schema.check_model_options`), the No Aux warm-up only for a fusion that
+    keeps its answer off x_I (`Fusion.answer_warmup`), and the type_gate control meets a GA2 gate;
     returns ``cfg``."""
     fusion = architecture(cfg.name)
     declared = fusion.options
@@ -233,6 +234,17 @@ def check_architecture(cfg):
             f"ModelConfig.options={cfg.options!r} must be the options of fusion {cfg.name!r}: a {declared.__qualname__}"
         )
     check_model_options(declared, {f.name: getattr(cfg.options, f.name) for f in fields(declared)})
+    g = cfg.answer_gate_frames
+    if g and not fusion.answer_warmup:
+        raise ValueError(
+            f"ModelConfig.answer_gate_frames={g!r} keeps the answer off the image encoder: model {cfg.name!r} "
+            f"({fusion.__qualname__}) has no answer that reads x_I (Fusion.answer_warmup is False); allowed: 0"
+        )
+    if g and getattr(cfg.options, "answer_grad", "all") == "gate":
+        raise ValueError(
+            f"ModelConfig.answer_gate_frames={g!r} keeps the answer loss to the GA2 gate before switching to "
+            "answer_grad: answer_grad='gate' keeps it there throughout (allowed with it: 0)"
+        )
     if cfg.control == "type_gate" and not (issubclass(fusion, DualAttention) and cfg.options.ga2):
         raise ValueError(
             f"ModelConfig.control='type_gate' replaces the GA2 gate (Eq. 4): only for name='dual_attention' "
@@ -244,6 +256,7 @@ def check_architecture(cfg):
 def build_fusion(cfg, vocab_size: int, height: int, width: int) -> Fusion:
     """Fusion unit of architecture `cfg.name` for a conv3 grid of (height, width) = (h, w)."""
     fusion = architecture(cfg.name).from_config(cfg, vocab_size, height, width)
+    fusion.warm_up(cfg.answer_gate_frames)  # the No Aux warm-up, one rule for every fusion (`Fusion.at_frames`)
     dim = getattr(fusion, "state_dim", None)
     if isinstance(dim, bool) or not isinstance(dim, int) or dim < 1:
         raise ValueError(

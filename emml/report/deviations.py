@@ -127,9 +127,55 @@ class Deviations:
     """Where the configs came from, in words."""
 
 
-def summarise(runs: list[ShownRun]) -> Deviations:
-    """Deviations and choices of ``runs``, grouped, with where their configs came from."""
+def noaux_schedule(table, profile: Profile | str) -> list[tuple[str, str]]:
+    """The No Aux warm-up as ``table`` declares it (`ModelConfig.answer_gate_frames`, issue 61: one rule for every No
+    Aux row whose answer reads the image), said once per table: (line, the rows it applies to) per schedule its No Aux
+    rows declare (one, where the tables keep the rule: tests/experiments/test_tables.py); [] when no No Aux row has
+    one. The line is the deviation each run's config gives (`fidelity.WARMUP`), so that `summarise` says it here
+    instead of once per group of runs."""
+    from emml.config.profiles import resolve_profile
+    from emml.models import MODELS
+
+    prof = resolve_profile(profile)
+    rows: dict[int, list[str]] = {}
+    blind: list[str] = []
+    for spec in table.runs(list(prof.seeds)[:1]):
+        if spec.aux:
+            continue
+        frames = spec.to_config(prof).model_options.get("answer_gate_frames", 0)
+        if not frames and not MODELS[spec.model].fusion.answer_warmup:
+            blind.append(spec.row)
+        rows.setdefault(frames, [])
+        if spec.row not in rows[frames]:
+            rows[frames].append(spec.row)
+    if not any(rows):
+        return []
+    (warmup,) = [p for p in fidelity.PAPER if p.label == fidelity.WARMUP]
+    out = []
+    for frames, labels in rows.items():
+        if not frames:
+            continue
+        others = [r for f, rs in rows.items() if f != frames for r in rs]
+        if not others:
+            who = "the No Aux runs of every row: "
+        elif set(others) <= set(blind):
+            who = f"the No Aux runs of every row but {' and '.join(others)} (its answer reads no image): "
+        else:
+            who = "the No Aux runs of the rows "
+        out.append((warmup.deviation({"model.answer_gate_frames": frames}), who + ", ".join(labels)))
+    return out
+
+
+def summarise(runs: list[ShownRun], schedule: list[tuple[str, str]] | None = None) -> Deviations:
+    """Deviations and choices of ``runs``, grouped, with where their configs came from. ``schedule``: the table's
+    No Aux warm-up (`noaux_schedule`), said once with the rows it applies to, in place of the runs' own lines that
+    say the same (a run under another schedule keeps its line)."""
     devs = grouped(runs, lambda r: fidelity.deviations(r.config, r.skip))
+    if schedule:
+        said = {line for line, _ in schedule}
+        at = next((i for i, (line, _) in enumerate(devs) if line in said), len(devs))
+        kept = [d for d in devs if d[0] not in said]
+        devs = kept[:at] + list(schedule) + kept[at:]
     choices = grouped(runs, lambda r: fidelity.choices(r.config))
     counts = {s: sum(r.source == s for r in runs) for s in (SAVED, NO_CONFIG, REFERENCE, DECLARED)}
     words = {

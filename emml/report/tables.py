@@ -308,7 +308,7 @@ def report_table(
     md_df, constant = layout(table, cells)
     text = caption(table, profile, cells, results, constant)
     runs = shown_runs(table, profile, cells, results, run_root)
-    devs = deviations.summarise(runs) if runs else None
+    devs = deviations.summarise(runs, deviations.noaux_schedule(table, profile)) if runs else None
     agg = summary(table, cells)
     out.mkdir(parents=True, exist_ok=True)
     md_path, tex_path = out / f"{name}-{profile}.md", out / f"{name}-{profile}.tex"

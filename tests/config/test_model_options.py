@@ -35,11 +35,9 @@ def test_the_declared_options_spell_their_parts_in_declaration_order_when_not_de
     assert option_name_parts(Mine, {"mode": "b", "scale": 0.5, "kind": "y"}) == ["sc0.5", "modeb"]
     assert option_name_parts(Mine, {"scale": 2, "on": True}) == ["sc2", "onTrue"]  # an int formats as {:g}
     assert option_name_parts(Mine, {"scale": None, "mode": "a", "other": 1}) == []  # the defaults: not spelled
-    assert named_options(ModelConfig) == ("sentence_readout", "sentence_activation")
-    assert option_name_parts(ModelConfig, {"sentence_activation": "softplus", "sentence_readout": "mean"}) == [
-        "sentmean",
-        "xsentsoftplus",
-    ]
+    assert named_options(ModelConfig) == ("sentence_readout", "sentence_activation", "answer_gate_frames")
+    spelled = {"answer_gate_frames": 400000, "sentence_activation": "softplus", "sentence_readout": "mean"}
+    assert option_name_parts(ModelConfig, spelled) == ["sentmean", "xsentsoftplus", "warm400000"]
 
 
 @pytest.mark.parametrize(

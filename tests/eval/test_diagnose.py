@@ -131,6 +131,54 @@ def test_a_saturated_conv_is_flagged_on_real_frames(no_leftovers):
     assert "x_image_saturated 1.00" in summary_line(collapsed)
 
 
+def test_saturation_counts_only_the_channels_asked_for():
+    z = np.zeros((4, 3, 2, 5))
+    z[:, 0] = -9.0  # pinned, but a channel the caller leaves out
+    z[:, 1:] = np.random.default_rng(0).normal(0, 2, size=(4, 2, 2, 5))
+    every = x_image_saturation(z, "sigmoid")
+    assert every["x_image_saturated"] == pytest.approx(1 / 3)
+    some = x_image_saturation(z, "sigmoid", np.array([False, True, True]))
+    assert some["x_image_saturated"] == 0.0 and some["x_image_spatial_std"] > every["x_image_spatial_std"]
+    assert [c["counted"] for c in some["x_image_channels"].values()] == [False, True, True]
+    assert some["x_image_channels"][0]["pinned"]  # still told per channel
+    with pytest.raises(ValueError, match="at least one channel"):
+        x_image_saturation(z, "sigmoid", np.zeros(3, dtype=bool))
+
+
+def test_an_aux_runs_all_zero_label_channels_are_not_a_collapse(no_leftovers):
+    """Issue 61: in a run with aux labels, the function words' channels ('go', 'the', 'what', ...: labels all zero)
+    are trained to 0 by the aux loss. Pinned so, they are not counted (the demo's Aux run warned "50% of the conv3
+    channels are pinned": its 9 function words and 2 superlatives of 22); without aux labels every channel counts,
+    and the warning names the words it counts and those pinned."""
+    from dataclasses import replace
+
+    cfg = _env_cfg()
+    words = cfg.vocabulary
+    function = ["go", "to", "the", "object", "what", "color", "is", "which", "in"]
+    model = build_model("dual_attention", len(words), cfg.height, cfg.width, cfg.max_steps)
+    with torch.no_grad():  # the aux loss's work: the function words' channels at 0 on every cell
+        for w in [*function, "largest", "smallest"]:
+            model.image_encoder.conv3.bias[words.index(w)] = -60.0
+    aux = diagnose(model, replace(cfg, aux_labels=True), episodes=1, step0_episodes=0, max_frames=20)
+    assert aux["x_image_uncounted"] == function
+    assert len(aux["x_image_counted"]) == 13 and "red" in aux["x_image_counted"]  # the superlatives count: no label
+    assert aux["x_image_saturated"] == pytest.approx(2 / 13)
+    assert saturation_warning(aux) is None
+    no_aux = diagnose(model, cfg, episodes=1, step0_episodes=0, max_frames=20)
+    assert not cfg.aux_labels and no_aux["x_image_uncounted"] == [] and len(no_aux["x_image_counted"]) == 22
+    assert no_aux["x_image_saturated"] == pytest.approx(11 / 22)
+    warning = saturation_warning(no_aux)
+    assert warning.startswith("WARNING: 11 of the 22 conv3 channels counted (50%) are pinned on every cell")
+    assert "go, to, the, object, largest, smallest, what, color, is, which, in" in warning
+    assert "counted: all 22 words" in warning
+    with torch.no_grad():  # and an Aux run whose content words collapsed too: said, naming what it counts
+        model.image_encoder.conv3.bias.fill_(-60.0)
+    collapsed = diagnose(model, replace(cfg, aux_labels=True), episodes=1, step0_episodes=0, max_frames=20)
+    warning = saturation_warning(collapsed)
+    assert warning.startswith("WARNING: 13 of the 13 conv3 channels counted (100%)")
+    assert "not the 9 whose aux labels are all zero, which the aux loss trains to 0: go, to, the" in warning
+
+
 def test_conv3_drift_tells_a_uniform_shift_from_learning():
     """The run's init rebuilt from its seed: untouched, no direction; a uniform signed shift (the No Aux collapse's
     signature), every weight one way; independent noise, about half."""

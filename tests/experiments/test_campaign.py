@@ -48,7 +48,7 @@ def test_steps_train_in_order_and_a_rerun_skips_what_is_finished(tracking, campa
         ("first", "da_no_ga2-easy-aux-s0-smoke", "to do"),
         ("first", "da_no_sa-easy-aux-s0-smoke", "to do"),
         ("second", "ga-easy-aux-s0-smoke", "to do"),
-        ("second", "ga-easy-noaux-s0-smoke", "to do"),
+        ("second", "ga-easy-noaux-warm400000-s0-smoke", "to do"),
     ]
     assert before[2].target == 128 and before[0].target == 512  # a step's frames, else the profile's
     (first, _), (second, _) = (step_runs(step)[0] for step in plan.steps)
@@ -272,9 +272,9 @@ def test_steps_can_be_chosen_by_name_in_the_campaigns_order(tracking, campaigns)
     assert [s.name for s in select_steps(plan, ["second", "first"]).steps] == ["first", "second"]
     second = select_steps(plan, ["second"])
     roots = (tracking["run_root"], tracking["results_root"])
-    assert [r.run_name for r in status(second, *roots)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-s0-smoke"]
+    assert [r.run_name for r in status(second, *roots)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-warm400000-s0-smoke"]
     run_campaign(second, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
-    assert [c[0] for c in calls(tracking)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-s0-smoke"]  # not "first"'s
+    assert [c[0] for c in calls(tracking)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-warm400000-s0-smoke"]  # not "first"'s
     with pytest.raises(ValueError, match=r"step='thrid' is not a step of campaign 'mine'; allowed: first, second"):
         select_steps(plan, ["first", "thrid"])
 
@@ -419,13 +419,13 @@ def test_status_names_a_damaged_run_dir_or_results_csv_and_goes_on(tracking, cam
     torn = Path(tracking["run_root"]) / "table2" / "ga-easy-aux-s0-smoke" / "metrics.csv"
     torn.parent.mkdir(parents=True)
     torn.write_text("step,key,value\n64,charts/fps,100.0\n128,charts/fps,10")  # a live run writing, or a kill
-    garbage = Path(tracking["run_root"]) / "table2" / "ga-easy-noaux-s0-smoke" / "metrics.csv"
+    garbage = Path(tracking["run_root"]) / "table2" / "ga-easy-noaux-warm400000-s0-smoke" / "metrics.csv"
     garbage.parent.mkdir(parents=True)
     garbage.write_text("step,key,value\n64,charts/fps,100.0\n\x00\x00garbage\n128,charts/fps,100.0\n")
     for mirror in (torn, garbage):  # interrupted runs: a checkpoint to resume from
         (mirror.parent / "checkpoint.pt").write_bytes(b"")
     rows = {r.run_name: r for r in status(plan, *roots)}
-    assert rows["ga-easy-aux-s0-smoke"].frames == 64 and rows["ga-easy-noaux-s0-smoke"].frames == 128
+    assert rows["ga-easy-aux-s0-smoke"].frames == 64 and rows["ga-easy-noaux-warm400000-s0-smoke"].frames == 128
     err = capsys.readouterr().err
     assert f"note: {garbage}: a line near its end is not a metric point" in err and str(torn) not in err
     assert torn.read_text().endswith(",10")  # a reader never cuts a file a live run may be writing

@@ -28,7 +28,7 @@ profile = "smoke"
 only = {{ model = "ga", difficulty = "easy", aux = [true, false] }}
 frames = {frames}
 """
-RUNS = ("ga-easy-aux-s0-smoke", "ga-easy-noaux-s0-smoke")
+RUNS = ("ga-easy-aux-s0-smoke", "ga-easy-noaux-warm400000-s0-smoke")
 LAUNCH = textwrap.dedent(
     """
     import sys

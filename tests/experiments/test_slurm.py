@@ -68,7 +68,7 @@ def test_a_job_trains_its_pack_and_requeues_itself_at_its_time_limit(tracking, n
     )
     store = Path(tracking["run_root"]) / "slurm" / "table3-smoke" / "pack0" / "mlflow.db"
     assert len(report.submitted) == 1 and report.failed == {}
-    assert sorted(report.done) == ["da_no_sa-easy-aux-s0-smoke", "da_no_sa-easy-noaux-s0-smoke"][:pack]
+    assert sorted(report.done) == ["da_no_sa-easy-aux-s0-smoke", "da_no_sa-easy-noaux-warm400000-s0-smoke"][:pack]
     for name in report.done:
         folder = Path(tracking["run_root"]) / "table3" / name
         starts = [json.loads(line) for line in (folder / "starts.jsonl").read_text().splitlines()]

@@ -51,8 +51,8 @@ def test_table3_expands_to_ablations_and_single_task_runs():
     assert {r.difficulty for r in runs} == {"easy"}
     names = {r.run_name("quick") for r in runs}
     assert "dual_attention-easy-noaux-noshaping-warm400000-s0-quick" in names  # No Aux: 400k to GA2 first (48)
-    assert "da_no_ga2-easy-noaux-s0-quick" in names  # no GA2 gate to keep it to
-    assert "da_no_sa-easy-noaux-s0-quick" in names  # its policy reads x_I per cell: no collapse, the paper's loss
+    assert "da_no_ga2-easy-noaux-warm400000-s0-quick" in names  # one No Aux rule for every row (issue 61)
+    assert "da_no_sa-easy-noaux-warm400000-s0-quick" in names  # its run under the paper's loss is retired
     assert "dual_attention-easy-aux-sgnonly-s0-quick" in names and "dual_attention-easy-aux-eqaonly-s0-quick" in names
     single = [r for r in runs if r.row == "DA Single-Task"]
     assert {(r.overrides["env.tasks"], r.metrics) for r in single} == {("sgn", ("sgn_test",)), ("eqa", ("eqa_test",))}
@@ -68,7 +68,7 @@ def test_table3_expands_to_ablations_and_single_task_runs():
 
 def test_noaux_overrides_reach_the_no_aux_runs_only():
     """Issue 48: Dual-Attention's No Aux runs keep the answer loss to the GA2 gate for their first 400k frames; its Aux
-    runs are the paper's."""
+    runs are the paper's. Issue 61: the baselines' No Aux runs take the same warm-up, under names that say it."""
     runs = [r for r in load_table("table2").runs([0]) if r.model == "dual_attention" and r.difficulty == "easy"]
     by_aux = {r.aux: r.to_config("quick") for r in runs}
     assert by_aux[False].model_options == {"answer_gate_frames": 400000} and not by_aux[True].model_options
@@ -77,10 +77,59 @@ def test_noaux_overrides_reach_the_no_aux_runs_only():
         True: "dual_attention-easy-aux-s0-quick",
     }
     assert {r.aux: r.departures for r in runs} == {False: ("model_options.answer_gate_frames",), True: ()}
-    baselines = [r for r in load_table("table2").runs([0]) if r.model != "dual_attention" and not r.aux]
-    assert all("model_options.answer_gate_frames" not in r.overrides for r in baselines)
-    house = [r for r in load_table("table5").runs([0]) if r.model == "dual_attention"]
-    assert [r.run_name("quick") for r in house] == ["dual_attention-house-noaux-warm400000-s0-quick"]
+    table2 = load_table("table2").runs([0])
+    easy = {r.model: r.run_name("quick") for r in table2 if r.difficulty == "easy" and not r.aux}
+    assert easy["ga"] == "ga-easy-noaux-warm400000-s0-quick" and easy["film"] == "film-easy-noaux-warm400000-s0-quick"
+    assert easy["text_only"] == "text_only-easy-noaux-s0-quick"  # its answer reads no image
+    house = {r.model: r.run_name("quick") for r in load_table("table5").runs([0])}
+    assert house["dual_attention"] == "dual_attention-house-noaux-warm400000-s0-quick"
+    assert house["film"] == "film-house-noaux-warm400000-s0-quick"
+
+
+NO_AUX_TABLES = ("table2", "table3", "table5")
+"""The tables with No Aux rows: one warm-up for all of them (issue 61)."""
+
+
+def _check_one_no_aux_schedule(load=load_table) -> None:
+    """Every No Aux run of Tables 2, 3 and 5 whose answer reads the image (`Fusion.answer_warmup`) under the same
+    warm-up, Text only under none, no Aux run under one; an AssertionError names the rows that differ."""
+    from emml.models import MODELS
+
+    schedules: dict[int, list[str]] = {}
+    for name in NO_AUX_TABLES:
+        for spec in load(name).runs([0]):
+            frames = spec.to_config("quick").model_options.get("answer_gate_frames", 0)
+            where = f"{name} {spec.row!r} ({spec.difficulty}, {'Aux' if spec.aux else 'No Aux'})"
+            if spec.aux:
+                assert frames == 0, f"{where}: an Aux run under a warm-up of {frames:,} frames"
+            elif MODELS[spec.model].fusion.answer_warmup:
+                schedules.setdefault(frames, []).append(where)
+            else:
+                assert frames == 0, f"{where}: its answer reads no image, yet a warm-up of {frames:,} frames"
+    assert len(schedules) == 1, "No Aux rows under different schedules: " + "; ".join(
+        f"{frames:,} frames: {', '.join(rows)}" for frames, rows in schedules.items()
+    )
+    return set(schedules)
+
+
+def test_every_no_aux_row_of_tables_2_3_and_5_trains_under_one_schedule():
+    """Issue 61, "No Aux like for like": the warm-up is a property of the No Aux setting, not of a row: every No Aux
+    row of Tables 2, 3 and 5 trains under the same one, issue 48's N (it stays unless two seeds say otherwise)."""
+    assert _check_one_no_aux_schedule() == {400_000}
+
+
+def test_the_one_schedule_check_fails_on_a_row_that_differs(tmp_path):
+    """The check above, on Table 2 with GA's No Aux row back on the paper's loss: it names the row."""
+    ga = 'model = "ga"\nnoaux_overrides = { "model_options.answer_gate_frames" = 400000 }\n'
+    text = (REPRODUCE_DIR / "table2.toml").read_text()
+    assert ga in text
+    (tmp_path / "table2.toml").write_text(text.replace(ga, 'model = "ga"\n'))
+
+    def load(name):
+        return load_table(name, tmp_path / "table2.toml") if name == "table2" else load_table(name)
+
+    with pytest.raises(AssertionError, match=r"0 frames: table2 'GA' \(easy, No Aux\), table2 'GA' \(hard, No Aux\)"):
+        _check_one_no_aux_schedule(load)
 
 
 def test_a_bad_noaux_override_fails_naming_the_row(tmp_path):

@@ -275,16 +275,20 @@ def test_answer_gate_frames_is_checked_named_and_told_by_the_model():
     assert model.fusion.warming
     model.at_frames(300_000)
     assert not model.fusion.warming
-    build_model("concat", 22, 36, 36, 30).at_frames(10)  # a fusion without a schedule: a no-op
-    for over, message in (
-        ({"answer_gate_frames": -1}, r"answer_gate_frames=-1 must be a whole number of frames >= 0"),
+    plain = build_model("concat", 22, 36, 36, 30)
+    plain.at_frames(10)  # a run without the warm-up: never warming
+    assert not plain.fusion.warming
+    for name, over, message in (
+        ("dual_attention", {"answer_gate_frames": -1}, r"answer_gate_frames=-1 must be a whole number of frames >= 0"),
         (
+            "dual_attention",
             {"answer_gate_frames": 10, "answer_grad": "gate"},
-            r"only with ga2=True and answer_grad 'all' or 'centered' \(got ga2=True, answer_grad='gate'\)",
+            r"answer_grad='gate' keeps it there throughout \(allowed with it: 0\)",
         ),
+        ("text_only", {"answer_gate_frames": 10}, r"model 'text_only' \(TextOnly\) has no answer that reads x_I"),
     ):
         with pytest.raises(ValueError, match=message):
-            model_config("dual_attention", **over)
+            model_config(name, **over)
 
 
 def test_eq1_over_the_content_words_drops_the_function_words_channels_from_the_attention():
