@@ -11,6 +11,17 @@ from emml.report.curves import plot_run
 from emml.runs.naming import run_name
 from emml.runs.tracking import metric_history, portable, portable_uri, tracking_uri
 
+LABELS = {
+    "attention_on_target": "attention on target",
+    "attention_mass_on_target": "attention mass on target",
+    "detector_ap": "detector AP",
+    "actor_sensitivity": "actor sensitivity",
+    "x_image_saturated": "x_I channels pinned",
+    "x_image_spatial_std": "x_I spatial std",
+}
+"""The diagnostics table's column per figure of `SCALARS` (until issue 66 the header named the first four only, and
+each row had two cells more than it)."""
+
 
 def _diagnostics_table(run_id: str) -> list[str]:
     """One row per evaluation: frames, greedy SGN accuracy and the diag/* figures logged with it."""
@@ -19,18 +30,11 @@ def _diagnostics_table(run_id: str) -> list[str]:
     steps = sorted(set().union(*(c.keys() for c in curves.values())))
     if not steps:
         return []
-    head = [
-        "frames",
-        "SGN train",
-        "SGN test",
-        "attention on target",
-        "attention mass on target",
-        "detector AP",
-        "actor sensitivity",
-    ]
+    head = ["frames", "SGN train", "SGN test", *(LABELS[k] for k in SCALARS)]  # one column per key (issue 66)
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    digits = {"diag/x_image_spatial_std": 3}  # a collapsed map's spread is below 0.01 (as `summary_line` prints it)
     for s in steps:
-        cells = [f"{s:,}"] + [f"{curves[k][s]:.2f}" if s in curves[k] else "—" for k in keys]
+        cells = [f"{s:,}"] + [f"{curves[k][s]:.{digits.get(k, 2)}f}" if s in curves[k] else "—" for k in keys]
         rows.append("| " + " | ".join(cells) + " |")
     return rows
 
@@ -69,8 +73,9 @@ def write_demo_report(cfg: TrainConfig, result, out: Path) -> list[Path]:
         lines += [
             "What the agent looks at, at each evaluation (`emml diagnose`, docs/fidelity.md): how often the argmax "
             "of its spatial attention lies on the target, the attention mass there, the mean average precision of "
-            "its word detectors against the aux labels, and how much its first move depends on where the target "
-            "stands (0: not at all).",
+            "its word detectors against the aux labels, how much its first move depends on where the target "
+            "stands (0: not at all), and whether x_I collapsed to a constant code (the share of conv3 channels "
+            "pinned on every cell, x_I's spatial spread).",
             "",
             *diag,
             "",
