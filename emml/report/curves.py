@@ -109,7 +109,7 @@ def plot_table(
     from emml.config.profiles import profile_config
     from emml.experiments.tables import load_table
     from emml.report import deviations
-    from emml.report.efficiency import chance
+    from emml.report.chance import blind_prior
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, reports_dir, table_results
     from emml.runs.rundir import METRICS, path_of
     from emml.runs.tracking import read_mirror
@@ -121,6 +121,7 @@ def plot_table(
     if table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
     results = table_results(table, profile, results_root)  # its own rows, and those it borrows (Table 3's DA)
+    prior = blind_prior(profile, results_root)
     run_ids = dict(zip(results["run_name"], results["run_id"]))
     paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
     metrics = list(dict.fromkeys(table.metrics.values()))
@@ -193,7 +194,8 @@ def plot_table(
                 value = paper.get((row, difficulty, aux, metric))
                 if value not in (None, ""):
                     ax.plot([1.0], [float(value)], marker="<", ms=6, color=color, transform=edge, clip_on=False)
-            ax.axhline(chance(metric), color="grey", lw=0.8, ls=":")
+            line = prior.of(curve_key(metric)[0].removeprefix("eval/"), difficulty)  # a blind model's score here
+            ax.axhline(line, color="grey", lw=0.8, ls=":")
             label = curve_key(metric)[1]
             title = f"{label}: {DIFFICULTY_LABELS.get(difficulty, difficulty)}, {AUX_LABELS[aux]}"
             ax.set_title(title)
@@ -202,7 +204,9 @@ def plot_table(
             ax.set_ylabel("greedy accuracy")
             for handle, text in zip(*ax.get_legend_handles_labels()):
                 legend.setdefault(text, handle)
-            legend.setdefault(f"chance ({chance(metric):.2f})", Line2D([], [], color="grey", lw=0.8, ls=":"))
+            legend.setdefault(
+                f"chance: blind prior ({curve_key(metric)[1]} {line:.2f})", Line2D([], [], color="grey", lw=0.8, ls=":")
+            )
             if any(paper.get((row, difficulty, aux, metric)) for _, row, _ in lines):
                 legend.setdefault("paper (its frames)", Line2D([], [], color="grey", marker="<", ls=""))
     right = 1 - LEGEND_INCHES / fig.get_size_inches()[0]

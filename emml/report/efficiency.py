@@ -15,14 +15,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml.config.profiles import Profile, resolve_profile
+from emml.experiments.claims.evidence import LEAVE, Chance, frames_text
 from emml.experiments.tables import METRICS
 
-CHANCE = {"sgn": 0.2, "eqa": 1 / 3}
-"""Chance per task: SGN, walking to one of the 5 objects (docs/fidelity.md); EQA, the paper's Text only row, which
-sees no frame, scores 0.33 in every column of its Table 2 (ours reads the test split's answer priors: 0.45)."""
-LEAVE = 0.1
-"""A run has left chance when its accuracy is above chance + LEAVE (SGN 0.30, EQA 0.43): the binomial noise of a 500
-episode evaluation is about 0.02, of a 100 episode one about 0.045."""
+__all__ = ["LEAVE", "frames_text", "first_crossing", "run_efficiency", "table_efficiency", "markdown"]
+UNIFORM_CHANCE = Chance()
+"""Chance without a blind run to read: the uniform floor (SGN 0.2, EQA 1/3; emml/experiments/claims/evidence.py)."""
 CURVE_METRICS = METRICS
 """The results columns whose greedy evaluation is logged periodically as `eval/<metric>`."""
 MARKS = ("chance", "0.5", "0.9")
@@ -30,19 +28,15 @@ MARKS = ("chance", "0.5", "0.9")
 MARK_LABELS = {"chance": "leaves chance", "0.5": "reaches 0.5", "0.9": "reaches 0.9"}
 
 
-def chance(metric: str) -> float:
-    """The chance accuracy of a results column's task (sgn_* or eqa_*)."""
-    return CHANCE["eqa" if metric.startswith("eqa") else "sgn"]
+def level(metric: str, mark: str, floor: float) -> float:
+    """The accuracy a crossing `mark` asks for: above `floor` (chance) + LEAVE for 'chance', else the number."""
+    return floor + LEAVE if mark == "chance" else float(mark)
 
 
-def level(metric: str, mark: str) -> float:
-    """The accuracy a crossing `mark` asks for: above chance + LEAVE for 'chance', else at least the number."""
-    return chance(metric) + LEAVE if mark == "chance" else float(mark)
-
-
-def first_crossing(points: list[tuple[int, float]], metric: str, mark: str) -> int | None:
-    """The first frame count at which the curve crosses `mark` (`level`); None when it never does."""
-    bar = level(metric, mark)
+def first_crossing(points: list[tuple[int, float]], metric: str, mark: str, floor: float | None = None) -> int | None:
+    """The first frame count at which the curve crosses `mark` (`level`; `floor`: chance, by default the uniform
+    chance of the metric's task); None when it never does."""
+    bar = level(metric, mark, UNIFORM_CHANCE.of(metric, "easy") if floor is None else floor)
     for step, value in points:
         if (value > bar) if mark == "chance" else (value >= bar):
             return step
@@ -64,7 +58,8 @@ class RunEfficiency:
     last: int = 0
     """The frames of the last evaluation point."""
     every: int = 0
-    """The frames between evaluation points (the cadence; 0 with one point)."""
+    """The largest gap between evaluation points in frames (0 with one point): a crossing is known to that
+    resolution (the gaps of a run may alternate, e.g. 99,328 / 100,352)."""
     found: bool = True
     """False when the run has no metrics mirror here (its run dir is on the machine that trained it)."""
 
@@ -82,8 +77,10 @@ def curves(path: Path) -> dict[str, list[tuple[int, float]]]:
     return {m: sorted(points.items()) for m, points in out.items()}
 
 
-def run_efficiency(spec, profile: Profile | str, run_root: str | Path) -> RunEfficiency:
-    """The crossings of one declared run (a RunSpec) from its run dir under `run_root`."""
+def run_efficiency(spec, profile: Profile | str, run_root: str | Path, chance: Chance | None = None) -> RunEfficiency:
+    """The crossings of one declared run (a RunSpec) from its run dir under `run_root`; 'leaves chance' above
+    `chance` (the profile's blind prior, emml/report/chance.py; default the uniform chance) + LEAVE."""
+    chance = chance if chance is not None else UNIFORM_CHANCE
     from emml.runs.rundir import METRICS, path_of
 
     name = spec.run_name(profile)
@@ -95,27 +92,31 @@ def run_efficiency(spec, profile: Profile | str, run_root: str | Path) -> RunEff
         return eff
     steps = sorted({s for points in found.values() for s, _ in points})
     eff.last = steps[-1]
-    eff.every = min((b - a for a, b in zip(steps, steps[1:])), default=0)
+    eff.every = max((b - a for a, b in zip(steps, steps[1:])), default=0)
     for metric in CURVE_METRICS:
         if metric in found:
-            eff.crossings[metric] = {mark: first_crossing(found[metric], metric, mark) for mark in MARKS}
+            floor = chance.of(metric, spec.difficulty)
+            eff.crossings[metric] = {mark: first_crossing(found[metric], metric, mark, floor) for mark in MARKS}
     return eff
 
 
-def table_efficiency(table, profile: str, names: list[str], run_root: str | Path) -> list[RunEfficiency]:
-    """The crossings of the named runs of `table` (the runs its page shows), in the table's run order."""
+def table_efficiency(
+    table, profile: str, names: list[str], run_root: str | Path, chance: Chance | None = None
+) -> list[RunEfficiency]:
+    """The crossings of the named runs of `table` (the runs its page shows), in the table's run order; chance: the
+    profile's blind prior (emml/report/chance.py) unless given."""
+    from emml.report.chance import blind_prior
+
     prof = resolve_profile(profile)  # once: every run name below reads it
+    chance = chance if chance is not None else blind_prior(profile)
     wanted = set(names)
     runs = table.runs(list(prof.seeds))
-    return [run_efficiency(spec, prof, run_root) for spec in runs if spec.run_name(prof) in wanted]
+    return [run_efficiency(spec, prof, run_root, chance) for spec in runs if spec.run_name(prof) in wanted]
 
 
-def frames_text(frames: int | None, last: int) -> str:
-    """'0.30M', or '>1.50M' (not by the last evaluation)."""
-    return f">{last / 1e6:.2f}M" if frames is None else f"{frames / 1e6:.2f}M"
-
-
-def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS) -> str:
+def markdown(
+    runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS, chance: Chance | None = None
+) -> str:
     """The page's sample-efficiency section: one line per run, per metric its three crossings."""
     from emml.config.env_kinds import env_label
     from emml.experiments.tables import METRIC_LABELS
@@ -124,15 +125,20 @@ def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS
     if not runs:
         return ""
     shown = [m for m in metrics if any(m in r.crossings for r in runs)]
+    from emml.report.chance import chance_text
+
+    chance = chance if chance is not None else UNIFORM_CHANCE
     every = sorted({r.every for r in runs if r.every})
     cadence = ", ".join(f"{e:,}" for e in every) or "—"
+    difficulties = tuple(dict.fromkeys(r.difficulty for r in runs))
     lines = [
         "### Sample efficiency",
         "",
         "Frames at which each run's greedy accuracy (its periodic evaluation in `metrics.csv`) first leaves chance "
-        f"(above chance + {LEAVE:.2f}: SGN {CHANCE['sgn'] + LEAVE:.2f}, EQA {CHANCE['eqa'] + LEAVE:.2f}), then "
-        f"reaches 0.5 and 0.9, as 'leaves chance / 0.5 / 0.9'; >F: not by its last evaluation at F frames. "
-        f"Evaluations every {cadence} frames: a crossing is known to that resolution.",
+        f"(above chance + {LEAVE:.2f}; chance is what a blind model scores here, {chance.source}: "
+        f"{chance_text(chance, difficulties)}), then reaches 0.5 and 0.9, as 'leaves chance / 0.5 / 0.9'; >F: not by "
+        f"its last evaluation at F frames. Evaluations at most {cadence} frames apart: a crossing is known to that "
+        "resolution.",
         "",
     ]
     header = ["Run", "Setting", "seed"] + [METRIC_LABELS.get(m, m) for m in shown]

@@ -333,7 +333,10 @@ def report_table(
         from emml.config.profiles import profile_config
 
         root = run_root if run_root is not None else profile_config(profile).run_root
-        md += [efficiency.markdown(efficiency.table_efficiency(table, profile, names, root))]
+        from emml.report.chance import blind_prior
+
+        prior = blind_prior(profile, results_root)  # 'leaves chance': above what a blind model scores here
+        md += [efficiency.markdown(efficiency.table_efficiency(table, profile, names, root, prior), chance=prior)]
     md += [f"Results: `{shown}`", ""]
     md_path.write_text("\n".join(md))
     tex_path.write_text(tex_table(table, profile, cells, results, devs, agg))

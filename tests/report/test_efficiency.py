@@ -3,10 +3,15 @@ on a FIXTURE: made-up results rows and metrics.csv files in tmp_path (never resu
 
 from emml.config.profiles import profile_seeds
 from emml.experiments.tables import load_table
-from emml.report.claims import BUDGET, CONTRADICTED, SUPPORTED, UNTESTABLE, decide
+from emml.report.claims import BUDGET, CONTRADICTED, INCONCLUSIVE, SUPPORTED, UNTESTABLE, decide
 from emml.report.efficiency import first_crossing, markdown, run_efficiency
 from tests.report.test_claims_page import CLAIMS
 from tests.report.test_tables import PROFILE, fake_results
+
+
+def learned(spec) -> float:
+    """FIXTURE: every run at 0.9 but the blind row (Text only) at 0.25, as a blind model scores SGN."""
+    return 0.25 if spec.model == "text_only" else 0.9
 
 
 def test_first_crossing_reads_chance_as_above_chance_plus_the_margin():
@@ -16,6 +21,7 @@ def test_first_crossing_reads_chance_as_above_chance_plus_the_margin():
     assert first_crossing(points, "sgn_test", "0.9") == 500
     assert first_crossing(points, "eqa_test", "chance") == 400  # EQA chance 1/3: above 0.433
     assert first_crossing(points[:2], "sgn_test", "0.9") is None
+    assert first_crossing(points, "eqa_test", "chance", floor=0.45) == 500  # the blind prior 0.45: above 0.55
 
 
 def write_curves(run_root, table: str, crossing, points: int = 10) -> None:
@@ -37,8 +43,8 @@ def write_curves(run_root, table: str, crossing, points: int = 10) -> None:
 
 def test_a_speed_claim_is_decided_by_the_frames_to_leave_chance(tmp_path):
     results, runs = tmp_path / "results", tmp_path / "runs"
-    fake_results("table3", results, value=lambda spec: 0.9)
-    fake_results("table2", results, value=lambda spec: 0.9)  # Table 3's DA Multi-Task is Table 2's Dual-Attention
+    fake_results("table3", results, value=learned)
+    fake_results("table2", results, value=learned)  # Table 3's DA Multi-Task is Table 2's Dual-Attention
     claim = CLAIMS["shaping-speed"]
     write_curves(runs, "table3", lambda s: 0.6 if s.overrides.get("env.shaping") is False else 0.3)
     write_curves(runs, "table2", lambda s: 0.3)
@@ -51,7 +57,7 @@ def test_a_speed_claim_is_decided_by_the_frames_to_leave_chance(tmp_path):
     write_curves(tmp_path / "r4", "table3", lambda s: 0.4)  # one evaluation (0.15M) later: within the cadence
     write_curves(tmp_path / "r4", "table2", lambda s: 0.3)
     d = decide(claim, PROFILE, results, tmp_path / "r4")
-    assert d.status == BUDGET and "0.45M vs 0.60M" in d.phrase
+    assert d.status == INCONCLUSIVE and "0.45M vs 0.60M" in d.phrase
     write_curves(tmp_path / "r3", "table3", lambda s: None)  # nothing leaves chance: not learned at this budget
     write_curves(tmp_path / "r3", "table2", lambda s: None)
     assert decide(claim, PROFILE, results, tmp_path / "r3").status == BUDGET
@@ -61,10 +67,11 @@ def test_a_speed_claim_is_decided_by_the_frames_to_leave_chance(tmp_path):
 
 def test_the_channel_alignment_claim_reads_the_no_aux_run_detector_ap(tmp_path):
     results, runs = tmp_path / "results", tmp_path / "runs"
-    fake_results("table2", results, value=lambda spec: 0.9)
+    fake_results("table2", results, value=learned)
     write_curves(runs, "table2", lambda s: 0.3)
     d = decide(CLAIMS["noaux-channels-align"], PROFILE, results, runs)
-    assert d.status == CONTRADICTED and "diag/detector_ap" in d.phrase  # 0.1 against 0.5, the runs learned (0.9)
+    assert d.status == CONTRADICTED and "diag/detector_ap" in d.phrase  # 0.1 against 0.5 × the Aux run's 0.7
+    assert "0.5 × its Easy · Aux run's 0.70" in d.phrase
     fake_results("table2", tmp_path / "low", value=lambda spec: 0.2)  # at chance on its training split
     assert decide(CLAIMS["noaux-channels-align"], PROFILE, tmp_path / "low", runs).status == BUDGET
     assert decide(CLAIMS["attention-on-target"], PROFILE, results, tmp_path / "nowhere").status == UNTESTABLE

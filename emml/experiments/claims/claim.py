@@ -1,4 +1,5 @@
 """The paper's claims as data (reproduce/claims.toml): each one the comparison of table cells that decides it.
+Each claim's `kind` is an object of emml/experiments/claims/kinds.py (the fields it needs, its rule, its decision).
 
 The campaign's steps name the claims their runs decide (emml/campaign.py, `--status`); the reports state each claim
 beside the cells that decide it. Loading checks every claim against its table (rows, metrics, columns) before any
@@ -13,16 +14,10 @@ from pathlib import Path
 import tomllib
 
 from emml.config.paths import REPRODUCE_DIR
+from emml.experiments.claims.kinds import KINDS
 from emml.experiments.tables import METRICS, load_table
 
 CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"
-KINDS = ("best", "below", "level", "at_least", "aux_helps", "faster", "diagnostic", "harder")
-"""best: `row` above every other row; below: each of `rows` below `than`; level: each of `rows` within `margin` of
-`than`; at_least: each of `rows` at or above `value`; aux_helps: each of `rows` as high with aux as without; faster:
-`than` crosses `mark` (leaves chance, reaches 0.5 or 0.9) in fewer frames than each of `rows`, on the greedy
-evaluation curves of the runs' metrics.csv; diagnostic: each of `rows` at or above `value` on the metrics.csv key
-`key` (a `diag/*` figure of `emml diagnose`, logged at every evaluation) at the run's last evaluation; harder: in
-most of `rows` (more than half) the first of the two `metrics` below the second, in each setting."""
 KEYS = (
     "id",
     "text",
@@ -38,6 +33,9 @@ KEYS = (
     "value",
     "mark",
     "key",
+    "relative",
+    "inferred",
+    "on_paper",
 )
 WHERE_KEYS = ("difficulty", "aux")
 CURVE_METRICS = METRICS
@@ -78,6 +76,19 @@ class Claim:
     """'faster': the crossing compared, one of MARKS."""
     key: str | None = None
     """'diagnostic': the metrics.csv key read (diag/detector_ap, ...)."""
+    relative: dict = field(default_factory=dict)
+    """'diagnostic': RunSpec fields of a reference setting (e.g. aux = true): the threshold is `value` times the same
+    row's mean there; empty: `value` itself."""
+    inferred: bool = False
+    """The paper does not state it in a sentence: we read it from its table (the page says so)."""
+    on_paper: str = ""
+    """Why the paper's own table fails the claim's rule, where it does (the page shows the paper's decision; a test
+    checks that exactly these claims fail on the paper's numbers)."""
+
+    @property
+    def kind_of(self):
+        """The kind as an object (emml/experiments/claims/kinds.py)."""
+        return KINDS[self.kind]
 
 
 def load_claims(path: Path = CLAIMS_FILE) -> dict[str, Claim]:
@@ -109,45 +120,44 @@ def _claim(where: str, raw: dict) -> Claim:
     table = load_table(raw["table"])
     labels = [r.label for r in table.rows]
     kind = raw["kind"]
-    needs = {
-        "best": ("row", "metrics"),
-        "below": ("rows", "than", "metrics"),
-        "level": ("rows", "than", "margin", "metrics"),
-        "at_least": ("value", "metrics"),
-        "aux_helps": ("metrics",),
-        "faster": ("rows", "than", "metrics"),
-        "diagnostic": ("rows", "key", "value"),
-        "harder": ("metrics",),
-    }
-    for key in needs[kind]:
+    for key in KINDS[kind].needs:
         if key not in raw:
             raise ValueError(f"{where}: kind={kind!r} needs {key!r}")
-    mark = raw.get("mark", "chance" if kind == "faster" else None)
-    if mark is not None and (kind != "faster" or mark not in MARKS):
-        allowed = ", ".join(MARKS) if kind == "faster" else "kind='faster' only"
+    k = KINDS[kind]
+    crossing = [n for n, x in KINDS.items() if x.reads == "crossing"]
+    mark = raw.get("mark", "chance" if k.reads == "crossing" else None)
+    if mark is not None and (k.reads != "crossing" or mark not in MARKS):
+        allowed = ", ".join(MARKS) if k.reads == "crossing" else f"kind={'/'.join(crossing)!r} only"
         raise ValueError(f"{where}.mark={mark!r} is not allowed; allowed: {allowed}")
-    if "key" in raw and (kind != "diagnostic" or not str(raw["key"]).startswith("diag/")):
-        raise ValueError(f"{where}.key={raw['key']!r}: kind='diagnostic' only, a metrics.csv key diag/<name>")
-    rows = (raw["row"],) if kind == "best" else tuple(raw.get("rows", labels))
+    figure = "/".join(n for n, x in KINDS.items() if x.reads == "figure")
+    if "key" in raw and (k.reads != "figure" or not str(raw["key"]).startswith("diag/")):
+        raise ValueError(f"{where}.key={raw['key']!r}: kind={figure!r} only, a metrics.csv key diag/<name>")
+    rows = (raw["row"],) if k.one_row else tuple(raw.get("rows", labels))
     for label in [*rows, *([raw["than"]] if "than" in raw else [])]:
         if label not in labels:
             raise ValueError(f"{where}: row {label!r} is not a row of {raw['table']}; allowed: {', '.join(labels)}")
     metrics = tuple(raw.get("metrics", list(table.metrics.values())[:1]))  # diagnostic: the cell whose runs it reads
     columns = table.metrics.values()
     trains = [m.replace("_test", "_train") for m in columns if m.endswith("_test")]  # read from the same runs' rows
-    allowed = tuple(dict.fromkeys([*columns, *trains, *(CURVE_METRICS if kind == "faster" else ())]))
+    allowed = tuple(dict.fromkeys([*columns, *trains, *(CURVE_METRICS if k.reads == "crossing" else ())]))
     for m in metrics:
         if m not in allowed:
             raise ValueError(f"{where}.metrics: {m!r} is not a column of {raw['table']}; allowed: {', '.join(allowed)}")
-    if kind == "harder" and len(metrics) != 2:
-        raise ValueError(f"{where}.metrics={list(metrics)!r}: kind='harder' compares two, the harder task's first")
+    if k.metric_count is not None and len(metrics) != k.metric_count:
+        raise ValueError(
+            f"{where}.metrics={list(metrics)!r}: kind={kind!r} compares {k.metric_count}, the harder task's first"
+        )
     cells = dict(raw.get("where", {}))
-    for key, value in cells.items():
-        if key not in WHERE_KEYS:
-            raise ValueError(f"{where}.where: {key!r} is unknown; allowed: {', '.join(WHERE_KEYS)}")
-        values = table.difficulties if key == "difficulty" else table.aux
-        if value not in values:
-            raise ValueError(f"{where}.where.{key}={value!r} is not a column of {raw['table']}; allowed: {values}")
+    relative = dict(raw.get("relative", {}))
+    if relative and k.reads != "figure":
+        raise ValueError(f"{where}.relative: kind={figure!r} only")
+    for part, selection in (("where", cells), ("relative", relative)):
+        for key, value in selection.items():
+            if key not in WHERE_KEYS:
+                raise ValueError(f"{where}.{part}: {key!r} is unknown; allowed: {', '.join(WHERE_KEYS)}")
+            values = table.difficulties if key == "difficulty" else table.aux
+            if value not in values:
+                raise ValueError(f"{where}.{part}.{key}={value!r} is not a column of {raw['table']}; allowed: {values}")
     return Claim(
         raw["id"],
         raw["text"],
@@ -162,4 +172,7 @@ def _claim(where: str, raw: dict) -> Claim:
         raw.get("value"),
         mark,
         raw.get("key"),
+        relative,
+        bool(raw.get("inferred", False)),
+        str(raw.get("on_paper", "")),
     )

@@ -1,5 +1,5 @@
-"""The paper's claims as data (reproduce/claims.toml, emml/experiments/claims.py): the committed file loads and names
-real rows, metrics and columns; a bad claim fails naming the file, the claim and the allowed values."""
+"""The paper's claims as data (reproduce/claims.toml, emml/experiments/claims/claim.py): the committed file loads and
+names real rows, metrics and columns; a bad claim fails naming the file, the claim and the allowed values."""
 
 import pytest
 
@@ -20,6 +20,8 @@ def test_the_committed_claims_load_and_point_at_their_tables():
     assert claims["aux-helps"].rows == tuple(r.label for r in load_table("table2").rows)  # no rows: all of them
     assert claims["shaping-speed"].mark == "chance" and claims["shaping-speed"].metrics == ("sgn_train",)
     assert claims["noaux-channels-align"].metrics == ("sgn_test",)  # the table's first: the cell whose runs it reads
+    assert claims["noaux-channels-align"].relative == {"aux": True}  # half the Aux run's own AP
+    assert claims["multitask-helps"].inferred and not claims["da-best-easy-aux"].inferred
 
 
 GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_test"]\n'
@@ -41,7 +43,12 @@ GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_te
         ),
         ('kind = "best"\nrow = "GA"\nmark = "0.5"\n', r"mark='0.5' is not allowed; allowed: kind='faster' only"),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\n', r"kind='diagnostic' needs 'key'"),
-        ('kind = "harder"\n', r"metrics=\['sgn_test'\]: kind='harder' compares two, the harder task's first"),
+        ('kind = "harder"\n', r"metrics=\['sgn_test'\]: kind='harder' compares 2, the harder task's first"),
+        ('kind = "best"\nrow = "GA"\nrelative = { aux = true }\n', r"relative: kind='diagnostic' only"),
+        (
+            'kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\nkey = "diag/x"\nrelative = { aux = "yes" }\n',
+            r"relative.aux='yes' is not a column of table2",
+        ),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\nkey = "eval/x"\n', r"key='eval/x': kind='diagnostic' only"),
     ],
 )

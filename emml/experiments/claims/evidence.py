@@ -1,0 +1,325 @@
+"""The evidence a claim of the paper rests on, and the rules that weigh it (issues 49 and 60).
+
+A claim compares cells of a table; a cell holds one `Score` per run (seed). The comparisons (`order`, `level`,
+`threshold`, `faster`, `diagnostic`, `most`) each return a `Check`; `status` turns a claim's checks into one of
+STATUSES. The rules are pure functions of the numbers: the same code decides our runs (emml/report/claims.py) and
+the paper's own tables (its numbers as one seed each), so a rule the paper's own table fails is seen to fail.
+
+- Chance is what a blind model scores here (`Chance`): the Text only row of the same source, per difficulty, task
+  and split (the paper's Table 2 row for the paper; ours for our runs), never below the uniform chance (`UNIFORM`).
+- A row has learned when its training split is above chance + LEAVE (`learned`: the mean over every seed the row
+  has); a row with no training score (the paper's tables) is read on the cell itself. A row that learned and loses
+  is contradicted; a row that did not learn says nothing against the paper (not supported at this budget).
+- A gap counts when it exceeds Z (one-sided 95%) standard errors of the difference of the two rows' means. Each
+  row's error is the larger of the between-seed spread (with two seeds or more: sample variance / seeds, as Welch's
+  test) and the binomial error of its success rates (p(1-p)/N per seed, N its evaluation episodes); one seed:
+  binomial only, and the status says 'on 1 seed'.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SUPPORTED, CONTRADICTED, INCONCLUSIVE, BUDGET, UNTESTABLE = (
+    "supported",
+    "contradicted",
+    "not supported (within the error)",
+    "not supported at this budget",
+    "untestable yet",
+)
+STATUSES = (SUPPORTED, CONTRADICTED, INCONCLUSIVE, BUDGET, UNTESTABLE)
+"""INCONCLUSIVE: the rows learned, and a gap is within the error; BUDGET: the row the claim puts higher has not
+learned its training split (its loss says nothing against the paper at this budget)."""
+HOLDS, REVERSED, UNCLEAR, MISSING = "holds", "reversed", "unclear", "missing"
+Z = 1.645
+"""A gap counts when it exceeds Z standard errors of the difference of the two means: a one-sided test at 95% (each
+claim orders two rows one way). The paper's own tables pass every claim at it but aux-helps (which they fail at any
+Z); at 1.96 they would fail da-best-hard-noaux and house-da-best too (EQA 0.38 vs 0.33, 0.29 vs 0.24 at 500
+episodes)."""
+LEAVE = 0.1
+"""A score has left chance when it is above chance + LEAVE: the binomial noise of a 500 episode evaluation is about
+0.02, of a 100 episode one about 0.045."""
+UNIFORM = {"sgn": 0.2, "eqa": 1 / 3}
+"""The floor of chance per task: SGN, walking to one of the 5 objects; EQA, one of the answers a question allows, as
+the paper's Text only row scores (0.33 in every column of its Table 2)."""
+
+
+def task_of(metric: str) -> str:
+    """'sgn' or 'eqa' for a results column (sgn_test, eqa_train, sgn_transfer, ...)."""
+    return "eqa" if metric.startswith("eqa") else "sgn"
+
+
+def split_of(metric: str) -> str:
+    """'train' for a training-split column, else 'test' (a transfer instruction is unseen: a test split)."""
+    return "train" if metric.endswith("_train") else "test"
+
+
+@dataclass(frozen=True)
+class Chance:
+    """What a model that sees no frame scores, per (difficulty, task_split) ('sgn_test', 'eqa_train', ...)."""
+
+    values: dict = field(default_factory=dict)
+    """(difficulty, 'eqa_test') → the blind row's mean over its seeds and aux settings; absent: UNIFORM."""
+    source: str = "the uniform chance"
+    """Where the values come from, for the page ('Table 2's Text only row, quick profile')."""
+
+    def of(self, metric: str, difficulty: str) -> float:
+        """Chance for a results column in a difficulty: the blind row's score, never below UNIFORM."""
+        floor = UNIFORM[task_of(metric)]
+        value = self.values.get((difficulty, f"{task_of(metric)}_{split_of(metric)}"))
+        return floor if value is None else max(floor, float(value))
+
+    def bar(self, metric: str, difficulty: str) -> float:
+        """The score a run must exceed to have left chance: chance + LEAVE."""
+        return self.of(metric, difficulty) + LEAVE
+
+    def measured(self, metric: str, difficulty: str) -> bool:
+        """Whether chance there is the blind row's measured score (not the uniform floor alone)."""
+        return (difficulty, f"{task_of(metric)}_{split_of(metric)}") in self.values
+
+
+@dataclass
+class Score:
+    """One run's number in a cell."""
+
+    run: str
+    seed: int
+    value: float
+    episodes: int
+    """Episodes the number is the success rate of (a results row's eval_episodes × the instructions a transfer row
+    averages); 0 for a number that is no success rate (frames, a diagnostic)."""
+    frames: int
+    train: float | None = None
+    """The run's score on the training split of the task compared (sgn_train for an SGN cell); the paper's tables
+    have none: the cell's own value stands in."""
+    bar: float = -math.inf
+    """`train` must exceed this for the run to have learned (chance + LEAVE of the training split); -inf for the
+    blind row, whose score is the chance line itself."""
+    every: int = 0
+    """'faster': the largest gap between the run's evaluations in frames (a crossing is known to that resolution)."""
+
+
+def learned(scores: list[Score]) -> bool:
+    """Whether the row learned its training split: the mean of its seeds' training scores above the bar (every seed
+    the row has); a row whose runs report no training score is read on its cell's own values."""
+    if not scores:
+        return False
+    train = [s.train if s.train is not None else s.value for s in scores]
+    return float(np.mean(train)) > max(s.bar for s in scores)
+
+
+@dataclass
+class Check:
+    """One comparison a claim makes: two cells, or a cell against a threshold."""
+
+    what: str
+    """E.g. 'SGN test, Easy · Aux: Dual-Attention > Text only'."""
+    outcome: str
+    """HOLDS, REVERSED (the opposite holds by the same rule), UNCLEAR or MISSING."""
+    detail: str
+    """The numbers: each seed's, the gap and its standard error."""
+    chance: bool = False
+    """The row the claim puts higher (the reference of 'level') has not learned its training split."""
+    seeds: int = 0
+    """The fewest seeds of the rows compared."""
+    high: list[Score] = field(default_factory=list)
+    """The scores of the row the claim puts higher (the reference of 'level'), every seed."""
+    numbers: str = ""
+    """The means compared, short: '0.38 vs 0.45'."""
+    setting: str = ""
+    metric: str = ""
+    subject: str = ""
+    """The row the claim puts higher."""
+
+    def tag(self, setting: str, metric: str, subject: str) -> Check:
+        """The check with its setting, metric label and higher row named (the page groups by setting)."""
+        self.setting, self.metric, self.subject = setting, metric, subject
+        return self
+
+
+def mean(scores: list[Score]) -> float:
+    return float(np.mean([s.value for s in scores]))
+
+
+def variance_of_mean(scores: list[Score]) -> float:
+    """The squared standard error of a row's mean: the larger of the between-seed sample variance and the mean
+    binomial variance of one seed's rate, over the seeds (one seed: binomial only)."""
+    n = len(scores)
+    binomial = float(np.mean([s.value * (1 - s.value) / max(s.episodes, 1) for s in scores]))
+    spread = float(np.var([s.value for s in scores], ddof=1)) if n > 1 else 0.0
+    return max(spread, binomial) / n
+
+
+def gap_error(a: list[Score], b: list[Score]) -> float:
+    """The standard error of mean(a) - mean(b), the rows independent (Welch)."""
+    return math.sqrt(variance_of_mean(a) + variance_of_mean(b))
+
+
+def seeds_text(scores: list[Score]) -> str:
+    return " · ".join(f"{s.value:.3f} (s{s.seed})" for s in scores)
+
+
+def _error_text(*rows: list[Score]) -> str:
+    return "between seeds and binomial" if any(len(r) > 1 for r in rows) else "binomial, 1 seed"
+
+
+def _missing(what: str, hi: list[Score], lo: list[Score]) -> Check:
+    """A comparison with a cell still empty; `chance` when the row the claim puts higher is there and unlearned."""
+    if not hi:
+        return Check(what, MISSING, "no run yet in " + ("either cell" if not lo else "the higher row's cell"))
+    unlearned = not learned(hi)
+    detail = f"no run yet in the lower row's cell; the higher row {seeds_text(hi)}"
+    if unlearned:
+        detail += ", which has not learned its training split"
+    return Check(what, MISSING, detail, unlearned, len(hi), hi)
+
+
+def order(what: str, hi: list[Score], lo: list[Score]) -> Check:
+    """Whether `hi` is above `lo` (HOLDS), below (REVERSED) or neither: the gap of the means over every seed each
+    row has, against Z standard errors (`gap_error`)."""
+    if not hi or not lo:
+        return _missing(what, hi, lo)
+    gap, se = mean(hi) - mean(lo), gap_error(hi, lo)
+    outcome = HOLDS if gap > Z * se else REVERSED if -gap > Z * se else UNCLEAR
+    unlearned = not learned(hi)
+    detail = (
+        f"{seeds_text(hi)} against {seeds_text(lo)}: gap {gap:+.3f}, standard error {se:.3f} ({_error_text(hi, lo)})"
+    )
+    if unlearned:
+        detail += "; the higher row has not learned its training split"
+    return Check(what, outcome, detail, unlearned, min(len(hi), len(lo)), hi, f"{mean(hi):.2f} vs {mean(lo):.2f}")
+
+
+def level(what: str, row: list[Score], ref: list[Score], margin: float) -> Check:
+    """Whether `row` is within `margin` of `ref` (HOLDS), beyond it by more than Z standard errors (REVERSED) or
+    neither; two unlearned rows are level trivially, so an unlearned reference never holds."""
+    if not row or not ref:
+        return _missing(what, ref, row)
+    diff, se = mean(row) - mean(ref), gap_error(row, ref)
+    unlearned = not learned(ref)
+    if abs(diff) <= margin and not unlearned:
+        outcome = HOLDS
+    elif abs(diff) - margin > Z * se:
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    detail = (
+        f"{seeds_text(row)} against {seeds_text(ref)}: difference {diff:+.3f} (margin {margin:g}), standard error "
+        f"{se:.3f} ({_error_text(row, ref)})"
+    )
+    if unlearned:
+        detail += "; the reference row has not learned its training split"
+    return Check(what, outcome, detail, unlearned, min(len(row), len(ref)), ref, f"{mean(row):.2f} vs {mean(ref):.2f}")
+
+
+def threshold(what: str, row: list[Score], value: float) -> Check:
+    """Whether the row's mean is at or above `value` (HOLDS), below it by more than Z standard errors (REVERSED) or
+    neither."""
+    if not row:
+        return Check(what, MISSING, "no run yet")
+    m, se = mean(row), math.sqrt(variance_of_mean(row))
+    outcome = HOLDS if m >= value else REVERSED if value - m > Z * se else UNCLEAR
+    unlearned = not learned(row)
+    detail = f"{seeds_text(row)}: mean {m:.3f} against {value:g}, standard error {se:.3f} ({_error_text(row)})"
+    if unlearned:
+        detail += "; the row has not learned its training split"
+    return Check(what, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:g}")
+
+
+def frames_text(frames: int | None, last: int) -> str:
+    """'0.30M', or '>1.50M' (not by the last evaluation at `last` frames)."""
+    return f">{last / 1e6:.2f}M" if frames is None else f"{frames / 1e6:.2f}M"
+
+
+def frames_list(scores: list[Score]) -> str:
+    """Each run's crossing, 'frames (seed)'."""
+    return " · ".join(
+        f"{frames_text(None if math.isinf(s.value) else int(s.value), s.frames)} (s{s.seed})" for s in scores
+    )
+
+
+def _median_frames(scores: list[Score]) -> str:
+    v = float(np.median([s.value for s in scores]))
+    return frames_text(None if math.isinf(v) else int(v), max(s.frames for s in scores))
+
+
+def faster(what: str, fast: list[Score], slow: list[Score]) -> Check:
+    """Whether `fast` crosses its mark more than one evaluation gap before `slow` in every seed both have (HOLDS),
+    `slow` first by as much in every seed (REVERSED) or neither. A value is the frames at the crossing (inf: never by
+    the run's last evaluation); the gap is the larger of the two runs' largest gaps between evaluations (a crossing
+    is known to that resolution). `chance`: the faster row never crosses in the seeds compared."""
+    if not fast or not slow:
+        which = "either cell" if not fast and not slow else "one cell"
+        return Check(what, MISSING, f"no run with a metrics.csv here in {which}")
+    common = sorted({s.seed for s in fast} & {s.seed for s in slow})
+    f = [s for s in fast if s.seed in common]
+    s_ = [s for s in slow if s.seed in common]
+    if not f:
+        return Check(what, MISSING, "no seed in common")
+    apart = [max(a.every, b.every) for a, b in zip(f, s_)]
+    if all(b.value - a.value > gap for a, b, gap in zip(f, s_, apart)):
+        outcome = HOLDS
+    elif all(a.value - b.value > gap for a, b, gap in zip(f, s_, apart)):
+        outcome = REVERSED
+    else:
+        outcome = UNCLEAR
+    never = all(math.isinf(a.value) for a in f)
+    detail = f"{frames_list(f)} against {frames_list(s_)} (evaluations up to {max(apart):,} frames apart)"
+    if never:
+        detail += "; the faster row never crosses by its last evaluation"
+    return Check(what, outcome, detail, never, len(f), fast, f"{_median_frames(f)} vs {_median_frames(s_)}")
+
+
+def diagnostic(what: str, row: list[Score], value: float) -> Check:
+    """Whether the row's mean diagnostic is at or above `value` (HOLDS), every seed below (REVERSED) or neither;
+    `chance`: the row has not learned its training split (its figure says nothing yet)."""
+    if not row:
+        return Check(what, MISSING, "no run with a metrics.csv here")
+    m = mean(row)
+    outcome = HOLDS if m >= value else REVERSED if all(s.value < value for s in row) else UNCLEAR
+    unlearned = not learned(row)
+    detail = " · ".join(f"{s.value:.3f} (s{s.seed}, at {s.frames:,} frames)" for s in row) + f": mean {m:.3f}"
+    detail += f" against {value:.3g}"
+    if unlearned:
+        detail += "; the run has not learned its training split"
+    return Check(what, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:.2g}")
+
+
+def most(what: str, checks: list[Check], unlearned_rows: int) -> Check:
+    """'harder': the rows' own comparisons (`order`, one per row) taken together, every row counted (the paper's
+    "most models" counts every row): HOLDS when more than half hold, REVERSED when more than half are reversed,
+    MISSING while a row has no run; `chance` when more than half of the rows have not learned their training split
+    (`unlearned_rows` of them)."""
+    absent = [c.what.split(":", 1)[0] for c in checks if c.outcome == MISSING]
+    if absent:
+        return Check(what, MISSING, f"no run yet for {', '.join(absent)}")
+    held = sum(c.outcome == HOLDS for c in checks)
+    reversed_ = sum(c.outcome == REVERSED for c in checks)
+    outcome = HOLDS if held * 2 > len(checks) else REVERSED if reversed_ * 2 > len(checks) else UNCLEAR
+    detail = "; ".join(f"{c.what}: {c.outcome}, {c.numbers}" for c in checks)
+    detail += f" ({unlearned_rows} of {len(checks)} rows have not learned their training split)"
+    seeds = min(c.seeds for c in checks)
+    return Check(what, outcome, detail, unlearned_rows * 2 > len(checks), seeds, [], f"in {held} of {len(checks)} rows")
+
+
+def status(checks: list[Check], single_subject: bool = True) -> str:
+    """The claim's status from its comparisons: contradicted when a row that learned loses by the rule; not
+    supported at this budget when a row the claim puts higher has not learned and does not win (with
+    `single_subject`, the claim's one subject row unlearned anywhere, cells missing or not); untestable while a cell
+    is empty; supported when every comparison holds; otherwise not supported within the error (the rows learned,
+    a gap is inside Z standard errors)."""
+    outcomes = [c.outcome for c in checks]
+    if any(c.outcome == REVERSED and not c.chance for c in checks):
+        return CONTRADICTED
+    if any(
+        c.chance and (c.outcome in (REVERSED, UNCLEAR) or (single_subject and c.outcome == MISSING)) for c in checks
+    ):
+        return BUDGET
+    if MISSING in outcomes or not outcomes:
+        return UNTESTABLE
+    if all(o == HOLDS for o in outcomes):
+        return SUPPORTED
+    return INCONCLUSIVE

@@ -1,0 +1,279 @@
+"""The kinds of claim (reproduce/claims.toml `kind`): each one object that says which fields it needs, which rows
+and cells it reads, its rule as the claims page states it, and how it turns the cells' scores into comparisons
+(emml/experiments/claims/evidence.py). The page asks the kind; adding a kind is one class here, its data and tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from emml.experiments.claims.evidence import (
+    MISSING,
+    Check,
+    Score,
+    diagnostic,
+    faster,
+    learned,
+    level,
+    mean,
+    most,
+    order,
+    threshold,
+)
+
+Get = Callable[[str, str, bool, str], list[Score]]
+"""(row, difficulty, aux, metric) → the scores of that cell (every seed found)."""
+MARK_LABELS = {"chance": "leaves chance", "0.5": "reaches 0.5", "0.9": "reaches 0.9"}
+
+
+def setting_text(difficulty: str, aux: bool | None) -> str:
+    from emml.config.env_kinds import env_label
+
+    return env_label(difficulty) if aux is None else f"{env_label(difficulty)} · {'Aux' if aux else 'No Aux'}"
+
+
+def metric_text(metric: str) -> str:
+    from emml.experiments.tables import METRIC_LABELS
+
+    return METRIC_LABELS.get(metric, metric)
+
+
+class Kind:
+    """What every kind answers; the defaults suit the kinds that compare rows cell by cell."""
+
+    name = ""
+    needs: tuple[str, ...] = ("metrics",)
+    """The claim fields this kind requires (reproduce/claims.toml)."""
+    rule = ""
+    """The rule as the claims page states it."""
+    curve = False
+    """Reads the runs' metrics.csv (the greedy evaluation curve or a diag/* figure), not their results rows."""
+    single_subject = True
+    """The claim puts one row higher everywhere: that row unlearned leaves the claim unsupported at this budget even
+    while other cells are missing."""
+    reads = "results"
+    """What a run's number is: 'results' (its results row), 'crossing' (the frames at which its evaluation curve
+    crosses the claim's mark: `mark` allowed, any curve metric) or 'figure' (a diag/* key at its last evaluation:
+    `key` and `relative` allowed)."""
+    one_row = False
+    """The claim names its one row as `row` (every other row of the table is compared with it)."""
+    metric_count: int | None = None
+    """How many metrics the claim must name (None: any)."""
+
+    def involved(self, claim, table) -> set[str]:
+        """The rows whose scores the claim reads."""
+        return {*claim.rows, *([claim.than] if claim.than else [])}
+
+    def wheres(self, claim) -> list[dict]:
+        """The column selections whose cells are read (RunSpec fields: difficulty, aux)."""
+        return [claim.where]
+
+    def metric_label(self, claim, metric: str) -> str:
+        """How the evidence names what it reads."""
+        return metric_text(metric)
+
+    def checks(self, claim, table, keys: list[tuple], get: Get) -> list[Check]:
+        """The comparisons, one per (difficulty, aux, metric) key of the claim's cells."""
+        out = []
+        for d, a, m in keys:
+            out += [
+                c.tag(setting_text(d, a), metric_text(m), subject)
+                for c, subject in self.compare(claim, table, d, a, m, get)
+            ]
+        return out
+
+    def compare(self, claim, table, d: str, a: bool, m: str, get: Get) -> list[tuple[Check, str]]:
+        raise NotImplementedError
+
+
+def _where(d: str, a: bool, m: str) -> str:
+    return f"{metric_text(m)}, {setting_text(d, a)}"
+
+
+class Best(Kind):
+    name = "best"
+    needs = ("row", "metrics")
+    one_row = True
+    rule = (
+        "**best**: the claim's row above every other row of the table in each cell, by the ordering rule ('the gap of "
+        "the means beyond the error')."
+    )
+
+    def involved(self, claim, table) -> set[str]:
+        return {r.label for r in table.rows}
+
+    def compare(self, claim, table, d, a, m, get):
+        top = claim.rows[0]
+        return [
+            (order(f"{_where(d, a, m)}: {top} > {other}", get(top, d, a, m), get(other, d, a, m)), top)
+            for other in (r.label for r in table.rows if r.label != top)
+        ]
+
+
+class Below(Kind):
+    name = "below"
+    needs = ("rows", "than", "metrics")
+    rule = "**below**: each of the claim's rows below the reference row in each cell, by the ordering rule."
+
+    def compare(self, claim, table, d, a, m, get):
+        return [
+            (order(f"{_where(d, a, m)}: {claim.than} > {row}", get(claim.than, d, a, m), get(row, d, a, m)), claim.than)
+            for row in claim.rows
+        ]
+
+
+class Level(Kind):
+    name = "level"
+    needs = ("rows", "than", "margin", "metrics")
+    rule = (
+        "**level**: each row's mean within the claim's margin of the reference row's, the reference having learned; "
+        "reversed when the difference exceeds the margin by more than the error."
+    )
+
+    def compare(self, claim, table, d, a, m, get):
+        return [
+            (
+                level(
+                    f"{_where(d, a, m)}: {row} level with {claim.than}",
+                    get(row, d, a, m),
+                    get(claim.than, d, a, m),
+                    claim.margin,
+                ),
+                claim.than,
+            )
+            for row in claim.rows
+        ]
+
+
+class AtLeast(Kind):
+    name = "at_least"
+    needs = ("value", "metrics")
+    rule = "**at_least**: each row's mean at or above the claim's value; reversed when below it by more than the error."
+
+    def compare(self, claim, table, d, a, m, get):
+        return [
+            (threshold(f"{_where(d, a, m)}: {row} ≥ {claim.value:g}", get(row, d, a, m), claim.value), row)
+            for row in claim.rows
+        ]
+
+
+class AuxHelps(Kind):
+    name = "aux_helps"
+    rule = "**aux_helps**: per row and difficulty, the row with aux above the same row without, by the ordering rule."
+    single_subject = False
+
+    def checks(self, claim, table, keys, get):
+        out = []
+        for row in claim.rows:
+            for d, m in dict.fromkeys((d, m) for (d, _, m) in keys):
+                what = f"{metric_text(m)}, {setting_text(d, None)}: {row} Aux > No Aux"
+                check = order(what, get(row, d, True, m), get(row, d, False, m))
+                out.append(check.tag(setting_text(d, None), metric_text(m), f"{row} Aux"))
+        return out
+
+
+class Harder(Kind):
+    name = "harder"
+    metric_count = 2
+    rule = (
+        "**harder** ('EQA is more challenging than SGN'): per setting, each row's first metric against its second, "
+        "by the ordering rule on the same runs; it holds where more than half of all the rows hold (the paper: 'most "
+        "models'), is reversed where more than half are reversed, and waits while a row has no run; it is excused "
+        "(not supported at this budget) only when more than half of the rows have not learned their training split "
+        "of the task the claim puts higher."
+    )
+
+    def involved(self, claim, table) -> set[str]:
+        return set(claim.rows)
+
+    def checks(self, claim, table, keys, get):
+        hard, easy = claim.metrics
+        out = []
+        for d, a in dict.fromkeys((d, a) for (d, a, _) in keys):
+            per_row = [
+                order(f"{row}: {metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard))
+                for row in claim.rows
+            ]
+            unlearned = sum(not learned(get(row, d, a, easy)) for row in claim.rows if get(row, d, a, easy))
+            check = most(f"{setting_text(d, a)}: {metric_text(hard)} below {metric_text(easy)}", per_row, unlearned)
+            out.append(check.tag(setting_text(d, a), "", "most rows"))  # its `what` names both metrics
+        return out
+
+
+class Faster(Kind):
+    name = "faster"
+    needs = ("rows", "than", "metrics")
+    curve = True
+    reads = "crossing"
+    rule = (
+        "**faster** (the speed claims): from each run's greedy evaluation curve (metrics.csv), the frames at which it "
+        "first crosses the claim's mark (leaves chance: above the blind prior + the margin; or reaches 0.5 / 0.9); it "
+        "holds when the faster row crosses first by more than the larger gap between the two runs' evaluations, in "
+        "every seed both rows have (a crossing is known only to that gap; a run that never crosses counts as "
+        "slowest), is reversed when the other row crosses first by as much in every seed, and is excused when the "
+        "faster row never crosses."
+    )
+
+    def metric_label(self, claim, metric):
+        return f"{metric_text(metric)}: frames until it {MARK_LABELS[claim.mark]}"
+
+    def compare(self, claim, table, d, a, m, get):
+        return [
+            (
+                faster(
+                    f"{_where(d, a, m)}: {claim.than} {MARK_LABELS[claim.mark]} before {row}",
+                    get(claim.than, d, a, m),
+                    get(row, d, a, m),
+                ),
+                claim.than,
+            )
+            for row in claim.rows
+        ]
+
+
+class Diagnostic(Kind):
+    name = "diagnostic"
+    needs = ("rows", "key", "value")
+    curve = True
+    reads = "figure"
+    rule = (
+        "**diagnostic**: a `diag/*` figure of `emml diagnose`, logged at every evaluation, read at each run's last; "
+        "holds when the row's mean is at or above the claim's value (with `relative`: the value times the same row's "
+        "mean in the reference setting, e.g. the Aux run's own), reversed when every seed is below it while the row "
+        "has learned its training split; a run with no metrics.csv here (trained elsewhere) is a missing cell."
+    )
+
+    def wheres(self, claim):
+        return [claim.where] + ([{**claim.where, **claim.relative}] if claim.relative else [])
+
+    def metric_label(self, claim, metric):
+        return claim.key
+
+    def checks(self, claim, table, keys, get):
+        out = []
+        for d, a, m in keys:
+            if any(claim.where.get(k) not in (None, v) for k, v in (("difficulty", d), ("aux", a))):
+                continue  # a reference setting's cell (`relative`): read by the comparison below
+            for row in claim.rows:
+                value, what = claim.value, f"{setting_text(d, a)}, {claim.key}: {row} ≥ {claim.value:g}"
+                if claim.relative:
+                    ref = get(row, claim.relative.get("difficulty", d), claim.relative.get("aux", a), m)
+                    ref_text = setting_text(claim.relative.get("difficulty", d), claim.relative.get("aux", a))
+                    if not ref:
+                        out.append(
+                            Check(what, MISSING, f"no run with a metrics.csv here in {ref_text}").tag(
+                                setting_text(d, a), claim.key, row
+                            )
+                        )
+                        continue
+                    value = claim.value * mean(ref)
+                    what = f"{setting_text(d, a)}, {claim.key}: {row} ≥ {claim.value:g} × its {ref_text} run's"
+                    what += f" {mean(ref):.2f}"
+                out.append(diagnostic(what, get(row, d, a, m), value).tag(setting_text(d, a), claim.key, row))
+        return out
+
+
+KINDS: dict[str, Kind] = {
+    k.name: k for k in (Best(), Below(), Level(), AtLeast(), AuxHelps(), Faster(), Diagnostic(), Harder())
+}
+"""Every kind by its name in reproduce/claims.toml."""

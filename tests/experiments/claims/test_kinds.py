@@ -1,0 +1,277 @@
+"""Each claim kind (emml/experiments/claims/kinds.py, issues 60, 64 and 66) on made-up tables worked out by hand: one
+where it must hold, one where it must be contradicted, one where the row the claim puts higher has not learned its
+training split (not supported at this budget) and one with a cell missing (untestable). A rule inverted, two rows
+swapped or a missing cell ignored makes one of them fail."""
+
+import math
+
+import pytest
+
+from emml.experiments.claims.claim import Claim
+from emml.experiments.claims.evidence import (
+    BUDGET,
+    CONTRADICTED,
+    INCONCLUSIVE,
+    SUPPORTED,
+    UNTESTABLE,
+    Score,
+    status,
+)
+from emml.experiments.claims.kinds import KINDS
+from emml.experiments.tables import load_table
+
+TABLE2 = load_table("table2")
+ROWS = [r.label for r in TABLE2.rows]  # Text only, Image only, Concat, GA, FiLM, PACMAN, Dual-Attention
+EASY_AUX = {"difficulty": "easy", "aux": True}
+
+
+def claim(kind: str, **fields) -> Claim:
+    fields.setdefault("rows", ())
+    fields.setdefault("metrics", ("sgn_test",))
+    fields.setdefault("where", dict(EASY_AUX))
+    return Claim("c", "t", "s", kind, "table2", **fields)
+
+
+def run(value: float, train: float = 0.9, seed: int = 0, bar: float = 0.3, every: int = 0) -> Score:
+    """A run: 500 episodes, learned unless `train` is at or below `bar`."""
+    return Score("r", seed, value, 500, 1_500_000, train, bar, every)
+
+
+def decide(c: Claim, cells: dict) -> str:
+    """The status of claim `c` on cells {(row, difficulty, aux, metric): [Score, ...]}."""
+    keys = sorted({(d, a, m) for (_, d, a, m) in cells}, key=lambda k: (c.metrics.index(k[2]), k[0], not k[1]))
+    kind = KINDS[c.kind]
+    checks = kind.checks(c, TABLE2, keys, lambda row, d, a, m: cells.get((row, d, a, m), []))
+    return status(checks, kind.single_subject)
+
+
+def table(values: dict, metric: str = "sgn_test", aux: bool = True, difficulty: str = "easy") -> dict:
+    return {(row, difficulty, aux, metric): scores for row, scores in values.items()}
+
+
+# best: Dual-Attention above every other row
+
+
+def best(da: list[Score], others: float = 0.2, **over) -> dict:
+    cells = {row: [run(others)] for row in ROWS}
+    cells["Dual-Attention"] = da
+    cells.update(over)
+    return table(cells)
+
+
+def test_best_holds_when_the_row_is_above_every_other():
+    assert decide(claim("best", rows=("Dual-Attention",)), best([run(0.9)])) == SUPPORTED
+
+
+def test_best_is_contradicted_when_a_baseline_is_above_a_row_that_learned():
+    # 0.30 against Concat 0.50: gap -0.20, se sqrt(0.21 + 0.25) / sqrt(500) = 0.030, beyond 1.645 se
+    cells = best([run(0.3)], Concat=[run(0.5)])
+    assert decide(claim("best", rows=("Dual-Attention",)), cells) == CONTRADICTED
+
+
+def test_best_is_not_supported_at_this_budget_when_the_row_has_not_learned():
+    cells = best([run(0.3, train=0.25)], Concat=[run(0.5)])  # its training split 0.25, the bar 0.3
+    assert decide(claim("best", rows=("Dual-Attention",)), cells) == BUDGET
+
+
+def test_best_is_untestable_while_a_baseline_has_no_run():
+    assert decide(claim("best", rows=("Dual-Attention",)), best([run(0.9)], GA=[])) == UNTESTABLE
+
+
+def test_best_within_the_error_is_not_supported():
+    # 0.52 against 0.48: se 0.0316, 1.645 se 0.052 > 0.04
+    assert decide(claim("best", rows=("Dual-Attention",)), best([run(0.52)], others=0.48)) == INCONCLUSIVE
+
+
+# below: each row below the reference row
+
+
+def below_claim() -> Claim:
+    return claim("below", rows=("GA",), than="Text only", metrics=("eqa_test",))
+
+
+def test_below_holds_contradicts_and_waits():
+    c = below_claim()
+    blind = -math.inf  # the blind row is chance itself: never excused
+    assert decide(c, table({"Text only": [run(0.45, bar=blind)], "GA": [run(0.30)]}, "eqa_test")) == SUPPORTED
+    assert decide(c, table({"Text only": [run(0.30, bar=blind)], "GA": [run(0.45)]}, "eqa_test")) == CONTRADICTED
+    assert decide(c, table({"Text only": [run(0.45, bar=blind)], "GA": []}, "eqa_test")) == UNTESTABLE
+    # a reference that has not learned (a non-blind row at its bar) excuses the reversal
+    assert decide(c, table({"Text only": [run(0.30, train=0.2)], "GA": [run(0.45)]}, "eqa_test")) == BUDGET
+
+
+# level: each row within the margin of the reference
+
+
+def level_claim() -> Claim:
+    return claim("level", rows=("GA",), than="Dual-Attention", margin=0.1)
+
+
+def test_level_holds_within_the_margin():
+    assert decide(level_claim(), table({"Dual-Attention": [run(0.9)], "GA": [run(0.85)]})) == SUPPORTED
+
+
+def test_level_is_contradicted_beyond_the_margin_by_more_than_the_error():
+    # 0.6 against 0.9: 0.3 beyond the margin 0.1 by 0.2, se 0.025
+    assert decide(level_claim(), table({"Dual-Attention": [run(0.9)], "GA": [run(0.6)]})) == CONTRADICTED
+
+
+def test_two_rows_at_chance_are_not_level_but_unlearned():
+    cells = table({"Dual-Attention": [run(0.2, train=0.2)], "GA": [run(0.22, train=0.2)]})
+    assert decide(level_claim(), cells) == BUDGET
+
+
+def test_level_waits_for_a_missing_row():
+    assert decide(level_claim(), table({"Dual-Attention": [run(0.9)], "GA": []})) == UNTESTABLE
+
+
+# at_least: every row at or above the value
+
+
+def at_least_claim() -> Claim:
+    return claim("at_least", rows=("GA",), value=0.8)
+
+
+def test_at_least_holds_contradicts_is_unclear_within_the_error_and_waits():
+    c = at_least_claim()
+    assert decide(c, table({"GA": [run(0.9)]})) == SUPPORTED
+    assert decide(c, table({"GA": [run(0.5)]})) == CONTRADICTED
+    # 0.78: 0.02 below, se sqrt(0.78 × 0.22 / 500) = 0.0185, 1.645 se = 0.030: within the error
+    assert decide(c, table({"GA": [run(0.78)]})) == INCONCLUSIVE
+    assert decide(c, table({"GA": [run(0.5, train=0.25)]})) == BUDGET  # not learned
+    assert decide(c, table({"GA": []})) == UNTESTABLE
+
+
+# aux_helps: each row with aux above the same row without
+
+
+def aux_cells(with_: list[Score], without: list[Score]) -> dict:
+    return {("GA", "easy", True, "sgn_test"): with_, ("GA", "easy", False, "sgn_test"): without}
+
+
+def test_aux_helps_reads_aux_above_no_aux_not_the_other_way():
+    c = claim("aux_helps", rows=("GA",), where={"difficulty": "easy"})
+    assert decide(c, aux_cells([run(0.5)], [run(0.3)])) == SUPPORTED
+    assert decide(c, aux_cells([run(0.3)], [run(0.5)])) == CONTRADICTED  # Aux and No Aux swapped
+    assert decide(c, aux_cells([run(0.3, train=0.2)], [run(0.5)])) == BUDGET
+    assert decide(c, aux_cells([run(0.5)], [])) == UNTESTABLE
+
+
+# harder: in most rows the first metric below the second
+
+
+def harder_cells(eqa: dict, sgn: float = 0.8, unlearned: tuple = (), drop: tuple = ()) -> dict:
+    cells = {}
+    for row in ROWS:
+        if row in drop:
+            cells[(row, "easy", True, "sgn_test")] = []
+            cells[(row, "easy", True, "eqa_test")] = [run(eqa[row])]
+            continue
+        train = 0.2 if row in unlearned else 0.9
+        cells[(row, "easy", True, "sgn_test")] = [run(sgn, train=train)]
+        cells[(row, "easy", True, "eqa_test")] = [run(eqa[row])]
+    return cells
+
+
+def harder_claim() -> Claim:
+    return claim("harder", rows=tuple(ROWS), metrics=("eqa_test", "sgn_test"))
+
+
+def test_harder_holds_when_more_than_half_of_the_rows_hold():
+    eqa = {row: (0.5 if i < 4 else 0.95) for i, row in enumerate(ROWS)}  # 4 of 7 below SGN 0.8, 3 above
+    assert decide(harder_claim(), harder_cells(eqa)) == SUPPORTED
+
+
+def test_harder_is_contradicted_when_most_rows_that_learned_are_reversed():
+    eqa = {row: (0.5 if i < 2 else 0.95) for i, row in enumerate(ROWS)}  # 5 of 7 above SGN
+    assert decide(harder_claim(), harder_cells(eqa)) == CONTRADICTED
+    eqa3 = {row: (0.5 if i < 3 else 0.95 if i < 6 else 0.8) for i, row in enumerate(ROWS)}  # 3 / 3 / 1 level
+    assert decide(harder_claim(), harder_cells(eqa3)) == INCONCLUSIVE  # neither most hold nor most reversed
+
+
+def test_harder_is_excused_only_when_most_rows_have_not_learned():
+    eqa = {row: (0.5 if i < 2 else 0.95) for i, row in enumerate(ROWS)}
+    assert decide(harder_claim(), harder_cells(eqa, unlearned=tuple(ROWS[:4]))) == BUDGET
+    assert decide(harder_claim(), harder_cells(eqa, unlearned=tuple(ROWS[:3]))) == CONTRADICTED
+
+
+def test_harder_waits_for_a_row_with_no_run():
+    eqa = {row: 0.5 for row in ROWS}
+    assert decide(harder_claim(), harder_cells(eqa, drop=("GA",))) == UNTESTABLE
+
+
+# faster: the reference row crosses its mark first, by more than the evaluations' gap
+
+
+def faster_claim() -> Claim:
+    return claim("faster", rows=("GA",), than="Dual-Attention", mark="chance", metrics=("sgn_train",))
+
+
+def crossing(frames: float, seed: int = 0, every: int = 100_000) -> Score:
+    return Score("r", seed, frames, 0, 1_500_000, every=every)
+
+
+def faster_cells(fast: list[Score], slow: list[Score]) -> dict:
+    return {("Dual-Attention", "easy", True, "sgn_train"): fast, ("GA", "easy", True, "sgn_train"): slow}
+
+
+def test_faster_holds_when_the_crossings_are_more_than_one_gap_apart():
+    assert decide(faster_claim(), faster_cells([crossing(300_000)], [crossing(500_000)])) == SUPPORTED
+    assert decide(faster_claim(), faster_cells([crossing(300_000)], [crossing(math.inf)])) == SUPPORTED
+
+
+def test_faster_does_not_count_crossings_one_actual_gap_apart():
+    """Issue 60: 300,032 and 400,384 are one evaluation apart when the gaps alternate 99,328 / 100,352."""
+    fast, slow = [crossing(300_032, every=100_352)], [crossing(400_384, every=100_352)]
+    assert decide(faster_claim(), faster_cells(fast, slow)) == INCONCLUSIVE
+
+
+def test_faster_is_contradicted_reversed_and_excused_when_the_faster_row_never_crosses():
+    assert decide(faster_claim(), faster_cells([crossing(600_000)], [crossing(300_000)])) == CONTRADICTED
+    assert decide(faster_claim(), faster_cells([crossing(math.inf)], [crossing(300_000)])) == BUDGET
+    assert decide(faster_claim(), faster_cells([crossing(300_000)], [])) == UNTESTABLE
+
+
+# diagnostic: the row's figure at or above the value (or a fraction of its reference setting's)
+
+
+def diag_cells(no_aux: list[Score], aux: list[Score] | None = None) -> dict:
+    cells = {("Dual-Attention", "easy", False, "sgn_test"): no_aux}
+    if aux is not None:
+        cells[("Dual-Attention", "easy", True, "sgn_test")] = aux
+    return cells
+
+
+def diag_claim(**fields) -> Claim:
+    return claim(
+        "diagnostic",
+        rows=("Dual-Attention",),
+        key="diag/detector_ap",
+        value=0.5,
+        where={"difficulty": "easy", "aux": False},
+        **fields,
+    )
+
+
+def test_diagnostic_holds_contradicts_is_excused_and_waits():
+    c = diag_claim()
+    assert decide(c, diag_cells([run(0.6)])) == SUPPORTED
+    assert decide(c, diag_cells([run(0.3)])) == CONTRADICTED
+    assert decide(c, diag_cells([run(0.3, train=0.2)])) == BUDGET
+    assert decide(c, diag_cells([])) == UNTESTABLE
+
+
+@pytest.mark.parametrize("value, expected", [(0.33, SUPPORTED), (0.25, CONTRADICTED)])
+def test_a_relative_diagnostic_reads_half_the_reference_setting(value, expected):
+    """The Aux run's AP 0.6: the threshold is 0.5 × 0.6 = 0.3."""
+    c = diag_claim(relative={"aux": True})
+    assert decide(c, diag_cells([run(value)], [run(0.6)])) == expected
+
+
+def test_a_relative_diagnostic_waits_for_its_reference():
+    assert decide(diag_claim(relative={"aux": True}), diag_cells([run(0.9)], [])) == UNTESTABLE
+
+
+def test_every_kind_is_tested_here():
+    tested = {"best", "below", "level", "at_least", "aux_helps", "harder", "faster", "diagnostic"}
+    assert set(KINDS) == tested
