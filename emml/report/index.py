@@ -144,15 +144,18 @@ def figures(
 def claims_lines(profiles: dict, out: Path, results_root: str | Path, run_root: str | Path = "runs") -> list[str]:
     """Write each profile's claims page (emml/report/claims.py) and return the index's lead: a link per profile with
     its status counts."""
+    from emml.experiments.claims import load_claims
     from emml.report.claims import campaign_costs, counts, write_claims
 
     costs = campaign_costs() if profiles else {}
+    inferred = sum(c.inferred for c in load_claims().values())
     lines = []
     for profile in profiles:
         path, decisions = write_claims(profile, out, results_root, costs, run_root)
         summary = ", ".join(f"{n} {status}" for status, n in counts(decisions).items() if n)
         lines += [
-            f"**Claims ({profile})**: [{path.name}]({path.name}), the paper's {len(decisions)} claims: {summary}.",
+            f"**Claims ({profile})**: [{path.name}]({path.name}), {len(decisions)} claims ({inferred} of them "
+            f"inferred from the paper's tables, not stated), each also decided on the paper's own tables: {summary}.",
             "",
         ]
     return lines
