@@ -9,7 +9,7 @@ BACKEND ?= local
 TCMALLOC := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib/x86_64-linux-gnu/libtcmalloc.so.4))
 EMML := $(if $(TCMALLOC),LD_PRELOAD=$(TCMALLOC) )$(VENV)/bin/emml
 
-.PHONY: setup demo test test-slow lint bench bench-gpu ui table2 ablations transfer house3d reports list campaign campaign-status
+.PHONY: setup demo test test-slow lint mutate bench bench-gpu ui table2 ablations transfer house3d reports list campaign campaign-status
 
 setup: $(VENV)/.installed
 
@@ -35,6 +35,42 @@ test-slow: setup
 lint: setup
 	$(VENV)/bin/ruff check emml tests
 	$(VENV)/bin/lint-imports
+
+# Mutation testing (issue 66; docs/testing.md): mutmut over the modules that decide numbers, each against the tests
+# that read it, then the score per module. Not in CI: ~1 h on 2 idle cores for all of them, hours beside a training.
+# Each module is mutated in its own copy of the checkout (scratch/mutate/<module>/: mutmut rewrites the files it
+# mutates; the checkout is never touched), at nice 10. `make mutate MUTATE=rl/ppo` runs one; the survivors are then
+# listed by `cd scratch/mutate/rl-ppo && ../../../.venv/bin/mutmut results` (`mutmut show NAME`: the diff).
+MUTATE ?= report/claims report/aggregate report/efficiency rl/ppo rl/rollout envs/doom
+MUT_TESTS_report/claims = $(wildcard tests/report/test_claims*.py tests/experiments/test_claims.py tests/experiments/claims/test_*.py)
+MUT_TESTS_report/aggregate = tests/report/test_aggregate.py tests/report/test_aggregate_interval.py
+MUT_TESTS_report/efficiency = tests/report/test_efficiency.py
+MUT_TESTS_rl/ppo = tests/rl/test_ppo_losses.py tests/rl/test_advantage_normalisation.py tests/rl/test_ppo_by_hand.py tests/rl/test_gae.py tests/rl/test_rollout_buffer.py
+MUT_TESTS_rl/rollout = tests/rl/test_gae.py tests/rl/test_rollout_buffer.py tests/rl/test_ppo_losses.py tests/rl/test_ppo_by_hand.py
+MUT_TESTS_envs/doom = tests/envs/test_reach.py
+# doom.py: its reward and success only (the engine's setup, spaces and labels are other tests' business)
+MUT_NAMES_envs/doom = 'emml.envs.doom.x*DoomEnv*step__mutmut_*' 'emml.envs.doom.x*DoomEnv*_reached__mutmut_*' 'emml.envs.doom.x*DoomEnv*_target_distance__mutmut_*' 'emml.envs.doom.x*DoomEnv*_distances__mutmut_*'
+# conftest.py builds an MLflow store per session (seconds per mutant): left out unless a module's tests need its
+# fixtures; torch.compile cannot trace mutmut's trampolines (the traceability test, not a number)
+MUT_CONFTEST = report/claims
+MUT_DESELECT = --deselect tests/rl/test_ppo_losses.py::test_ppo_losses_read_nothing_back_from_the_device
+
+mutate: $(addprefix mutate/,$(MUTATE))
+	@echo "mutation score (killed or timed out, of the mutants run):"; cat $(foreach m,$(MUTATE),scratch/mutate/$(subst /,-,$(m))/score.txt)
+
+mutate/%: setup
+	@dir=scratch/mutate/$(subst /,-,$*); rm -rf $$dir; mkdir -p $$dir; cp -r emml tests reproduce pyproject.toml $$dir/; \
+	{ echo "[mutmut]"; echo "source_paths = emml"; echo "only_mutate = emml/$*.py"; echo "also_copy = reproduce"; \
+	  echo "process_isolation = forkserver"; echo "timeout_constant = 30"; echo "pytest_add_cli_args_test_selection ="; \
+	  for t in $(MUT_TESTS_$*); do echo "    $$t"; done; echo "pytest_add_cli_args ="; \
+	  for a in -p no:cacheprovider $(if $(filter $*,$(MUT_CONFTEST)),,--noconftest) $(MUT_DESELECT); do echo "    $$a"; done; \
+	} > $$dir/setup.cfg; \
+	echo "mutmut on emml/$*.py ($$dir/mutmut.log)…"; \
+	cd $$dir && { nice -n 10 $(CURDIR)/$(VENV)/bin/mutmut run $(MUT_NAMES_$*) > mutmut.log 2>&1 || { tail -c 3000 mutmut.log; exit 1; }; } && \
+	$(CURDIR)/$(VENV)/bin/mutmut results --all true > results.txt && \
+	awk -F': ' -v m=emml/$*.py '{ n[$$2]++ } END { run = NR - n["not checked"] - n["skipped"]; ok = n["killed"] + n["timeout"]; \
+	  printf "  %s: %.1f%% (%d killed, %d timed out of %d run; %d survived, %d without a test)\n", m, run ? 100 * ok / run : 0, \
+	  n["killed"], n["timeout"], run, n["survived"], n["no tests"] }' results.txt | tee score.txt
 
 bench: setup
 	$(EMML) bench env

@@ -241,6 +241,10 @@ def test_the_aux_channel_mask_and_use_aux_reach_the_loss():
     terms = ppo_step(model, make_optimizer(model.parameters(), cfg), list(model.parameters()), buf,
                      buf.initial_state, cfg, mask)  # fmt: skip
     torch.testing.assert_close(terms["aux"], want)
+    model, buf = _buffer()  # the same through the update loop: one epoch, one batch, the mean of one step
+    stats = ppo_update(model, make_optimizer(model.parameters(), cfg), model.parameters(), buf, PPOConfig(epochs=1),
+                       aux_channel_mask=mask)  # fmt: skip
+    assert stats["aux"] == pytest.approx(want.item(), rel=1e-6)
     no_aux = ppo_update(model, make_optimizer(model.parameters(), cfg), model.parameters(), buf, cfg, use_aux=False)
     assert "aux" not in no_aux
     clipped = PPOConfig(clip_vloss=True)

@@ -48,12 +48,24 @@ def _stores(tmp_path: Path) -> dict[str, str]:
     }
 
 
-def test_a_broken_store_is_named_in_one_line_within_seconds(tmp_path):
+@pytest.fixture
+def no_retries(monkeypatch):
+    """What made a broken store take ~100 s was MLflow's client retrying with back-off; the pre-flight checks must
+    neither reach MLflow nor wait between attempts. Observed as events, not by a clock (issue 66: a 3 s bound is at
+    the mercy of the machine's load): importing mlflow and any sleep fail the test."""
+    import sys
+
+    def sleep(seconds):
+        raise AssertionError(f"the pre-flight check slept {seconds} s: a retry")
+
+    monkeypatch.setitem(sys.modules, "mlflow", None)  # `import mlflow` raises ImportError
+    monkeypatch.setattr(time, "sleep", sleep)
+
+
+def test_a_broken_store_is_named_in_one_line_within_seconds(tmp_path, no_retries):
     for uri, why in _stores(tmp_path).items():
-        t0 = time.monotonic()
         with pytest.raises(PreflightError) as e:
             check_store(uri)
-        assert time.monotonic() - t0 < 3, uri
         assert str(e.value).startswith(f"MLflow store {uri}: ") and why in str(e.value), str(e.value)
         assert "\n" not in str(e.value)
 
@@ -217,18 +229,20 @@ def _serve(answer):
     return f"http://127.0.0.1:{server.server_address[1]}", server.shutdown
 
 
-def test_a_web_server_that_is_not_mlflow_is_refused_in_one_line(tmp_path):
-    """Issue 54: any server answering /health passed, and training failed 12 s later in a traceback with HTML."""
-    uri, stop = _serve(
-        lambda path: (
-            (200, "text/html", b"<html>OK</html>") if path == "/health" else (404, "text/html", b"<html>no</html>")
-        )
-    )  # noqa: E501
+def test_a_web_server_that_is_not_mlflow_is_refused_in_one_line(tmp_path, no_retries):
+    """Issue 54: any server answering /health passed, and training failed 12 s later in a traceback with HTML. One
+    request, no retry (the server counts them)."""
+    asked = []
+
+    def answer(path):
+        asked.append(path)
+        return (200, "text/html", b"<html>OK</html>") if path == "/health" else (404, "text/html", b"<html>no</html>")
+
+    uri, stop = _serve(answer)
     try:
-        t0 = time.monotonic()
         with pytest.raises(PreflightError) as e:
             check_store(uri)
-        assert time.monotonic() - t0 < 3
+        assert len(asked) == 1, asked
         assert str(e.value).startswith(f"MLflow store {uri}: answers, but is not an MLflow tracking server (GET ")
         assert "HTTP 404" in str(e.value) and "\n" not in str(e.value)
     finally:
