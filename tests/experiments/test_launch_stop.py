@@ -33,13 +33,14 @@ LAUNCH = textwrap.dedent(
 
 
 def slow_train(cfg, quiet=False, parent_run_id=None):
-    """Stands in for the trainer: says it started, trains for a minute unless stopped, says how it ended."""
+    """Stands in for the trainer: says it started, trains for ten minutes unless stopped, says how it ended (so a
+    'stopped' line can only come from the stop, never from the end of its training)."""
     log = Path(cfg.run_root) / "log.txt"
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "a") as f:
         f.write(f"start {run_name(cfg)}\n")
     try:
-        time.sleep(60)
+        time.sleep(600)
     except BaseException as e:
         with open(log, "a") as f:
             f.write(f"stopped {run_name(cfg)} {type(e).__name__}\n")
@@ -77,7 +78,6 @@ def test_a_stopped_launch_starts_nothing_more_and_leaves_no_worker(tracking, how
         time.sleep(0.2)
     assert log.read_text().count("start") == 2, "two runs should be training"
     workers = _children(proc.pid)
-    t0 = time.monotonic()
     if how == "ctrl-c":
         os.killpg(proc.pid, signal.SIGINT)
     else:
@@ -91,7 +91,9 @@ def test_a_stopped_launch_starts_nothing_more_and_leaves_no_worker(tracking, how
         out, err = proc.communicate()
         alive = {w: Path(f"/proc/{w}/cmdline").read_bytes()[:120] for w in workers if Path(f"/proc/{w}").exists()}
         pytest.fail(f"the launcher did not end within 30 s of the stop; its stacks:\n{err[-6000:]}\nworkers: {alive}")
-    assert time.monotonic() - t0 < 10, "the stop took too long"
+    # that the stop was prompt is read from events, not a clock (issue 66: a 10 s bound failed twice under load):
+    # both runs say they were stopped, in a training nothing else ends for ten minutes, and the launcher ended
+    # before communicate's 30 s above, which only a stop that reached the runs allows
     lines = log.read_text().splitlines()
     assert len([x for x in lines if x.startswith("start")]) == 2  # no queued run started
     assert len([x for x in lines if x.startswith("stopped")]) == 2  # both runs saw the stop
