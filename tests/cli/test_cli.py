@@ -206,31 +206,77 @@ def test_a_stopped_run_prints_a_resume_command_the_shell_reads_back(monkeypatch)
     assert shlex.split(result.output.split("resume with: ", 1)[1]) == [*argv[:5], "--jobs", "3"]
 
 
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory):
+    """A finished smoke run (64 frames) in its own MLflow store: the checkpoint the commands below are given."""
+    from emml.config.profiles import profile_config
+    from emml.rl.trainer import train
+
+    root = tmp_path_factory.mktemp("yield")
+    uri = f"sqlite:///{root}/mlflow.db"
+    over = {"run_root": str(root / "runs"), "results_root": str(root / "results"), "table": "test"}
+    short = {"frames": 64, "eval_episodes": 1, "final_eval_episodes": 1, "diagnose_episodes": 0}
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("MLFLOW_TRACKING_URI", uri)
+        cfg = profile_config("smoke", "easy", {**over, **short, "env.max_steps": 12}, aux=True)
+        run_dir = train(cfg, quiet=True).run_dir
+    return {"uri": uri, "run_dir": run_dir}
+
+
+class _Played(Exception):
+    """Raised where a command starts its first ViZDoom engine (or writes the reports): the test has seen what came
+    before, and nothing is played or written."""
+
+
 @pytest.mark.parametrize(
     "command",
     [
-        ("oracle",),
-        ("eval",),
-        ("rescore",),
-        ("transfer",),
-        ("diagnose",),
-        ("probe-eqa",),
-        ("video",),
-        ("reports",),
-        ("visualize", "channels"),
-        ("visualize", "attention"),
-        ("visualize", "house"),
+        ["oracle", "--episodes", "1", "--height", "60", "--width", "108"],
+        ["eval", "{ckpt}", "--episodes", "1"],
+        ["rescore", "{run}", "--episodes", "1", "--no-record", "--force"],
+        ["transfer", "{ckpt}", "--episodes", "1"],
+        ["diagnose", "{ckpt}", "--episodes", "1", "--step0-episodes", "1", "--eqa-episodes", "0"],
+        ["probe-eqa", "{ckpt}", "--episodes", "1", "--seeds", "1", "--steps", "1"],
+        ["video", "{ckpt}", "--episodes", "1", "--out", "{out}"],
+        ["reports", "--out", "{out}"],
+        ["visualize", "channels", "{ckpt}", "--out", "{out}"],
+        ["visualize", "attention", "{ckpt}", "--out", "{out}"],
+        ["visualize", "house", "--out", "{out}"],
     ],
+    ids=lambda c: " ".join(w for w in c if not w.startswith(("-", "{")) and not w.isdigit())[:30],
 )
-def test_commands_that_train_nothing_yield_the_cpu_to_trainings(command):
-    """Each command that plays or scores a model beside a campaign defers to it (tests/rl/test_contention.py:
-    lowest priority, one thread), after its inputs are checked and before it plays."""
-    import inspect
+def test_commands_that_train_nothing_yield_the_cpu_to_trainings(command, finished_run, tmp_path, monkeypatch):
+    """Each command that plays or scores a model beside a training defers to it (tests/rl/test_contention.py:
+    lowest priority, one thread), after its inputs are checked and before it plays: observed with a learner made
+    up beside it (pid 4242), the CPU yield and torch's threads recorded instead of done, and the first engine start
+    stopped. The yield comes first, the line saying so is printed, and a bad checkpoint is refused with no yield."""
+    import emml.envs.engine
+    import emml.report.index
+    import emml.rl.contention
 
-    group = typer.main.get_command(app)
-    for name in command:
-        group = group.commands[name]
-    assert "_own_engines()" in inspect.getsource(group.callback)  # defer=True: the default
+    events = []
+
+    def start_engine(*args, **kwargs):  # where the command starts to play (`reports`: where it starts to write)
+        events.append("engine")
+        raise _Played
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", finished_run["uri"])
+    monkeypatch.setattr(emml.rl.contention, "other_learners", lambda *a, **k: [4242])
+    monkeypatch.setattr(emml.rl.contention, "_yielded", lambda: False)
+    monkeypatch.setattr(emml.rl.contention, "yield_cpu", lambda: events.append("yield") or "SCHED_IDLE")
+    monkeypatch.setattr("torch.set_num_threads", lambda n: events.append(f"threads {n}"))
+    monkeypatch.setattr(emml.envs.engine, "start_engine", start_engine)
+    monkeypatch.setattr(emml.report.index, "write_reports", start_engine)
+    paths = {"ckpt": str(finished_run["run_dir"] / "checkpoint.pt"), "run": str(finished_run["run_dir"])}
+    args = [a.format(**paths, out=tmp_path / "out") for a in command]
+    result = runner.invoke(app, args)
+    assert events[:2] == ["yield", "threads 1"], (events, result.output)  # before any engine started
+    assert "1 emml learner(s) running (pid 4242)" in result.output
+    if "{ckpt}" in command or "{run}" in command:  # a checkpoint that is not one: refused before any yield
+        events.clear()
+        missing = str(tmp_path / "nothing" / "checkpoint.pt")
+        bad = runner.invoke(app, [missing if a in ("{ckpt}", "{run}") else a.format(out=tmp_path) for a in command])
+        assert bad.exit_code != 0 and not isinstance(bad.exception, _Played) and events == [], (events, bad.output)
 
 
 def test_a_piped_train_log_has_lines_and_no_progress_bar(tracking, no_leftovers):
