@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 import torch
-from PIL import Image
+from PIL import Image, ImageSequence
 from typer.testing import CliRunner
 
 from emml.cli import app
@@ -115,17 +115,56 @@ def test_cli_figures_and_videos(checkpoints, tmp_path, no_leftovers):
     assert r.exit_code == 0, r.output
     gifs = sorted(tmp_path.glob("*.gif"))
     assert [g.name.split("-")[-2] for g in gifs] == ["eqa", "sgn"]
-    assert Image.open(gifs[0]).n_frames >= 6
+    # each GIF holds a whole episode: its steps at 150 ms, then the outcome for 5 × 150 (durations, not a frame count:
+    # the encoder merges identical frames), under the sentence the command printed for it
+    for gif in gifs:
+        frames = _gif(gif)
+        total = sum(d for _, d in frames)
+        assert total % 150 == 0 and total >= 150 * 6, total
+        sentence = r.output.split(f"wrote {gif} ('", 1)[1].split("': ", 1)[0]
+        picture = frames[-1][0][22:].astype(np.uint8)
+        outcome = r.output.split(f"wrote {gif} ('{sentence}': ", 1)[1].split(")", 1)[0]
+        assert outcome in ("success", "failure")
+        if gif.name.split("-")[-2] == "sgn":  # an EQA caption also names the answer word: read on SGN
+            assert _caption_gap(frames[-1][0], picture, f"{sentence}: {outcome}") < 2
     assert len(list(tmp_path.glob("channels-*.png"))) == 1 and len(list(tmp_path.glob("attention-sgn-*.png"))) == 1
     bad = runner.invoke(app, ["visualize", "attention", ck, "--task", "nav"], env={"COLUMNS": "200"})
     assert bad.exit_code == 2 and "'nav' is not one of 'sgn', 'eqa'" in bad.output
 
 
+def _gif(path) -> list[tuple[np.ndarray, int]]:
+    """A GIF's frames as RGB arrays, each with its duration (ms)."""
+    with Image.open(path) as gif:
+        return [(np.asarray(f.convert("RGB"), dtype=float), f.info["duration"]) for f in ImageSequence.Iterator(gif)]
+
+
+def _caption_gap(frame: np.ndarray, picture: np.ndarray, text: str) -> float:
+    """How far a GIF frame's caption strip is from ``text`` captioned over ``picture`` (mean absolute difference)."""
+    from emml.report.oracle_video import CAPTION_HEIGHT, _captioned
+
+    expected = np.asarray(_captioned(picture, text), dtype=float)[:CAPTION_HEIGHT]
+    return float(np.abs(frame[:CAPTION_HEIGHT] - expected).mean())
+
+
 def test_a_gif_per_episode(checkpoints, tmp_path, no_leftovers):
+    """The GIF's content (issue 66: it was checked for two frames): every step shown 150 ms and the outcome 5 × 150
+    (identical consecutive frames are merged by the encoder, their durations added), the first frame the episode's
+    first picture under its caption, the last its last picture under its own."""
+    from emml.envs.doom import MOVES
+    from emml.report.oracle_video import CAPTION_HEIGHT
+
     model, cfg = load_model(checkpoints[True])
     ep = record_episode(model, cfg.env, "sgn", seed=0)
-    path = episode_gif(ep, tmp_path / "e.gif")
-    assert Image.open(path).n_frames >= 2  # identical consecutive frames may be merged by the encoder
+    frames = _gif(episode_gif(ep, tmp_path / "e.gif"))
+    assert sum(d for _, d in frames) == 150 * (len(ep.frames) + 5)
+    (first, _), (last, _) = frames[0], frames[-1]
+    assert first.shape == (ep.frames[0].shape[0] + CAPTION_HEIGHT, *ep.frames[0].shape[1:])
+    assert np.abs(first[CAPTION_HEIGHT:] - ep.frames[0]).mean() < 8  # the picture, up to the GIF's palette
+    assert np.abs(last[CAPTION_HEIGHT:] - ep.frames[-1]).mean() < 8
+    # the captions as drawn (at the smoke width the move and the outcome run past the frame's right edge)
+    assert _caption_gap(first, ep.frames[0], f"{ep.sentence} | t=0 {MOVES[ep.moves[0]]}") < 2
+    assert _caption_gap(last, ep.frames[-1], f"{ep.sentence}: {'success' if ep.success else 'failure'}") < 2
+    assert _caption_gap(first, ep.frames[0], "") > 2  # a caption is there: not a blank strip
 
 
 def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints, tmp_path, monkeypatch, no_leftovers):
