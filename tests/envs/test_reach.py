@@ -138,3 +138,38 @@ def test_an_episode_in_reach_of_nothing_is_truncated_at_max_steps():
     assert env.step([1, 0])[2:4] == (False, False)
     _, r, term, trunc, _ = env.step([2, 0])
     assert (term, trunc) == (False, True) and r == pytest.approx(-0.001, rel=1e-12)
+
+
+def test_each_move_presses_its_buttons_and_only_an_eqa_answer_ends_without_moving():
+    """forward [1, 0], left [0, -turn], right [0, turn], and in SGN 'answer' a step that does not move ([0, 0]); in
+    EQA a move is a move (the episode goes on), the answer ends it."""
+    env, moves = _playing([(100.0, 0.0), *FAR], 0, [(1.0, 0.0)] * 4)
+    turn = env._turn
+    for move in range(4):
+        assert env.step([move, 0])[2:4] == (False, False)
+    assert [b for b, _ in moves.buttons] == [[1, 0], [0, -turn], [0, turn], [0, 0]] and turn > 0
+    env, moves = _playing([(100.0, 0.0), *FAR], 0, [(1.0, 0.0)], task=1)
+    assert env.step([0, 3])[2:4] == (False, False) and moves.buttons == [([1, 0], 5)]
+
+
+def test_steps_out_of_turn_and_bad_actions_are_refused_by_name():
+    env, _ = _playing([(100.0, 0.0), *FAR], 0, [(65.0, 0.0)])
+    refused = (
+        r"^action \[7, 0\]: expected two integers \[move, word\], move in 0\.\.3 \(forward, left, right, answer\) "
+        r"and word in 0\.\.21 \(a vocabulary index, read on 'answer'\)$"
+    )
+    with pytest.raises(ValueError, match=refused):
+        env.step([7, 0])
+    assert env.step([0, 0])[2]  # reached: terminated
+    with pytest.raises(RuntimeError, match=r"^step\(\) after the episode ended \(terminated or truncated\): call"):
+        env.step([0, 0])
+    env, _ = _playing([(100.0, 0.0), *FAR], 0, [(1.0, 0.0)], max_steps=1)
+    assert env.step([1, 0])[3]  # truncated: ended too
+    with pytest.raises(RuntimeError, match="after the episode ended"):
+        env.step([1, 0])
+    fresh = DoomEnv(**SMOKE)
+    with pytest.raises(RuntimeError, match=r"^call reset\(\) before step\(\)$"):
+        fresh.step([0, 0])
+    env._engine = None  # as close() leaves it
+    with pytest.raises(RuntimeError, match=r"^step\(\) after close\(\): this env is closed; make a new one$"):
+        env.step([0, 0])
