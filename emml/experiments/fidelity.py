@@ -343,3 +343,11 @@ def deviations(cfg: dict, skip: frozenset[str] = frozenset()) -> list[str]:
 def choices(cfg: dict) -> list[str]:
     """Our choices in force for the run where the paper is silent."""
     return [s for c in CHOICES if (s := c.statement(cfg)) is not None]
+
+
+def answer_reads_image(model: str) -> bool:
+    """Whether a registered model's answer reads the image (its No Aux runs take issue 61's warm-up; Text only's
+    does not): the registry's own flag, for the reports, which do not import the model zoo."""
+    from emml.models import MODELS
+
+    return bool(MODELS[model].fusion.answer_warmup)

@@ -204,9 +204,7 @@ def plot_table(
             ax.set_ylabel("greedy accuracy")
             for handle, text in zip(*ax.get_legend_handles_labels()):
                 legend.setdefault(text, handle)
-            legend.setdefault(
-                f"chance: blind prior ({curve_key(metric)[1]} {line:.2f})", Line2D([], [], color="grey", lw=0.8, ls=":")
-            )
+            legend.setdefault(f"blind chance {line:.2f}", Line2D([], [], color="grey", lw=0.8, ls=":"))
             if any(paper.get((row, difficulty, aux, metric)) for _, row, _ in lines):
                 legend.setdefault("paper (its frames)", Line2D([], [], color="grey", marker="<", ls=""))
     right = 1 - LEGEND_INCHES / fig.get_size_inches()[0]
@@ -214,7 +212,8 @@ def plot_table(
     note = "" if profile == "paper" else f"\nprofile '{profile}' is not the paper's protocol: its deviations below"
     fig.suptitle(
         f"{name} [{profile}]: greedy accuracy (the table's metric, periodic evaluation), seed mean, 95% bootstrap "
-        f"band;\nthe paper's number marked at the right edge{note}"
+        f"band;\nthe paper's number marked at the right edge; dotted: chance, what a blind model (Text only) "
+        f"scores here{note}"
     )
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
     shown = [deviations.shown_run(spec, profile, run_root, rows.get(r)) for r, spec in drawn.items()]

@@ -134,7 +134,7 @@ def noaux_schedule(table, profile: Profile | str) -> list[tuple[str, str]]:
     one. The line is the deviation each run's config gives (`fidelity.WARMUP`), so that `summarise` says it here
     instead of once per group of runs."""
     from emml.config.profiles import resolve_profile
-    from emml.models import MODELS
+    from emml.experiments.fidelity import answer_reads_image
 
     prof = resolve_profile(profile)
     rows: dict[int, list[str]] = {}
@@ -143,7 +143,7 @@ def noaux_schedule(table, profile: Profile | str) -> list[tuple[str, str]]:
         if spec.aux:
             continue
         frames = spec.to_config(prof).model_options.get("answer_gate_frames", 0)
-        if not frames and not MODELS[spec.model].fusion.answer_warmup:
+        if not frames and not answer_reads_image(spec.model):
             blind.append(spec.row)
         rows.setdefault(frames, [])
         if spec.row not in rows[frames]:

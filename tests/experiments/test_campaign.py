@@ -274,7 +274,10 @@ def test_steps_can_be_chosen_by_name_in_the_campaigns_order(tracking, campaigns)
     roots = (tracking["run_root"], tracking["results_root"])
     assert [r.run_name for r in status(second, *roots)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-warm400000-s0-smoke"]
     run_campaign(second, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
-    assert [c[0] for c in calls(tracking)] == ["ga-easy-aux-s0-smoke", "ga-easy-noaux-warm400000-s0-smoke"]  # not "first"'s
+    assert [c[0] for c in calls(tracking)] == [
+        "ga-easy-aux-s0-smoke",
+        "ga-easy-noaux-warm400000-s0-smoke",
+    ]  # not "first"'s
     with pytest.raises(ValueError, match=r"step='thrid' is not a step of campaign 'mine'; allowed: first, second"):
         select_steps(plan, ["first", "thrid"])
 

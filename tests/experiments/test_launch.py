@@ -72,7 +72,9 @@ def test_finished_runs_are_skipped_and_failures_kept(tracking):
 def test_partial_and_unrecorded_runs_go_to_the_trainer(tracking):
     states = run_states("table3", PROFILE, tracking["run_root"], tracking["results_root"])
     specs = {name: spec for name, (spec, _) in states.items()}
-    partial = run_dir(specs["da_no_sa-easy-noaux-warm400000-s0-smoke"].to_config(PROFILE, run_root=tracking["run_root"]))
+    partial = run_dir(
+        specs["da_no_sa-easy-noaux-warm400000-s0-smoke"].to_config(PROFILE, run_root=tracking["run_root"])
+    )
     save_checkpoint(partial / CHECKPOINT, {"finished": False})
     done = run_dir(specs["da_no_sa-easy-aux-s0-smoke"].to_config(PROFILE, run_root=tracking["run_root"]))
     save_checkpoint(done / CHECKPOINT, {"finished": True})
