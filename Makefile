@@ -43,7 +43,7 @@ lint: setup
 # listed by `cd scratch/mutate/rl-ppo && ../../../.venv/bin/mutmut results` (`mutmut show NAME`: the diff).
 MUTATE ?= report/claims report/aggregate report/efficiency rl/ppo rl/rollout envs/doom
 MUT_TESTS_report/claims = $(wildcard tests/report/test_claims*.py tests/experiments/test_claims.py tests/experiments/claims/test_*.py)
-MUT_TESTS_report/aggregate = tests/report/test_aggregate.py tests/report/test_aggregate_interval.py
+MUT_TESTS_report/aggregate = tests/report/test_aggregate.py tests/report/test_aggregate_interval.py $(addprefix tests/report/test_tables.py::,test_the_aggregate_under_the_table test_the_aggregate_compares_like_with_like_issue_49)
 MUT_TESTS_report/efficiency = tests/report/test_efficiency.py
 MUT_TESTS_rl/ppo = tests/rl/test_ppo_losses.py tests/rl/test_advantage_normalisation.py tests/rl/test_ppo_by_hand.py tests/rl/test_gae.py tests/rl/test_rollout_buffer.py
 MUT_TESTS_rl/rollout = tests/rl/test_gae.py tests/rl/test_rollout_buffer.py tests/rl/test_ppo_losses.py tests/rl/test_ppo_by_hand.py
