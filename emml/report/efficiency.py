@@ -25,7 +25,6 @@ CURVE_METRICS = METRICS
 """The results columns whose greedy evaluation is logged periodically as `eval/<metric>`."""
 MARKS = ("chance", "0.5", "0.9")
 """The crossings per metric: leaving chance (above chance + LEAVE), reaching 0.5, reaching 0.9."""
-MARK_LABELS = {"chance": "leaves chance", "0.5": "reaches 0.5", "0.9": "reaches 0.9"}
 
 
 def level(metric: str, mark: str, floor: float) -> float:

@@ -46,8 +46,6 @@ class Kind:
     """The claim fields this kind requires (reproduce/claims.toml)."""
     rule = ""
     """The rule as the claims page states it."""
-    curve = False
-    """Reads the runs' metrics.csv (the greedy evaluation curve or a diag/* figure), not their results rows."""
     single_subject = True
     """The claim puts one row higher everywhere: that row unlearned leaves the claim unsupported at this budget even
     while other cells are missing."""
@@ -59,6 +57,11 @@ class Kind:
     """The claim names its one row as `row` (every other row of the table is compared with it)."""
     metric_count: int | None = None
     """How many metrics the claim must name (None: any)."""
+
+    @property
+    def curve(self) -> bool:
+        """Reads the runs' metrics.csv (the greedy evaluation curve or a diag/* figure), not their results rows."""
+        return self.reads != "results"
 
     def involved(self, claim, table) -> set[str]:
         """The rows whose scores the claim reads."""
@@ -203,7 +206,6 @@ class Harder(Kind):
 class Faster(Kind):
     name = "faster"
     needs = ("rows", "than", "metrics")
-    curve = True
     reads = "crossing"
     rule = (
         "**faster** (the speed claims): from each run's greedy evaluation curve (metrics.csv), the frames at which it "
@@ -234,7 +236,6 @@ class Faster(Kind):
 class Diagnostic(Kind):
     name = "diagnostic"
     needs = ("rows", "key", "value")
-    curve = True
     reads = "figure"
     rule = (
         "**diagnostic**: a `diag/*` figure of `emml diagnose`, logged at every evaluation, read at each run's last; "
