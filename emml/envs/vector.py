@@ -171,8 +171,14 @@ class AsyncDoomVectorEnv(_Closing, AsyncVectorEnv):
 
     def close_extras(self, timeout: float | None = None, terminate: bool = False) -> None:
         terminate = terminate or not all(p.is_alive() for p in self.processes)  # a dead one would never answer
+        if terminate:  # the workers are ended, not asked: a pending call's reply is not waited for
+            self._state = AsyncState.DEFAULT
         try:
-            super().close_extras(timeout, terminate)
+            try:
+                super().close_extras(timeout, terminate)
+            except WorkerDied:  # a worker died while the pending call was waited for: end the others
+                self._state = AsyncState.DEFAULT
+                super().close_extras(timeout, terminate=True)
         finally:
             end_orphan_engines()
 

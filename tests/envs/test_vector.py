@@ -241,3 +241,17 @@ def test_threaded_batch_lets_every_step_end_before_an_error_leaves_it():
         assert all(env._pending is None for env in envs.envs)  # the slow env's step ended and was forgotten
     finally:
         envs.close()
+
+
+@pytest.mark.parametrize("terminate", [False, True])
+def test_closing_with_a_step_pending_on_a_dead_worker_raises_nothing(terminate, no_leftovers):
+    """A run stopped by SIGTERM: the launcher ends the workers while a step is pending, then the vector env is closed
+    (or collected: gymnasium's __del__ closes with terminate=True). The close ends what is left without raising the
+    dead worker's `WorkerDied` (which a __del__ printed as a traceback, 'Exception ignored in ... __del__')."""
+    with make_vector_env(DoomConfig(**SMOKE), 2) as venv:
+        venv.reset(seed=0)
+        venv.step_async(np.array([[0, 0], [0, 0]]))
+        os.kill(venv.processes[0].pid, signal.SIGKILL)
+        venv.processes[0].join(5)
+        venv.close(terminate=terminate)
+        assert venv.closed
