@@ -106,6 +106,11 @@ def _add(spec: ModelSpec) -> ModelSpec:
     return spec
 
 
+BUILD_ARGUMENTS = ("vocab_size", "height", "width", "max_steps")
+"""What `emml.models.build_model` takes beside the options (by position, then the options by keyword): an option of
+one of these names would reach it twice (a TypeError at the first training, its run dir already made)."""
+
+
 def _check_declared(name: str, fusion: type[Fusion]) -> None:
     """A fusion's `Fusion.options` is a dataclass type whose fields have defaults and are not named as the options
     every model shares (`ModelConfig`); a ValueError names the model and the field."""
@@ -120,6 +125,12 @@ def _check_declared(name: str, fusion: type[Fusion]) -> None:
         if f.name in shared or f.name in ("name", "options"):
             raise ValueError(
                 f"model {name!r}: its option {f.name!r} is one every model shares (ModelConfig); name it otherwise"
+            )
+        if f.name in BUILD_ARGUMENTS:  # an option is passed to build_model by keyword beside these
+            raise ValueError(
+                f"model {name!r}: its option {f.name!r} is an argument of every model's build ("
+                + ", ".join(BUILD_ARGUMENTS)
+                + "); name it otherwise"
             )
     try:
         declared()

@@ -259,15 +259,22 @@ def test_a_plugin_declares_its_options_in_its_file(sandbox, toy, monkeypatch):
 
 
 def test_a_bad_option_declaration_is_named_where_it_registers(sandbox):
+    import inspect
     from dataclasses import make_dataclass
 
-    from emml.models import Fusion, model_option, register_model
+    from emml.models import Fusion, build_model, model_option, register_model
+    from emml.models.registry import BUILD_ARGUMENTS
 
     def fusion(*fields):
         return type("Bad", (Fusion,), {"options": make_dataclass("BadOptions", fields)})
 
     with pytest.raises(ValueError, match="model 'bad': its option 'hidden' is one every model shares"):
         register_model("bad", "Bad", fusion(("hidden", int, model_option(3))))
+    for reserved in ("width", "height", "vocab_size", "max_steps"):  # build_model's own arguments
+        with pytest.raises(ValueError, match=f"model 'bad': its option '{reserved}' is an argument of every model"):
+            register_model("bad", "Bad", fusion((reserved, int, model_option(3))))
+    build = inspect.signature(build_model).parameters  # the reserved names follow build_model's signature
+    assert set(BUILD_ARGUMENTS) == {p for p, v in build.items() if v.kind is v.POSITIONAL_OR_KEYWORD} - {"name"}
     with pytest.raises(ValueError, match="model 'bad': every field of BadOptions needs a default"):
         register_model("bad", "Bad", fusion(("gain", float)))
     with pytest.raises(ValueError, match="model 'bad': Bad.options=<class 'dict'> must be a dataclass type"):
