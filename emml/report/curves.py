@@ -12,7 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from emml.config.profiles import resolve_profile  # noqa: E402
-from emml.report.savefig import save  # noqa: E402
+from emml.report.aggregate import reference_row  # noqa: E402
+from emml.report.savefig import PAGE_INCHES, frames_axis, save, wrap  # noqa: E402
 from emml.runs.tracking import metric_history  # noqa: E402
 
 SERIES = (
@@ -26,7 +27,7 @@ SERIES = (
 
 
 def plot_run(run_id: str, path: Path, title: str) -> Path:
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = plt.subplots(figsize=(PAGE_INCHES, 3.5))
     for key, label, color, style in SERIES:
         hist = metric_history(run_id, key)
         if not hist:
@@ -37,11 +38,11 @@ def plot_run(run_id: str, path: Path, title: str) -> Path:
         else:
             ax.plot(steps, values, style, color=color, label=label, linestyle="--", alpha=0.8)
     ax.axhline(0.2, color="grey", lw=0.8, ls=":", label="SGN chance (1 of 5)")
-    ax.set_xlabel("frames (agent steps)")
+    frames_axis(ax)
     ax.set_ylabel("accuracy")
     ax.set_ylim(-0.02, 1.02)
-    ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=7, loc="upper left")
+    ax.set_title(wrap(title, PAGE_INCHES - 0.2, plt.rcParams["axes.titlesize"]))
+    ax.legend(loc="upper left")
     ax.grid(alpha=0.3)
     fig.tight_layout()
     save(fig, path, dpi=120)
@@ -169,82 +170,82 @@ def plot_table(
         return kept, notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
     settings = list(dict.fromkeys((d, a) for (_, d, a) in panels))
     shown_metrics = list(dict.fromkeys(m for (m, _, _) in panels))
-    fig, axes = plt.subplots(
-        len(shown_metrics),
-        len(settings),
-        figsize=(3.6 * len(settings) + LEGEND_INCHES, 2.8 * len(shown_metrics) + 0.3),
-        squeeze=False,
-        sharey=True,
-    )
+    rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
+    shown = [deviations.shown_run(spec, profile, run_root, rows.get(r)) for r, spec in drawn.items()]
+    footer = wrap(deviations.sentence(deviations.summarise(shown)), PAGE_INCHES - 0.1, FOOTER_POINTS) if shown else ""
+    heights = [PANEL_INCHES] * len(shown_metrics)
+    if footer:  # a row of its own under the panels: the layout makes room for every line of it
+        heights.append((footer.count("\n") + 1) * FOOTER_POINTS * 1.3 / 72)
+    fig = plt.figure(figsize=(PAGE_INCHES, sum(heights) + 1.2), layout="constrained")
+    grid = fig.add_gridspec(len(heights), len(settings), height_ratios=heights)
+    ref = reference_row(table)
+    width = PAGE_INCHES / len(settings)
     legend: dict = {}
     for i, metric in enumerate(shown_metrics):
         for j, (difficulty, aux) in enumerate(settings):
-            ax = axes[i][j]
             lines = panels.get((metric, difficulty, aux))
             if not lines:
-                ax.remove()  # no run of this metric in this setting: no empty panel
-                continue
+                continue  # no run of this metric in this setting: no empty panel
+            ax = fig.add_subplot(grid[i, j])
             edge = mtransforms.blended_transform_factory(ax.transAxes, ax.transData)
             for k, row, curves in lines:
-                grid, mean, band = _mean_band(curves)
+                grid_x, mean, band = _mean_band(curves)
                 color = f"C{k % 10}"
-                ax.plot(grid, mean, color=color, marker="o" if len(grid) == 1 else None, label=row)
+                main = row == ref  # the paper's model, drawn over the others
+                ax.plot(
+                    grid_x,
+                    mean,
+                    color=color,
+                    marker="o" if len(grid_x) == 1 else None,
+                    label=row,
+                    lw=2.2 if main else 1.0,
+                    zorder=3 if main else 2,
+                )
                 if band is not None:
-                    ax.fill_between(grid, band[0], band[1], color=color, alpha=0.2, lw=0)
+                    ax.fill_between(grid_x, band[0], band[1], color=color, alpha=0.2, lw=0)
                 value = paper.get((row, difficulty, aux, metric))
                 if value not in (None, ""):
-                    ax.plot([1.0], [float(value)], marker="<", ms=6, color=color, transform=edge, clip_on=False)
+                    ax.plot([1.0], [float(value)], marker="<", ms=5, color=color, transform=edge, clip_on=False)
             line = prior.of(curve_key(metric)[0].removeprefix("eval/"), difficulty)  # a blind model's score here
             ax.axhline(line, color="grey", lw=0.8, ls=":")
             label = curve_key(metric)[1]
             title = f"{label}: {DIFFICULTY_LABELS.get(difficulty, difficulty)}, {AUX_LABELS[aux]}"
-            ax.set_title(title)
+            ax.set_title(wrap(title, width - 0.2, plt.rcParams["axes.titlesize"]))
             ax.set_ylim(-0.02, 1.02)
-            ax.set_xlabel("frames (agent steps)")
-            ax.set_ylabel("greedy accuracy")
+            frames_axis(ax)
+            if j == 0:
+                ax.set_ylabel("greedy accuracy")
+            else:
+                ax.tick_params(labelleft=False)
             for handle, text in zip(*ax.get_legend_handles_labels()):
                 legend.setdefault(text, handle)
             legend.setdefault(f"blind chance {line:.2f}", Line2D([], [], color="grey", lw=0.8, ls=":"))
             if any(paper.get((row, difficulty, aux, metric)) for _, row, _ in lines):
                 legend.setdefault("paper (its frames)", Line2D([], [], color="grey", marker="<", ls=""))
-    right = 1 - LEGEND_INCHES / fig.get_size_inches()[0]
-    fig.legend(list(legend.values()), list(legend), loc="upper left", bbox_to_anchor=(right + 0.01, 0.92))
-    note = "" if profile == "paper" else f"\nprofile '{profile}' is not the paper's protocol: its deviations below"
-    fig.suptitle(
+    longest = max(len(t) for t in legend)
+    ncol = max(1, min(len(legend), int(PAGE_INCHES * 72 / (0.6 * plt.rcParams["legend.fontsize"] * longest + 30))))
+    fig.legend(list(legend.values()), list(legend), loc="outside lower center", ncol=ncol)
+    note = "" if profile == "paper" else f" Profile '{profile}' is not the paper's protocol: its deviations below."
+    title = (
         f"{name} [{profile}]: greedy accuracy (the table's metric, periodic evaluation), seed mean, 95% bootstrap "
-        f"band;\nthe paper's number marked at the right edge; dotted: chance, what a blind model (Text only) "
-        f"scores here{note}"
+        f"band; the paper's number marked at the right edge; dotted: chance, what a blind model (Text only) scores "
+        f"here.{note}"
     )
-    rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    shown = [deviations.shown_run(spec, profile, run_root, rows.get(r)) for r, spec in drawn.items()]
-    footer = deviations.sentence(deviations.summarise(shown)) if shown else ""
-    _footer(fig, footer, right=right)
+    fig.suptitle(wrap(title, PAGE_INCHES - 0.1, plt.rcParams["figure.titlesize"]))
+    if footer:
+        ax = fig.add_subplot(grid[-1, :])
+        ax.axis("off")
+        ax.text(0, 1, footer, fontsize=FOOTER_POINTS, ha="left", va="top", transform=ax.transAxes)
     for p in paths:
         save(fig, p)
     plt.close(fig)
     return paths, notes
 
 
-FOOTER_CHARS_PER_INCH = 21
-"""Characters of the 6-point footer per inch of figure width (wrapping)."""
-FOOTER_LINE_INCHES = 0.11
-
-
-LEGEND_INCHES = 1.8
-"""The width kept right of the panels for the curves figure's one legend."""
-
-
-def _footer(fig, text: str, right: float = 1.0) -> None:
-    """``text`` wrapped under the panels, the figure grown to hold it; the panels end at ``right`` (a fraction)."""
-    import textwrap
-
-    w, h = fig.get_size_inches()
-    lines = textwrap.wrap(text, int(w * FOOTER_CHARS_PER_INCH)) if text else []
-    extra = FOOTER_LINE_INCHES * len(lines) + (0.1 if lines else 0)
-    fig.set_size_inches(w, h + extra)
-    fig.tight_layout(rect=(0, extra / (h + extra), right, 1))
-    if lines:
-        fig.text(0.01, 0.005, "\n".join(lines), fontsize=6, ha="left", va="bottom")
+FOOTER_POINTS = 7
+"""The size of the footer's text (the deviations of the runs drawn)."""
+PANEL_INCHES = 1.9
+"""The height of a row of panels; the figure is `PAGE_INCHES` wide, each setting a column."""
 
 
 def _history(run_id: str, key: str) -> list[tuple[int, float]] | None:

@@ -11,13 +11,13 @@ apart, Easy and Hard apart) and metric (SGN and EQA apart: the table's own colum
 
 n is always a number of runs (seeds) in the cell. A row with one run in a cell is a hollow point with no interval
 (resampling one run cannot move it); a filled point with a bar is an IQM with its interval. Every bootstrap is seeded
-(aggregate.SEED). A cell with no run is not drawn: no empty panel. The title is wrapped to the figure's width.
+(aggregate.SEED). A cell where fewer than two rows have runs is not drawn: nothing to compare, no empty panel. The
+figure is a page's text wide (7 in, emml/report/savefig.py), its title wrapped to it.
 Written as reports/<table>-<profile>-rliable.png and .pdf (embedded in reports/<table>-<profile>.md).
 """
 
 from __future__ import annotations
 
-import textwrap
 import warnings
 from pathlib import Path
 
@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
 from emml.report.aggregate import REPS, SEED, iqm, probability_of_improvement, reference_row  # noqa: E402
-from emml.report.savefig import save  # noqa: E402
+from emml.report.savefig import PAGE_INCHES, save, wrap  # noqa: E402
 
 TAUS = np.linspace(0.0, 1.0, 51)
 """The thresholds of the performance profiles (accuracy), every 0.02."""
@@ -37,8 +37,6 @@ PROFILE_REPS = 500
 """Resamples of a performance profile's band: drawn, never tabulated, and rliable's profile bootstrap evaluates
 every threshold in Python per resample (2,000 resamples over 101 thresholds took ~2 s per row, most of a table's
 report); the intervals reported as numbers (IQM, P(improvement)) keep `REPS`."""
-WIDTH = 11.0
-"""The figure's width in inches; the title is wrapped to it."""
 XLIM = (-0.03, 1.03)
 """Accuracy and probability axes: a point at 0 or 1 drawn whole."""
 PAPER_MARK = dict(marker="x", color="black", ms=7, mew=1.5, ls="none", zorder=2)
@@ -100,8 +98,8 @@ def panel_data(table, cells) -> list[dict]:
     return out
 
 
-def _runs(n: int) -> str:
-    return f"n={n} run{'s' if n != 1 else ''}"
+ROW_INCHES = 0.2
+"""The height of a row of the table in a panel; the figure is `PAGE_INCHES` wide."""
 
 
 def _estimate(ax, y: float, e, color: str, name: str, several: bool) -> None:
@@ -114,60 +112,58 @@ def _estimate(ax, y: float, e, color: str, name: str, several: bool) -> None:
 
 
 def field_figure(table, profile: str, cells):
-    """The figure (one row of three panels per setting and metric with runs); None for a transfer table (every row
-    reads the same runs) or when no row has runs."""
+    """The figure (one row of three panels per setting and metric where two rows or more have runs: one row alone
+    compares with nothing); None for a transfer table (every row reads the same runs) or when no such cell. The
+    reference row (Dual-Attention) in bold and drawn over the others."""
     if table.transfer is not None:
         return None
-    data = panel_data(table, cells)
+    data = [d for d in panel_data(table, cells) if len(d["rows"]) >= 2]
     if not data:
         return None
     ref = reference_row(table)
-    heights = [0.9 + 0.26 * max(len(d["rows"]), 2) for d in data]
+    lines = max(_tick(row, 1).count("\n") + 1 for d in data for row in d["rows"])
+    heights = [0.75 + ROW_INCHES * lines * len(d["rows"]) for d in data]
     fig, axes = plt.subplots(
         len(data),
         3,
-        figsize=(WIDTH, 0.9 + sum(heights) + 0.3 * len(data)),
+        figsize=(PAGE_INCHES, 1.4 + sum(heights)),
         squeeze=False,
         gridspec_kw={"height_ratios": heights},
         layout="constrained",
     )
+    legend: dict = {}
     for i, d in enumerate(data):
         names = list(d["rows"])
-        where = f"{d['setting']} · {d['label']}"
         # 1. IQM per row over its runs in this cell, the paper's number beside it
         ax = axes[i][0]
-        ticks = []
         for y, row in enumerate(names[::-1]):
             k, values, paper = d["rows"][row]
             color = f"C{k % 10}"
             _estimate(ax, y, iqm([values]), color, row, len(values) > 1)
             if paper is not None:
                 ax.plot([paper], [y], **PAPER_MARK, label=f"_paper {row}")
-            ticks.append(f"{row} ({_runs(len(values))})")
-        ax.set_yticks(range(len(names)), ticks)
-        ax.set_ylim(-0.6, max(len(names), 2) - 0.4)
+        ax.set_yticks(range(len(names)), [_tick(row, len(d["rows"][row][1])) for row in names[::-1]])
+        _bold(ax, names[::-1], ref)
+        ax.set_ylim(-0.6, len(names) - 0.4)
         ax.set_xlim(*XLIM)
-        ax.set_xlabel(f"{d['label']}: IQM over runs, 95% CI")
-        ax.set_title(f"{where}: IQM per row")
+        ax.set_xlabel("IQM over runs, 95% CI")
+        ax.set_title(f"{d['setting']} · {d['label']}: IQM")
         # 2. P(reference > row) in this cell
         ax = axes[i][1]
         theirs = d["rows"][ref][1] if ref in d["rows"] else []
         others = [r for r in names if r != ref]
-        ticks = []
         for y, row in enumerate(others[::-1]):
             k, values, _ = d["rows"][row]
-            ticks.append(f"{row} (n={len(theirs)} vs {len(values)})")
             if theirs:
                 p = probability_of_improvement([theirs], [values])
                 _estimate(ax, y, p, f"C{k % 10}", row, len(theirs) > 1 and len(values) > 1)
-        ax.set_yticks(range(len(others)), ticks)
-        ax.set_ylim(-0.6, max(len(others), 2) - 0.4)
+        ax.set_yticks(range(len(others)), [_tick(r, f"{len(theirs)} vs {len(d['rows'][r][1])}") for r in others[::-1]])
+        ax.set_ylim(-0.6, max(len(others), 1) - 0.4)
         ax.axvline(0.5, color="grey", lw=0.8, ls="--")
         ax.set_xlim(*XLIM)
-        ax.set_xlabel(f"{d['label']}: P({ref} > row), 95% CI" if ref else "no reference row")
-        if not theirs or not others:
-            why = f"no {ref or 'reference'} run in this cell" if not theirs else "no other row run in this cell"
-            ax.text(0.5, 0.5, why, ha="center", va="center", transform=ax.transAxes)
+        ax.set_xlabel(wrap(f"P({ref} > row), 95% CI" if ref else "no reference row", 2.0, 8))
+        if not theirs:
+            ax.text(0.5, 0.5, f"no {ref or 'reference'} run here", ha="center", va="center", transform=ax.transAxes)
         ax.set_title("probability of improvement")
         # 3. performance profiles over the runs in this cell
         ax = axes[i][2]
@@ -175,28 +171,48 @@ def field_figure(table, profile: str, cells):
             k, values, _ = d["rows"][row]
             prof, band = _profile(np.asarray(values, dtype=float)[:, None])
             color = f"C{k % 10}"
-            ax.plot(TAUS, prof, color=color, label=f"{row} ({_runs(len(values))})")
+            main = row == ref
+            ax.plot(TAUS, prof, color=color, label=row, lw=2.2 if main else 1.0, zorder=3 if main else 2)
             if band is not None:
                 ax.fill_between(TAUS, band[0], band[1], color=color, alpha=0.15, lw=0)
+            legend.setdefault(row, Line2D([], [], color=color, lw=2.2 if main else 1.0))
         ax.set_xlim(0, 1)
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel(f"{d['label']} τ")
         ax.set_ylabel("fraction of runs > τ")
         ax.set_title("performance profile")
-        ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    key = [
-        Line2D([], [], marker="o", color="grey", lw=4, alpha=0.6, label="IQM with its 95% CI (2 runs or more)"),
-        Line2D([], [], marker="o", color="grey", mfc="white", ls="none", label="one run: its score, no interval"),
-        Line2D([], [], **PAPER_MARK, label="the paper's number"),
-    ]
-    fig.legend(handles=key, loc="outside lower center", ncol=3, fontsize=7)
+    key = {
+        "IQM, 95% CI (2 runs or more)": Line2D([], [], marker="o", color="grey", lw=4, alpha=0.6),
+        "one run: no interval": Line2D([], [], marker="o", color="grey", mfc="white", ls="none"),
+        "the paper's number": Line2D([], [], **PAPER_MARK),
+    }
+    handles = {**legend, **key}
+    longest = max(len(t) for t in handles)
+    ncol = max(1, min(len(handles), int(PAGE_INCHES * 72 / (0.6 * plt.rcParams["legend.fontsize"] * longest + 30))))
+    fig.legend(list(handles.values()), list(handles), loc="outside lower center", ncol=ncol)
     title = (
-        f"{table.name} [{profile}]: rliable per setting and metric (SGN and EQA apart), n = runs in the cell; "
-        f"95% CIs from resampling each cell's runs ({REPS:,} resamples, seed {SEED}; {PROFILE_REPS:,} for the "
-        "profiles' bands)"
+        f"{table.name} [{profile}]: rliable per setting and metric where two rows or more have runs; (n) = runs in "
+        f"the cell; 95% CIs from resampling each cell's runs ({REPS:,} resamples, seed {SEED}; {PROFILE_REPS:,} for "
+        "the profiles' bands)"
     )
-    fig.suptitle(textwrap.fill(title, width=int(WIDTH * 72 / (0.62 * plt.rcParams["figure.titlesize"]))))
+    fig.suptitle(wrap(title, PAGE_INCHES - 0.1, plt.rcParams["figure.titlesize"]))
     return fig
+
+
+TICK_INCHES = 1.2
+"""The width a row's name takes beside a panel; longer names wrap."""
+
+
+def _tick(row: str, runs) -> str:
+    """A row's tick label: its name, wrapped to `TICK_INCHES`, and its runs in the cell."""
+    return wrap(f"{row} ({runs})", TICK_INCHES, plt.rcParams["ytick.labelsize"])
+
+
+def _bold(ax, names: list[str], ref: str | None) -> None:
+    """The reference row's tick label in bold."""
+    for label, row in zip(ax.get_yticklabels(), names):
+        if row == ref:
+            label.set_fontweight("bold")
 
 
 def plot_field(table, profile: str, cells, out: Path) -> list[Path]:

@@ -37,3 +37,53 @@ def save(fig, path: str | Path, **kwargs) -> Path:
     with matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT}):
         fig.savefig(path, metadata=METADATA.get(path.suffix.lower()), **kwargs)
     return path
+
+
+COLUMN_INCHES = 3.3
+"""A figure one column of a two-column paper wide: made at the width it prints at, its 7-8 pt text prints at 7-8 pt."""
+PAGE_INCHES = 7.0
+"""A figure the text width of a two-column page wide (`figure*`)."""
+
+
+def frames_axis(ax) -> None:
+    """x in millions of frames ('M frames', ticks 0, 0.5, 1, ...), not matplotlib's '1e6' offset."""
+    from matplotlib.ticker import FuncFormatter
+
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e6:g}"))
+    ax.set_xlabel("M frames")
+
+
+def wrap(text: str, inches: float, points: float) -> str:
+    """``text`` wrapped to lines that fit ``inches`` at ``points`` (a character ~0.6 em wide: DejaVu Sans)."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, max(10, int(inches * 72 / (0.6 * points))))) or text
+
+
+def outside(fig, dpi: float | None = None) -> list[str]:
+    """The texts of ``fig`` drawn (titles, labels, tick labels, legends, annotations) whose extent leaves the
+    canvas: what the file cuts off. Drawn at ``dpi`` (default: the dpi files are saved at; text does not scale
+    exactly with it). A tick label outside its axis' view is not drawn, and not counted."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Text
+
+    if not hasattr(fig.canvas, "get_renderer"):  # a closed figure: drawn again as it is saved
+        FigureCanvasAgg(fig)
+    fig.set_dpi(dpi or matplotlib.rcParams["savefig.dpi"])
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    hidden = set()
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            lo, hi = sorted(axis.get_view_interval())
+            for tick in axis.get_major_ticks() + axis.get_minor_ticks():
+                if not lo - 1e-9 * max(1, abs(hi)) <= tick.get_loc() <= hi + 1e-9 * max(1, abs(hi)):
+                    hidden |= {id(tick.label1), id(tick.label2)}
+    box, out = fig.bbox, []
+    for text in fig.findobj(Text):
+        if id(text) in hidden or not text.get_visible() or not text.get_text().strip():
+            continue
+        e = text.get_window_extent(renderer)
+        if e.x0 < box.x0 - 0.5 or e.y0 < box.y0 - 0.5 or e.x1 > box.x1 + 0.5 or e.y1 > box.y1 + 0.5:
+            out.append(text.get_text())
+    return out

@@ -119,22 +119,20 @@ def _levels(cells: list[Cell]) -> dict[str, list]:
     return out
 
 
-def layout(table: Table, cells: list[Cell], tex: bool = False) -> tuple[pd.DataFrame, list[str]]:
+def layout(table: Table, cells: list[Cell]) -> tuple[pd.DataFrame, list[str]]:
     """The paper-shaped DataFrame (rows × difficulty/aux/metric columns) and the column levels held constant."""
     levels = _levels(cells)
     keep = [k for k in ("difficulty", "aux", "metric") if len(levels[k]) > 1 or k == "metric"]
     constant = [_label(k, levels[k][0]) for k in ("difficulty", "aux") if k not in keep]
     metric_labels = {v: k for k, v in table.metrics.items()}
-    sep, missing = (r" $\mid$ ", "---") if tex else (r" \| ", MISSING)  # GFM: a bare | splits the cell
     data: dict[str, dict] = {}
     for c in cells:
-        ours = c.ours().replace(MISSING, missing)
-        paper = c.paper if c.paper is not None else missing
+        paper = c.paper if c.paper is not None else MISSING
         col = tuple(
             metric_labels.get(c.metric) or _label("metric", c.metric) if k == "metric" else _label(k, getattr(c, k))
             for k in keep
         )
-        data.setdefault(col, {})[c.row] = f"{ours}{sep}{paper}"
+        data.setdefault(col, {})[c.row] = f"{c.ours()} \\| {paper}"  # GFM: a bare | splits the cell
     rows = list(dict.fromkeys(c.row for c in cells))
     df = pd.DataFrame(data, index=rows)
     extra = {r.label for r in table.rows if r.extra}
@@ -231,23 +229,6 @@ def _run_names(table: Table, profile: str) -> set[str]:
     return {spec.run_name(prof) for spec in table.runs(list(prof.seeds))}
 
 
-def _tex_escape(text: str) -> str:
-    for char, repl in (
-        ("\\", r"\textbackslash{}"),
-        ("&", r"\&"),
-        ("%", r"\%"),
-        ("$", r"\$"),
-        ("#", r"\#"),
-        ("_", r"\_"),
-        ("{", r"\{"),
-        ("}", r"\}"),
-        ("<", r"\textless{}"),
-        (">", r"\textgreater{}"),
-    ):
-        text = text.replace(char, repl)
-    return text
-
-
 def results_path(name: str, profile: str, results_root: str | Path | None = None) -> Path:
     """results/<name>/<profile>.csv under ``results_root`` (default: the profile's, `results` but for smoke)."""
     if results_root is None:
@@ -266,10 +247,6 @@ def reports_dir(profile: str, out: str | Path | None = None) -> Path:
         out = project_root() / (f"{SCRATCH}/reports" if is_scratch(profile) else "reports")
     refuse_committed(profile, out, "report folder")
     return Path(out)
-
-
-def _tex_caption(text: str) -> str:
-    return _tex_escape(text).replace("—", "---").replace("–", "--").replace("|", r"$\mid$")
 
 
 def table_results(table: Table, profile: str, results_root: str | Path | None = None) -> pd.DataFrame:
@@ -297,6 +274,7 @@ def report_table(
     from emml.report import deviations, efficiency
     from emml.report.aggregate import summary
     from emml.report.field import plot_field
+    from emml.report.tex import tex_table
     from emml.runs.segments import commits_note
 
     table = load_table(name)
@@ -339,7 +317,7 @@ def report_table(
         md += [efficiency.markdown(efficiency.table_efficiency(table, profile, names, root, prior), chance=prior)]
     md += [f"Results: `{shown}`", ""]
     md_path.write_text("\n".join(md))
-    tex_path.write_text(tex_table(table, profile, cells, results, devs, agg))
+    tex_path.write_text(tex_table(table, profile, cells, results, devs))
     return {
         "table": name,
         "profile": profile,
@@ -392,112 +370,3 @@ def headline(table: Table, profile: str, cells: list[Cell]) -> str:
     )
     claims = f" Claims decided on [claims-{profile}.md](claims-{profile}.md)." if table.name in list_tables() else ""
     return f"**In one line** ({profile}{rest}): " + "; ".join(parts) + "." + claims
-
-
-TEX_PACKAGES = ("booktabs", "graphicx")
-"""What the .tex tables need in the preamble (stated in each file's first line)."""
-TEX_CHARS = {
-    "·": r"$\cdot$",
-    "−": "-",
-    "≥": r"$\geq$",
-    "≤": r"$\leq$",
-    "†": r"$\dagger$",
-    "×": r"$\times$",
-    "—": "---",
-    "–": "--",
-    "→": r"$\rightarrow$",
-    "…": r"\dots{}",
-    "§": r"\S{}",
-}
-"""Characters a bare pdflatex (no unicode packages) cannot set, as LaTeX."""
-
-
-def tex_text(text: str) -> str:
-    """Plain text as LaTeX that a minimal pdflatex document sets: specials escaped, the Unicode above replaced, any
-    other non-ASCII character dropped."""
-    out = _tex_escape(text).replace("|", r"$\mid$")
-    for char, repl in TEX_CHARS.items():
-        out = out.replace(char, repl)
-    return "".join(ch for ch in out if ord(ch) < 128)
-
-
-def _fit(tabular: str) -> str:
-    """The tabular scaled down to \\linewidth when wider (never up)."""
-    return "\\resizebox{\\ifdim\\width>\\linewidth\\linewidth\\else\\width\\fi}{!}{%\n" + tabular.strip() + "%\n}\n"
-
-
-def tex_table(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame, devs, agg) -> str:
-    """reports/<table>-<profile>.tex: the table (and its aggregate) as floats that compile in a minimal document with
-    the packages of the first line, scaled to fit the text width; a short caption, the deviations as notes."""
-    tex_df, constant = layout(table, cells, tex=True)
-    tex_df.index = pd.Index([tex_text(str(i)) for i in tex_df.index], name=tex_text(table.row_header))
-    tex_df.columns = (
-        pd.MultiIndex.from_tuples([tuple(tex_text(x) for x in c) for c in tex_df.columns])
-        if isinstance(tex_df.columns, pd.MultiIndex)
-        else [tex_text(c) for c in tex_df.columns]
-    )
-    tex_df = tex_df.map(lambda v: tex_text(str(v).replace(r" $\mid$ ", " | ")))
-    tabular = tex_df.reset_index().to_latex(
-        index=False,
-        escape=False,
-        multicolumn=True,
-        multicolumn_format="c",
-        column_format="l" + "c" * tex_df.shape[1],
-    )
-    used = results[results["run_name"].isin(_run_names(table, profile))] if not results.empty else results
-    paper = table.name in list_tables()
-    what = f"Ours vs the paper's Table {table.name.removeprefix('table')}" if paper else table.title
-    if used.empty:
-        runs = "no finished run yet"
-    else:
-        lo, hi = int(used["frames"].min()), int(used["frames"].max())
-        frames = f"{lo:,}" if lo == hi else f"{lo:,}--{hi:,}"
-        seeds = ", ".join(str(s) for s in sorted(int(x) for x in used["seed"].unique()))
-        runs = f"{frames} frames, seeds {seeds}, {len(used)} of {len(_run_names(table, profile))} runs"
-    setting = f" {', '.join(constant)}." if constant else ""
-    cap = f"{what} ({profile} profile: {runs}).{setting} Each cell: ours, the mean (each seed) | the paper"
-    cap += "; --- = not run."
-    notes = []
-    if devs is not None and devs.deviations:
-        notes.append("Deviations from the paper: " + "; ".join(f"{line} [{h}]" for line, h in devs.deviations) + ".")
-    if profile != "paper":
-        notes.append(f"The '{profile}' profile is not the paper's protocol: compare orderings, not absolute numbers.")
-    label = f"tab:ours-{table.name}-{profile}"
-    lines = [
-        f"% {table.name} [{profile}], written by `make reports` (emml/report/tables.py). Needs "
-        + ", ".join(f"\\usepackage{{{p}}}" for p in TEX_PACKAGES)
-        + "; fits \\linewidth (scaled down when wider).",
-        "\\begin{table}[t]",
-        "\\centering",
-        f"\\caption{{{tex_text(cap)}}}",
-        f"\\label{{{label}}}",
-        _fit(tabular).rstrip(),
-    ]
-    if notes:
-        lines += ["\\par\\smallskip", "{\\footnotesize\\raggedright Notes: " + tex_text(" ".join(notes)) + "\\par}"]
-    lines += ["\\end{table}", ""]
-    if agg is not None:
-        agg_df = pd.DataFrame(agg[0]).map(lambda v: tex_text(_short(str(v))))
-        agg_df.columns = [tex_text(c.replace(" [95% CI]", "")) for c in agg_df.columns]
-        agg_cap = (
-            f"Aggregate per setting ({what}, {profile}): IQM, the reference row minus the row, P(reference > row), "
-            "each with its 95% bootstrap interval; a number alone: one run, no interval."
-        )
-        agg_tab = agg_df.to_latex(index=False, escape=False, column_format="ll" + "c" * (agg_df.shape[1] - 2))
-        lines += [
-            "\\begin{table}[t]",
-            "\\centering",
-            f"\\caption{{{tex_text(agg_cap)}}}",
-            f"\\label{{{label}-aggregate}}",
-            _fit(agg_tab).rstrip(),
-            "\\end{table}",
-            "",
-        ]
-    return "\n".join(lines)
-
-
-def _short(value: str) -> str:
-    """An aggregate cell without its parenthesised counts ('0.93 (1 run in 1 cell: no interval)' -> '0.93')."""
-    import re
-
-    return re.sub(r" \([^()]*\)$", "", value)

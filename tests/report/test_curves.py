@@ -86,8 +86,8 @@ def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(track
     from emml.experiments.tables import load_table
 
     footers = []
-    real = curves._footer
-    monkeypatch.setattr(curves, "_footer", lambda fig, text, **kw: (footers.append(text), real(fig, text, **kw)))
+    real = curves.save
+    monkeypatch.setattr(curves, "save", lambda fig, path, **kw: (footers.append(_texts(fig)), real(fig, path, **kw))[1])
     name = "dual_attention-easy-aux-s0-quick"
     csv = tmp_path / "results" / "table3" / "quick.csv"
     csv.parent.mkdir(parents=True)
@@ -112,3 +112,41 @@ def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(track
     plot_table("table3", "quick", **kw)
     assert "input" not in footers[-1] and "x_S = h·w·vec(x_spat)" in footers[-1]
     assert [p.read_bytes() for p in paths] != first
+
+
+def _texts(fig) -> str:
+    """Every text of the figure, its wrapped lines joined again."""
+    from matplotlib.text import Text
+
+    return " ".join(t.get_text().replace("\n", " ") for t in fig.findobj(Text))
+
+
+def test_the_figure_is_a_page_wide_nothing_cut_x_in_m_frames_dual_attention_over_the_rest(
+    tracking, tmp_path, monkeypatch
+):
+    import emml.report.curves as curves
+    from emml.report.savefig import PAGE_INCHES, outside
+    from tests.report.test_efficiency import write_curves
+    from tests.report.test_tables import fake_results, fake_run_dirs
+
+    fake_results("table2", tmp_path / "results")
+    fake_run_dirs("table2", tmp_path / "runs")
+    write_curves(tmp_path / "runs", "table2", lambda s: 0.5)
+    figs = []
+    monkeypatch.setattr(curves, "save", lambda fig, path, **kw: (figs.append(fig), path)[1])
+    kw = dict(results_root=tmp_path / "results", out=tmp_path / "reports", run_root=tmp_path / "runs")
+    plot_table("table2", "quick", **kw)
+    fig = figs[0]
+    assert fig.get_size_inches()[0] == PAGE_INCHES
+    assert outside(fig) == []  # every title, label, tick label, legend entry and the footer inside the canvas
+    panels = [ax for ax in fig.axes if ax.get_title()]
+    assert {ax.get_title() for ax in panels} == {
+        f"{m} test: {d}, {a}" for m in ("SGN", "EQA") for d in ("Easy", "Hard") for a in ("No Aux", "Aux")
+    }
+    for ax in panels:
+        assert ax.get_xlabel() == "M frames" and ax.xaxis.get_offset_text().get_text() == ""  # no '1e6'
+        assert ax.xaxis.get_major_formatter()(1.5e6, 0) == "1.5"  # 1.5M frames reads 1.5
+        ticks = [float(t.get_text()) for t in ax.get_xticklabels() if t.get_text()]
+        assert ticks and max(ticks) <= 6, ticks  # millions: at most 5M frames here
+        width = {line.get_label(): line.get_linewidth() for line in ax.get_lines()}
+        assert width["Dual-Attention"] > max(w for k, w in width.items() if k in ("GA", "FiLM", "Concat"))
