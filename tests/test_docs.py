@@ -1,7 +1,9 @@
-"""The docs site (issue 63): `make docs` builds the site strictly (no broken link or anchor, no page left out of the
-nav, the generated CLI and config references included)."""
+"""The docs site and the README (issue 63): `make docs` builds the site strictly (no broken link or anchor, no page
+left out of the nav, the generated CLI and config references included), and the README fits a screen or two,
+leads with the two commands CI runs, and links only what exists or what `make reports` writes."""
 
 import importlib.util
+import re
 import shutil
 import subprocess
 import sys
@@ -10,6 +12,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
 MKDOCS = importlib.util.find_spec("mkdocs") is not None and importlib.util.find_spec("material") is not None
 
 
@@ -62,3 +65,25 @@ def test_a_broken_link_or_a_page_left_out_fails_the_strict_build(tmp_path):
     )
     assert build.returncode != 0
     assert "orphan.md" in build.stderr and "no-such-section" in build.stderr
+
+
+def test_the_readme_fits_a_screen_or_two_and_leads_with_the_two_commands():
+    text = README.read_text()
+    assert len(text) < 8000
+    block = text.split("```bash\n", 1)[1].split("```", 1)[0].splitlines()
+    assert [line.split()[:2] for line in block] == [["make", "demo"], ["make", "test"]]
+    assert "make test" in (ROOT / ".ci" / "run").read_text()  # CI runs the README's test command
+    assert max(len(line) for line in text.splitlines() if line.startswith("|")) < 200  # no paragraph in a cell
+
+
+def test_every_readme_link_exists_or_is_written_by_make_reports():
+    from emml.report.claims_page import page_names
+
+    written = {f"reports/{n}" for n in page_names("quick").values()} | {"reports/index.md"}
+    links = re.findall(r"!?\[[^\]]*\]\(([^)\s#]+)[^)]*\)", README.read_text())
+    assert any(link.startswith("reports/claims-quick") for link in links)  # the snapshot: make reports writes it
+    assert any(link.startswith("docs/") for link in links)
+    for link in links:
+        if re.match(r"^[a-z]+:", link):
+            continue
+        assert (ROOT / link).exists() or link in written, link
