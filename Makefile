@@ -95,7 +95,7 @@ ui: setup
 
 # The paper's tables (reproduce/tableN.toml): every run under PROFILE, skipping finished ones, resuming the rest.
 # BACKEND=slurm submits submitit jobs of PACK runs each, requeued at TIME_MIN until their runs finish
-# (pip install -e ".[slurm]"; PARTITION, TIME_MIN, GPUS, PACK below; README "On a Slurm cluster").
+# (pip install -e ".[slurm]"; PARTITION, TIME_MIN, GPUS, PACK below; docs/slurm.md).
 PARTITION ?=
 TIME_MIN ?= 1440
 GPUS ?= 0
