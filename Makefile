@@ -9,7 +9,7 @@ BACKEND ?= local
 TCMALLOC := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libtcmalloc_minimal.so.4 /usr/lib/x86_64-linux-gnu/libtcmalloc.so.4))
 EMML := $(if $(TCMALLOC),LD_PRELOAD=$(TCMALLOC) )$(VENV)/bin/emml
 
-.PHONY: setup demo test test-slow lint mutate bench bench-gpu ui table2 ablations transfer house3d reports list campaign campaign-status
+.PHONY: setup demo test test-slow lint docs mutate bench bench-gpu ui table2 ablations transfer house3d reports list campaign campaign-status
 
 setup: $(VENV)/.installed
 
@@ -35,6 +35,13 @@ test-slow: setup
 lint: setup
 	$(VENV)/bin/ruff check emml tests
 	$(VENV)/bin/lint-imports
+
+# the docs site (mkdocs.yml, docs/; MkDocs with the Material theme, in the dev extra) into site/: the CLI and config
+# references generated first (docs/reference/, not committed), then built strictly: a broken link or anchor, or a page
+# left out of the nav, fails it (tests/test_docs.py builds it the same way). `mkdocs serve` to browse it.
+docs: setup
+	$(PY) scripts/docs_reference.py docs/reference
+	$(VENV)/bin/mkdocs build --strict
 
 # Mutation testing (issue 66; docs/testing.md): mutmut over the modules that decide numbers, each against the tests
 # that read it, then the score per module. Not in CI: ~1 h on 2 idle cores for all of them, hours beside a training.
@@ -88,7 +95,7 @@ ui: setup
 
 # The paper's tables (reproduce/tableN.toml): every run under PROFILE, skipping finished ones, resuming the rest.
 # BACKEND=slurm submits submitit jobs of PACK runs each, requeued at TIME_MIN until their runs finish
-# (pip install -e ".[slurm]"; PARTITION, TIME_MIN, GPUS, PACK below; README "On a Slurm cluster").
+# (pip install -e ".[slurm]"; PARTITION, TIME_MIN, GPUS, PACK below; docs/slurm.md).
 PARTITION ?=
 TIME_MIN ?= 1440
 GPUS ?= 0

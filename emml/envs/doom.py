@@ -69,12 +69,12 @@ OBSERVATION_KEYS = {
     "aux": "with `aux_labels`: per word, the conv3 cells showing an object it describes",
     "target": "with `target_in_obs`: the cells showing the referent (privileged; else `info['target_mask']`)",
 }
-"""What each observation key holds (the class docstring, README's env section: `space_rows`)."""
+"""What each observation key holds (the class docstring, docs/environment.md: `space_rows`)."""
 
 
 def space_rows(env: DoomEnv) -> list[str]:
-    """README's table of ``env``'s spaces, one markdown row per observation key, then the action: checked against
-    README by the tests, so the two cannot drift."""
+    """docs/environment.md's table of ``env``'s spaces, one markdown row per observation key, then the action:
+    checked against that page by the tests, so the two cannot drift."""
 
     def spelled(space) -> str:
         if isinstance(space, spaces.MultiDiscrete):

@@ -56,8 +56,8 @@ class FusionOptions:
 
 
 class Fusion(nn.Module):
-    """A fusion unit: (x_I, x_BoW, x_sent) -> `FusionOutput`. Subclass it for a model of your own (README, "Compare
-    your own model") and register it (`emml.models.register_model`). What it needs is declared by the class
+    """A fusion unit: (x_I, x_BoW, x_sent) -> `FusionOutput`. Subclass it for a model of your own
+    (docs/own-model.md) and register it (`emml.models.register_model`). What it needs is declared by the class
     attributes below; `EmmlModel` reads them, never the class's identity."""
 
     uses_bow: bool = False

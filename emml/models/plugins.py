@@ -1,4 +1,4 @@
-"""Plugins: models of one's own, registered from outside the package (README, "Compare your own model").
+"""Plugins: models of one's own, registered from outside the package (docs/own-model.md, "Compare your own model").
 
 A plugin is a module that registers models when imported (`emml.models.register_model`). It is found in two ways:
 

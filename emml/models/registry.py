@@ -38,7 +38,7 @@ F = TypeVar("F", bound=type[Fusion])
 
 PLUGIN_HINT = (
     "a plugin's model is known once its plugin is loaded: emml --plugin PATH_OR_MODULE …, or the EMML_PLUGINS "
-    "environment variable (README, 'Compare your own model')"
+    "environment variable (docs/own-model.md)"
 )
 """Said with every unknown model name: the model may be a plugin's, not loaded in this process."""
 

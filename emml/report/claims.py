@@ -399,10 +399,13 @@ def counts(decisions: list[Decision]) -> dict[str, int]:
     return {s: sum(d.status == s for d in decisions) for s in STATUSES}
 
 
-def write_claims(profile: str, out=None, results_root=None, costs: dict | None = None, run_root=None):
-    """reports/claims-<profile>.md (scratch/reports for a scratch profile, as the table pages: `reports_dir`)."""
+def write_claims(profile: str, out=None, results_root=None, costs: dict | None = None, run_root=None, tables=None):
+    """reports/claims-<profile>.md, the page read first, and beside it its detail and figure
+    (emml/report/claims_page.py; scratch/reports for a scratch profile, as the table pages: `reports_dir`).
+    ``tables``: the tables whose page `make reports` writes for the profile, which the detail links (None: those
+    that have a finished run of the profile)."""
     from emml.experiments.claims import load_claims
-    from emml.report.claims_page import markdown
+    from emml.report.claims_page import write_pages
     from emml.report.tables import reports_dir
 
     folder = reports_dir(profile, out)
@@ -410,6 +413,24 @@ def write_claims(profile: str, out=None, results_root=None, costs: dict | None =
     decisions = decide_all(profile, results_root, costs, run_root)
     claims = load_claims()
     paper = {c.id: decide_paper(c) for c in claims.values()}
-    path = folder / f"claims-{profile}.md"
-    path.write_text(markdown(decisions, profile, paper, claims, blind_prior(profile, results_root)))
-    return path, decisions
+    if tables is None:
+        tables = _tables_with_runs({c.table for c in claims.values()}, profile, results_root)
+    chance = blind_prior(profile, results_root)
+    paths = write_pages(folder, decisions, profile, paper, claims, chance, set(tables))
+    return paths[0], decisions
+
+
+def _tables_with_runs(names: set[str], profile: str, results_root) -> set[str]:
+    """The tables among ``names`` that are not placeholders and have a finished run of ``profile``."""
+    from emml.experiments.tables import load_table
+    from emml.report.tables import _run_names, table_results
+
+    out = set()
+    for name in names:
+        table = load_table(name)
+        if table.placeholder:
+            continue
+        df = table_results(table, profile, results_root)
+        if not df.empty and df["run_name"].isin(_run_names(table, profile)).any():
+            out.add(name)
+    return out

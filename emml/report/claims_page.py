@@ -1,11 +1,23 @@
-"""The claims page's text (reports/claims-<profile>.md): a line per claim at the top with its status here and on the
-paper's own table, the rules (general, then each kind's own, from emml/experiments/claims/kinds.py), then a section
-per claim with the numbers per row and seed, the comparisons, the missing runs and the campaign steps that train
-them."""
+"""The claims pages: what a reviewer reads first (reports/claims-<profile>.md: the status table, one line per claim
+with its status, seeds, the paper's numbers and ours, and one figure of ours against the paper per claim), and the
+detail (reports/claims-<profile>-detail.md: the rules, general then each kind's own from
+emml/experiments/claims/kinds.py, then a section per claim with the numbers per row and seed, the comparisons, the
+missing runs and the campaign steps that train them)."""
 
 from __future__ import annotations
 
-from emml.experiments.claims.evidence import LEAVE, SUPPORTED, UNTESTABLE, Chance, Z
+from dataclasses import dataclass
+
+from emml.experiments.claims.evidence import (
+    BUDGET,
+    CONTRADICTED,
+    INCONCLUSIVE,
+    LEAVE,
+    SUPPORTED,
+    UNTESTABLE,
+    Chance,
+    Z,
+)
 from emml.experiments.claims.kinds import KINDS
 from emml.report.chance import chance_text
 
@@ -72,19 +84,155 @@ def thresholds(claim) -> str:
     return ", ".join(parts)
 
 
-def markdown(decisions: list, profile: str, paper: dict, claims: dict, chance: Chance) -> str:
-    """The claims page: one line per claim at the top, the rules, then a section per claim."""
+MAX_CELLS = 4
+"""The cells of a claim the status table shows (the detail page has them all)."""
+STATUS_COLOURS = {
+    SUPPORTED: "#1a7f37",
+    CONTRADICTED: "#cf222e",
+    INCONCLUSIVE: "#bc4c00",
+    BUDGET: "#6e7781",
+    UNTESTABLE: "#8c959f",
+}
+"""The figure's colour for each status (its tick label)."""
+TASK_COLOURS = {"sgn": "C0", "eqa": "C1", "diag": "C2"}
+FIGURE_WIDTH = 7.0
+"""Inches: the figure prints across a two-column page (or a one-column one) at its own size."""
+
+
+def page_names(profile: str) -> dict[str, str]:
+    """The files of a profile's claims pages: the page read first, its detail, its figure (PNG for the page, PDF
+    for print)."""
+    return {
+        "page": f"claims-{profile}.md",
+        "detail": f"claims-{profile}-detail.md",
+        "png": f"claims-{profile}.png",
+        "pdf": f"claims-{profile}.pdf",
+    }
+
+
+def focus_rows(claim) -> list[str]:
+    """The rows whose numbers the status table and the figure show: the reference row the claim compares with
+    (`than`), then its first row ('best': the row it puts above every other)."""
+    return list(dict.fromkeys([*([claim.than] if claim.than else []), *claim.rows[:1]]))
+
+
+@dataclass
+class Cell:
+    """One cell a claim reads, ours and the paper's."""
+
+    label: str
+    task: str
+    ours: list[float]
+    """Each seed's value (a success rate, a diag/* figure, or frames for a crossing)."""
+    shown: str
+    """Ours as the detail page writes it: the mean (a success rate, a figure) or each seed's crossing."""
+    paper: float | None
+    frames: bool = False
+    """The numbers are frames (a 'faster' claim's crossing), not on the [0, 1] axis of the figure."""
+
+
+def cells(decision, paper_decision, claim) -> list[Cell]:
+    """The focus rows' cells of a decision (`focus_rows`), with the paper's number for the same cell."""
+    focus = focus_rows(claim)
+    entries = [e for e in decision.evidence if e["row"] in focus]
+    theirs = {
+        (e["row"], e["setting"], e["metric"]): next(iter(e["values"].values()), None)
+        for e in (paper_decision.evidence if paper_decision is not None else [])
+    }
+    settings = {e["setting"] for e in entries}
+    frames = claim.kind_of.reads == "crossing"
+    out = []
+    for e in entries:
+        parts = [e["row"]] if len(focus) > 1 else []
+        parts += [e["setting"]] if len(settings) > 1 else []
+        label = ", ".join([*parts, e["metric"]])
+        values = [float(v) for _, v in sorted(e["values"].items())]
+        if frames:
+            shown = " / ".join(e["shown"][s] for s in sorted(e["shown"])) or "—"
+        else:
+            shown = f"{sum(values) / len(values):.2f}" if values else "—"
+        task = "diag" if claim.kind_of.reads == "figure" else ("eqa" if "EQA" in e["metric"] else "sgn")
+        out.append(Cell(label, task, values, shown, theirs.get((e["row"], e["setting"], e["metric"])), frames))
+    return out
+
+
+def _lines(values: list[str]) -> str:
+    shown = values[:MAX_CELLS]
+    if len(values) > MAX_CELLS:
+        shown.append(f"… {len(values) - MAX_CELLS} more")
+    return "<br>".join(shown) or "—"
+
+
+def quick_page(decisions: list, profile: str, paper: dict, claims: dict) -> str:
+    """The page a reviewer reads first: a line of counts, the status table (each claim's status, seeds, the paper's
+    numbers and ours on its focus rows, its status on the paper's own table), the figure, and the way to the
+    detail."""
     from emml.report.claims import counts
 
+    names = page_names(profile)
     n = counts(decisions)
     frames = sorted({f for d in decisions for f in d.frames})
     inferred = sum(claims[d.id].inferred for d in decisions)
     lines = [
         f"# Claims ({profile})",
         "",
-        f"{len(decisions)} claims ({len(decisions) - inferred} the paper states, {inferred} inferred from its tables; "
-        f"reproduce/claims.toml) decided from the '{profile}' profile's results "
-        f"({', '.join(f'{f:,}' for f in frames) or 'no'} frames per run), and from the paper's own tables, by the "
+        f"{len(decisions)} claims of the paper ({len(decisions) - inferred} it states, {inferred} inferred from its "
+        f"tables; reproduce/claims.toml) decided from the '{profile}' profile's results "
+        f"({', '.join(f'{f:,}' for f in frames) or 'no'} frames per run) and from the paper's own tables, by the same "
+        "rules. Here: " + ", ".join(f"{v} {k}" for k, v in n.items()) + ". Regenerated by `make reports`.",
+        "",
+        "| Claim | Status | Seeds | Cells (focus rows) | Paper | Ours | On the paper's table |",
+        "|:--|:--|--:|:--|--:|--:|:--|",
+    ]
+    for d in decisions:
+        claim = claims[d.id]
+        cs = cells(d, paper.get(d.id), claim)
+        lines.append(
+            f"| [{d.id}]({names['detail']}#{d.id}) | {d.status} | {d.seeds or '—'} | "
+            + " | ".join(
+                _lines(col)
+                for col in (
+                    [_cell(c.label) for c in cs],
+                    ["—" if c.paper is None else f"{c.paper:.2f}" for c in cs],
+                    [_cell(c.shown) for c in cs],
+                )
+            )
+            + f" | {_paper_label(paper.get(d.id), claim)} |"
+        )
+    lines += [
+        "",
+        f"![Ours against the paper, per claim]({names['png']})",
+        "",
+        f"Ours (the mean over seeds, each seed a hollow point) against the paper (×) on each claim's focus rows, "
+        f"SGN in blue, EQA in orange, a `diag/*` figure in green ([PDF]({names['pdf']}), {FIGURE_WIDTH:g} in wide). "
+        "The focus rows are the row a claim compares with and its first row (for 'best', the row it puts above "
+        "every other); a 'faster' claim's crossings are frames, in the table only. Seeds: the fewest seeds of the "
+        "rows any comparison of the claim read.",
+        "",
+        f"Every claim's comparisons, the numbers per row and seed, the decision rules, the runs still missing and the "
+        f"campaign step that trains each: [{names['detail']}]({names['detail']}).",
+    ]
+    if profile != "paper":
+        lines += [
+            "",
+            f"The '{profile}' profile is not the paper's protocol (fewer frames, smaller input: each table page lists "
+            "its deviations): 'not supported at this budget' says no more than that.",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def detail_page(decisions: list, profile: str, paper: dict, claims: dict, chance: Chance, tables=None) -> str:
+    """The detail: one line per claim, the rules, then a section per claim. ``tables``: the tables whose page
+    (<table>-<profile>.md) lies beside this one; a claim of another table names its table without a link (None:
+    every claim's table is linked)."""
+    from emml.report.claims import counts
+
+    names = page_names(profile)
+    n = counts(decisions)
+    lines = [
+        f"# Claims ({profile}): the detail",
+        "",
+        f"Each claim of [{names['page']}]({names['page']}) with the numbers per row and seed that decide it, by the "
         "rules below. Here: " + ", ".join(f"{v} {k}" for k, v in n.items()) + ". Regenerated by `make reports`.",
         "",
         "| Claim | Status | On the paper's table | Evidence |",
@@ -106,10 +254,16 @@ def markdown(decisions: list, profile: str, paper: dict, claims: dict, chance: C
         if claim.inferred:
             lines += [f"Not a sentence of the paper: inferred from its {d.table.replace('table', 'Table ')}.", ""]
         chosen = thresholds(claim)
+        page = f"{d.table}-{profile}.md"
+        where = (
+            f"[{page}]({page})"
+            if tables is None or d.table in tables
+            else f"{d.table.replace('table', 'Table ')} (no page at this profile: none of its runs has finished)"
+        )
         lines += [
             f"Paper: {d.source}. Kind `{d.kind}`"
             + (f" ({chosen}: ours, not the paper's)" if chosen and claim.kind_of.reads != "crossing" else "")
-            + f", decided on [{d.table}-{profile}.md]({d.table}-{profile}.md).",
+            + f", decided on {where}.",
             "",
         ]
         seeds = sorted({s for e in d.evidence for s in e["values"]})
@@ -134,3 +288,68 @@ def markdown(decisions: list, profile: str, paper: dict, claims: dict, chance: C
             lines += ["", "The campaign steps that train them (emml campaign reference --status):", ""]
             lines += [f"- {c}" for c in d.costs]
     return "\n".join(lines) + "\n"
+
+
+def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:
+    """Ours against the paper per claim, one line each (its status in its label's colour): for each focus cell the
+    paper's number (×), our mean (●) and each seed (○), joined by a line; FIGURE_WIDTH inches wide, written to each
+    of ``paths`` (PNG, PDF)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from emml.report.savefig import save
+
+    n = len(decisions)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 0.8 + 0.22 * n), layout="constrained")
+    for i, d in enumerate(decisions):
+        y = n - 1 - i
+        cs = [c for c in cells(d, paper.get(d.id), claims[d.id]) if not c.frames]
+        if not cs:
+            note = "a curve's crossing in frames: see the table" if claims[d.id].kind_of.curve else "no number"
+            ax.text(0.01, y, note, va="center", fontsize=6, color="0.45")
+            continue
+        step = min(0.6 / len(cs), 0.18)
+        for j, c in enumerate(cs):
+            yy = y + (len(cs) - 1) / 2 * step - j * step
+            colour = TASK_COLOURS[c.task]
+            mean = sum(c.ours) / len(c.ours) if c.ours else None
+            if c.paper is not None and mean is not None:
+                ax.plot([c.paper, mean], [yy, yy], color=colour, alpha=0.35, lw=1)
+            if c.paper is not None:
+                ax.plot(c.paper, yy, "x", color=colour, ms=4, mew=1)
+            ax.plot(c.ours, [yy] * len(c.ours), "o", mfc="none", color=colour, ms=2.5, mew=0.6)
+            if mean is not None:
+                ax.plot(mean, yy, "o", color=colour, ms=3.5)
+    ax.set_yticks(range(n), [f"{d.id}: {d.status} ({d.seeds or 0})" for d in reversed(decisions)])
+    for label, d in zip(ax.get_yticklabels(), reversed(decisions)):
+        label.set_color(STATUS_COLOURS.get(d.status, "black"))
+    ax.set_ylim(-0.6, n - 0.4)
+    ax.set_xlim(-0.02, 1.02)  # a point at 0 or 1 drawn whole
+    ax.set_xlabel("success rate (a diag/* figure: its value)")
+    ax.grid(axis="y", visible=False)
+    handles = [
+        Line2D([], [], ls="none", marker="x", color="0.2", label="paper"),
+        Line2D([], [], ls="none", marker="o", color="0.2", label="ours (mean)"),
+        Line2D([], [], ls="none", marker="o", mfc="none", color="0.2", label="ours (a seed)"),
+        *(Line2D([], [], ls="none", marker="s", color=c, label=t) for t, c in (("SGN", "C0"), ("EQA", "C1"))),
+        Line2D([], [], ls="none", marker="s", color="C2", label="diag/*"),
+    ]
+    ax.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=6, fontsize=6)
+    ax.set_title("Ours against the paper per claim (label: status, seeds)", pad=14)
+    for path in paths:
+        save(fig, path)
+    plt.close(fig)
+
+
+def write_pages(folder, decisions: list, profile: str, paper: dict, claims: dict, chance: Chance, tables=None):
+    """The claims page, its detail and its figure into ``folder``; returns their paths, the page first."""
+    from pathlib import Path
+
+    folder = Path(folder)
+    names = page_names(profile)
+    page, detail = folder / names["page"], folder / names["detail"]
+    page.write_text(quick_page(decisions, profile, paper, claims))
+    detail.write_text(detail_page(decisions, profile, paper, claims, chance, tables))
+    figs = [folder / names["png"], folder / names["pdf"]]
+    figure(decisions, paper, claims, figs)
+    return [page, detail, *figs]

@@ -145,13 +145,15 @@ def claims_lines(profiles: dict, out: Path, results_root: str | Path, run_root: 
     """Write each profile's claims page (emml/report/claims.py) and return the index's lead: a link per profile with
     its status counts."""
     from emml.experiments.claims import load_claims
+    from emml.experiments.tables import load_table
     from emml.report.claims import campaign_costs, counts, write_claims
 
     costs = campaign_costs() if profiles else {}
     inferred = sum(c.inferred for c in load_claims().values())
     lines = []
     for profile in profiles:
-        path, decisions = write_claims(profile, out, results_root, costs, run_root)
+        pages = [t for t in profiles[profile] if not load_table(t).placeholder]  # the table pages written beside
+        path, decisions = write_claims(profile, out, results_root, costs, run_root, pages)
         summary = ", ".join(f"{n} {status}" for status, n in counts(decisions).items() if n)
         lines += [
             f"**Claims ({profile})**: [{path.name}]({path.name}), {len(decisions)} claims ({inferred} of them "

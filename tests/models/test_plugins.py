@@ -1,4 +1,4 @@
-"""Models of one's own (README, "Compare your own model"): a toy fusion written outside the package registers
+"""Models of one's own (docs/own-model.md): a toy fusion written outside the package registers
 through `--plugin`, `EMML_PLUGINS` or an entry point, appears in every list of models, and is trained, evaluated
 and diagnosed through `emml train`, and as a row of its own table through `emml run`, in child processes too."""
 

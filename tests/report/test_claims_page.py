@@ -138,20 +138,65 @@ def test_eqa_harder_counts_the_rows_where_eqa_is_below_sgn(tmp_path):
 
 
 def test_the_page_leads_with_a_line_per_claim_and_is_the_same_bytes_twice(tmp_path):
+    """Issue 63: the page read first is the status table (status, seeds, the paper's numbers and ours) and the
+    figure; the rules and the sections per claim are in the detail page it links."""
     root = tmp_path / "results"
     for table in ("table2", "table3"):
         fake_results(table, root, value=da_ahead)
     path, decisions = write_claims(PROFILE, tmp_path / "reports", root)
     text = path.read_text()
+    detail = (tmp_path / "reports" / "claims-quick-detail.md").read_text()
     assert path.name == "claims-quick.md" and len(decisions) == len(CLAIMS)
-    top = text.split("## Decision rules")[0]
+    lines = text.split("\n")
+    assert lines[4] == "| Claim | Status | Seeds | Cells (focus rows) | Paper | Ours | On the paper's table |"
+    table = lines[6 : 6 + len(CLAIMS)]
+    for claim, line in zip(CLAIMS, table):
+        assert line.startswith(f"| [{claim}](claims-quick-detail.md#{claim}) |")
+    by_id = dict(zip(CLAIMS, table))
+    # Dual-Attention 0.6 (mean of 0.5 / 0.6 / 0.7) against the paper's 0.96 / 0.58 in Easy Aux, on 3 seeds
+    row = "| supported | 3 | SGN test<br>EQA test | 0.96<br>0.58 | 0.60<br>0.60 | supported |"
+    assert row in by_id["da-best-easy-aux"]
+    assert "![Ours against the paper, per claim](claims-quick.png)" in text
+    assert "## Decision rules" not in text and "Welch" not in text and len(text) < len(detail) / 2
+    assert "**fails**" in text  # aux-helps fails on the paper's own table
+    for name in ("claims-quick.png", "claims-quick.pdf"):
+        assert (tmp_path / "reports" / name).stat().st_size > 0
+    assert "## Decision rules" in detail and "Welch" in detail
     for claim in CLAIMS:
-        assert f"| [{claim}](#{claim}) |" in top
-    assert "## Decision rules" in text and "Welch" in text and "one-sided" not in top
-    assert "| On the paper's table |" in top and "**fails**" in top  # aux-helps fails on the paper's own table
-    assert "Not a sentence of the paper: inferred from its Table 3." in text  # multitask-helps
+        assert f'<a id="{claim}"></a>' in detail and f"| [{claim}](#{claim}) |" in detail
+    assert "Not a sentence of the paper: inferred from its Table 3." in detail  # multitask-helps
+    # Table 5 has no run here: its claim names it without a link to a page that is not written (issue 63)
+    assert "table5-quick.md" not in detail and "Table 5 (no page at this profile" in detail
+    assert "[table2-quick.md](table2-quick.md)" in detail
+    first = {p.name: p.read_bytes() for p in (tmp_path / "reports").iterdir()}
     write_claims(PROFILE, tmp_path / "reports", root)
-    assert path.read_text() == text
+    assert {p.name: p.read_bytes() for p in (tmp_path / "reports").iterdir()} == first
+
+
+def test_the_figure_is_print_width_and_no_text_leaves_its_canvas(tmp_path, monkeypatch):
+    """Issue 63: the claims figure at 7 in across, every text (tick labels, legend, title, notes) inside the
+    canvas."""
+    import matplotlib.pyplot as plt
+
+    import emml.report.claims_page as page
+
+    root = tmp_path / "results"
+    fake_results("table2", root, value=da_ahead)
+    drawn = []
+    monkeypatch.setattr(plt, "close", lambda fig=None: drawn.append(fig))
+    write_claims(PROFILE, tmp_path / "reports", root)
+    (fig,) = [f for f in drawn if f is not None]
+    assert tuple(fig.get_size_inches())[0] == page.FIGURE_WIDTH
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    canvas = fig.bbox
+    texts = [t for t in fig.findobj(plt.Text) if t.get_visible() and t.get_text()]
+    assert len(texts) > len(CLAIMS)
+    for t in texts:
+        box = t.get_window_extent(renderer)
+        assert box.x0 >= -1 and box.y0 >= -1 and box.x1 <= canvas.x1 + 1 and box.y1 <= canvas.y1 + 1, t.get_text()
+    pdf = (tmp_path / "reports" / "claims-quick.pdf").read_bytes()
+    assert b"/MediaBox [ 0 0 504 " in pdf  # 7 in = 504 pt
 
 
 def test_missing_runs_are_costed_by_their_own_table():
