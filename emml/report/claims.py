@@ -32,6 +32,8 @@ from emml.experiments.claims.evidence import (
     task_of,
 )
 from emml.report.chance import BLIND_MODEL, blind_prior, paper_prior
+from emml.runs.atomic import write_text
+from emml.runs.diskspace import RERUN
 
 __all__ = [
     "BUDGET",
@@ -408,5 +410,5 @@ def write_claims(profile: str, out=None, results_root=None, costs: dict | None =
     claims = load_claims()
     paper = {c.id: decide_paper(c) for c in claims.values()}
     path = folder / f"claims-{profile}.md"
-    path.write_text(markdown(decisions, profile, paper, claims, blind_prior(profile, results_root)))
+    write_text(path, markdown(decisions, profile, paper, claims, blind_prior(profile, results_root)), then=RERUN)
     return path, decisions
