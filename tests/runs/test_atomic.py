@@ -81,7 +81,9 @@ def test_every_file_a_report_writes_goes_through_the_atomic_writer():
     """emml/report/ writes pages, tables and figures only through emml/runs/atomic.py (savefig.save included): no
     `write_text`, `open(..., 'w')`, PIL `.save(path` or `savefig(path` of its own."""
     root = Path(__file__).resolve().parents[2] / "emml" / "report"
-    direct = re.compile(r"\.write_text\(|\.write_bytes\(|open\([^)]*['\"][wa]b?['\"]|\.save\((?!tmp\b)|\.savefig\((?!tmp\b)")
+    direct = re.compile(
+        r"\.write_text\(|\.write_bytes\(|open\([^)]*['\"][wa]b?['\"]|\.save\((?!tmp\b)|\.savefig\((?!tmp\b)"
+    )
     found = [
         f"{p.name}:{n}: {line.strip()}"
         for p in sorted(root.glob("*.py"))
