@@ -248,7 +248,7 @@ def run_table(
     except (KeyboardInterrupt, SystemExit) as e:  # stop: the parent run ends KILLED, the caller says how to resume
         set_run_status(report.parent_run_id, "KILLED")
         finished = set(report.done) | set(report.failed)
-        report.stopped = "Ctrl-C" if isinstance(e, KeyboardInterrupt) else f"signal {_signal_name(e)}"
+        report.stopped = stop_cause(e)
         report.unfinished = [run.name for run in todo if run.name not in finished]
         return report
     except BaseException:  # a broken pool: the parent run ends, never stays RUNNING
@@ -294,9 +294,25 @@ def _signal_name(e: SystemExit) -> str:
         return str(e.code)
 
 
+def stop_cause(e: BaseException) -> str | None:
+    """What stopped a command, as its stopped line says it: 'Ctrl-C' (KeyboardInterrupt), 'signal SIGTERM' (the
+    SystemExit(128 + signum) of emml.envs.engine.install_signal_handlers); None for any other exit."""
+    if isinstance(e, KeyboardInterrupt):
+        return "Ctrl-C"
+    if isinstance(e, SystemExit) and isinstance(e.code, int) and 128 < e.code < 128 + 65:
+        return f"signal {_signal_name(e)}"
+    return None
+
+
 def stopped_line(report, again: str) -> str:
     """The one line a stopped launch ends with: what stopped, what was left, and the command that resumes it."""
+    return stop_line(report.stopped, len(report.done), len(report.unfinished), again)
+
+
+def stop_line(stopped: str, finished: int, unfinished: int, again: str) -> str:
+    """The one line every stopped command ends with (`emml run`, `campaign`, `train`), exit 130: what stopped it,
+    what was left, and the command that resumes it."""
     return (
-        f"stopped by {report.stopped}: {len(report.done)} runs finished, {len(report.unfinished)} not (those in "
-        f"progress ended KILLED, resumable from their checkpoints); resume with: {again}"
+        f"stopped by {stopped}: {finished} runs finished, {unfinished} not (those in progress ended KILLED, "
+        f"resumable from their checkpoints); resume with: {again}"
     )
