@@ -225,26 +225,30 @@ def run_table(
     ensure_store()  # a new store's tables made once, under a lock, whoever starts beside this launch
     tags = {"table": name, "profile": profile.name}
     report.parent_run_id = parent_run(name, f"{name}-{profile.name}", tags)
-    if backend == "slurm":
-        folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
-        from emml.experiments.slurm import submit
-
-        return submit(
-            report, todo, report.parent_run_id, train_fn, folder, pack=pack, partition=partition, time_min=time_min,
-            gpus=gpus, cpus=cpus, cluster=slurm_cluster, wait=wait, log=log, signal_delay_s=signal_delay_s,
-        )  # fmt: skip
     set_run_status(report.parent_run_id, "RUNNING")
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()  # SIGTERM/SIGHUP raise SystemExit here as Ctrl-C raises KeyboardInterrupt
     args = [(run, report.parent_run_id, train_fn) for run in todo]
     try:
-        _await_left_behind([run.cfg for run in todo], log)
-        if jobs == 1:
-            for a in args:
-                collect(report, a[0].name, lambda a=a: train_one(*a), log)
+        if backend == "slurm":  # the parent run ends as a local launch's does (issue 65), once the jobs are waited for
+            folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
+            from emml.experiments.slurm import submit
+
+            submit(
+                report, todo, report.parent_run_id, train_fn, folder, pack=pack, partition=partition,
+                time_min=time_min, gpus=gpus, cpus=cpus, cluster=slurm_cluster, wait=wait, log=log,
+                signal_delay_s=signal_delay_s,
+            )  # fmt: skip
+            if not wait:  # the jobs go on: the parent run stays RUNNING until a launch waits for them
+                return report
         else:
-            run_pool(report, args, jobs, log)
+            _await_left_behind([run.cfg for run in todo], log)
+            if jobs == 1:
+                for a in args:
+                    collect(report, a[0].name, lambda a=a: train_one(*a), log)
+            else:
+                run_pool(report, args, jobs, log)
     except (KeyboardInterrupt, SystemExit) as e:  # stop: the parent run ends KILLED, the caller says how to resume
         set_run_status(report.parent_run_id, "KILLED")
         finished = set(report.done) | set(report.failed)
