@@ -26,6 +26,7 @@ def replacing(path: str | os.PathLike, then: str | None = None) -> Iterator[Path
     with no_space_names(path, then=then):
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        os.fchmod(fd, _mode())  # mkstemp's 0600 would make every report readable by its writer only
         os.close(fd)
         tmp = Path(name)
         try:
@@ -34,6 +35,13 @@ def replacing(path: str | os.PathLike, then: str | None = None) -> Iterator[Path
         except BaseException:  # an error, Ctrl-C, SIGTERM (raised as an exception): the old file stays
             tmp.unlink(missing_ok=True)
             raise
+
+
+def _mode() -> int:
+    """The mode a plain ``open(path, 'w')`` gives a new file: 0666 less the process's umask."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
 
 
 def write_text(path: str | os.PathLike, text: str, then: str | None = None) -> Path:

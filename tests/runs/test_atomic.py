@@ -25,6 +25,9 @@ def test_until_the_block_ends_the_final_name_holds_the_old_file(tmp_path):
         assert path.read_text() == "old" and tmp.parent == path.parent and tmp.name.startswith(".page.md.")
         assert list(tmp_path.glob("*.md")) == [path] and tmp.suffix == ".tmp"  # no "*.md" reader sees it
     assert path.read_text() == "new, half" and [p.name for p in tmp_path.iterdir()] == ["page.md"]
+    plain = tmp_path / "plain.md"
+    plain.write_text("x")  # the mode every reader had before: mkstemp's 0600 would lock other users out
+    assert path.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777
 
 
 @pytest.mark.parametrize("stop", [KeyboardInterrupt, RuntimeError, SystemExit])
