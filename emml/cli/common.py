@@ -31,6 +31,7 @@ Control = Literal[CONTROLS]
 Eq1Words = Literal[EQ1_WORDS]
 Activation = Literal[SENTENCE_ACTIVATIONS]
 Backend = Literal["local", "slurm"]
+SlurmCluster = Literal["slurm", "local", "debug"]
 Interpolation = Literal["linear", "area", "nearest"]
 BenchPart = Literal["both", "model", "e2e"]
 

@@ -22,6 +22,7 @@ def report(
     Writes reports/TABLE-PROFILE.md and .tex (the mean over seeds with each seed's value beside the paper's, the
     runs' deviations from the paper, an rliable aggregate) and TABLE-PROFILE-curves.png/.pdf."""
     from emml.report.tables import report_table
+    from emml.runs.diskspace import NoSpaceError
 
     if curves:  # they read MLflow
         _check_store()
@@ -31,7 +32,7 @@ def report(
 
             table = own_table(table)
         data = report_table(table, profile, out=_out(out) if out else None)
-    except ValueError as e:
+    except (ValueError, NoSpaceError) as e:  # NoSpaceError: a full disk, the folder named, each file old or new
         _fail(str(e))
     data["notes"] = []
     if curves:
@@ -52,9 +53,11 @@ def reports(out: Path = typer.Option(None, help="Output folder (default: reports
 
     _check_store()  # the curves read MLflow
     _own_engines()
+    from emml.runs.diskspace import NoSpaceError
+
     try:  # a damaged run dir is named and skipped inside; what is left (a results CSV, the claims) fails in one line
         index = write_reports(_out(out) if out else None, log=typer.echo)
-    except ValueError as e:
+    except (ValueError, NoSpaceError) as e:  # a full disk: the folder named, each file written old or new
         _fail(str(e))
     typer.echo(f"wrote {index}")
 
@@ -96,7 +99,30 @@ def import_runs_cmd(
     if missing:
         _fail(f"no such run dir or folder: {', '.join(missing)}")
     _check_store()
-    results = import_runs(roots, log=None if as_json else lambda r: typer.echo(r.line()), progress=not as_json)
+    from emml.envs.engine import install_signal_handlers
+    from emml.experiments.launch import stop_cause
+    from emml.runs.diskspace import NoSpaceError
+
+    install_signal_handlers()  # SIGTERM ends it as Ctrl-C does: the run being imported deleted, exit 130
+    done: list = []
+
+    def log(r):
+        done.append(r)
+        if not as_json:
+            typer.echo(r.line())
+
+    try:
+        results = import_runs(roots, log=log, progress=not as_json)
+    except NoSpaceError as e:
+        _fail(str(e))
+    except (KeyboardInterrupt, SystemExit) as e:
+        if stop_cause(e) is None:
+            raise
+        typer.echo(
+            f"stopped by {stop_cause(e)}: {sum(r.outcome == 'imported' for r in done)} run dirs imported, the one "
+            "being imported removed from the store; resume with the same command (what is imported is skipped)"
+        )
+        raise typer.Exit(130) from None
     counts = {k: sum(r.outcome == k for r in results) for k in ("imported", "skipped", "failed")}
     text = ", ".join(f"{n} {k}" for k, n in counts.items()) + f" (MLflow store {tracking_uri()})"
     _echo({"uri": tracking_uri(), **counts, "runs": [vars(r) for r in results]}, as_json, text)

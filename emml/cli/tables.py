@@ -11,6 +11,7 @@ from emml.cli.common import (
     RESULTS_ROOT_HELP,
     RUN_ROOT_HELP,
     Backend,
+    SlurmCluster,
     _echo,
     _fail,
     _use_tcmalloc,
@@ -74,6 +75,11 @@ def run_table(
     cpus: int = typer.Option(8, help="CPUs per Slurm job (shared by its --pack runs)."),
     pack: int = typer.Option(1, min=1, help="Slurm: runs per job, side by side on its GPU (e.g. 8 on one H100)."),
     wait: bool = typer.Option(False, help="Slurm: wait for the jobs to end."),
+    slurm_cluster: SlurmCluster = typer.Option(
+        "slurm",
+        help="Slurm: where the jobs run. local: submitit's local executor, a job process here with Slurm's time "
+        "limit and requeue (try the Slurm path without a cluster); debug: in this process.",
+    ),
     only: list[str] = typer.Option(
         [], "--only", help="Only the runs whose FIELD=VALUE (row, model, difficulty, aux, seed), e.g. difficulty=easy."
     ),
@@ -115,6 +121,7 @@ def run_table(
             gpus=gpus,
             cpus=cpus,
             wait=wait,
+            slurm_cluster=slurm_cluster,
             log=(lambda m: None) if as_json else typer.echo,
             only=selection,
         )
@@ -129,6 +136,10 @@ def run_table(
         # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
         roots = [a for k, v in (("--run-root", run_root), ("--results-root", results_root)) if v for a in (k, v)]
         how = (["--jobs", str(jobs)] if jobs else []) + (["--device", device] if device != "cpu" else [])
+        if backend == "slurm":  # the same jobs' shape: a rerun resumes them there
+            slurm = [("--partition", partition), ("--time-min", time_min), ("--gpus", gpus), ("--cpus", cpus)]
+            how += ["--backend", "slurm", *[a for k, v in slurm if v for a in (k, str(v))], "--pack", str(pack)]
+            how += ["--wait"] * wait + (["--slurm-cluster", slurm_cluster] if slurm_cluster != "slurm" else [])
         again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *roots, *only_args, *how])
         _echo(data, as_json, stopped_line(report, again))
         raise typer.Exit(130)

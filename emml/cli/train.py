@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import shlex
+import sys
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
@@ -101,6 +104,8 @@ def train(
             results = train_packed(cfgs, quiet=quiet or as_json)
         except (CheckpointError, ConfigMismatch, RunLocked, ValueError, NoSpaceError) as e:
             _fail(str(e))
+        except (KeyboardInterrupt, SystemExit) as e:
+            _stopped(e, len(cfgs))
         data = [{"run_dir": str(r.run_dir), "run_id": r.run_id, "frames": r.frames, **r.metrics} for r in results]
         text = [
             f"{run_name(c)} after {r.frames:,} frames: " + ", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items())
@@ -112,6 +117,8 @@ def train(
         result = run(cfg, quiet=quiet or as_json)
     except (CheckpointError, ConfigMismatch, RunLocked, NoSpaceError, RunDirError, RecordError) as e:
         _fail(str(e))
+    except (KeyboardInterrupt, SystemExit) as e:
+        _stopped(e, 1)
     data = {
         "run_dir": str(result.run_dir),
         "run_id": result.run_id,
@@ -128,6 +135,19 @@ def train(
         + ", ".join(f"{k} {v:.3f}" for k, v in result.metrics.items())
         + f"\n  run dir {result.run_dir}",
     )
+
+
+def _stopped(e: BaseException, runs: int) -> NoReturn:
+    """A training stopped by Ctrl-C or SIGTERM (its run saved and ended KILLED by the trainer) ends as `emml run` and
+    `emml campaign` do (issue 65): their one stopped line, the resuming command being this same one, and exit 130.
+    Any other exit goes on as it was."""
+    from emml.experiments.launch import stop_cause, stop_line
+
+    cause = stop_cause(e)
+    if cause is None:
+        raise e
+    typer.echo(stop_line(cause, 0, runs, shlex.join(["emml", *sys.argv[1:]])))
+    raise typer.Exit(130) from None
 
 
 def eval_checkpoint(

@@ -49,6 +49,19 @@ def check_device_name(device: str) -> None:
     check_choice("device", device.split(":")[0], DEVICES)
 
 
+MAX_FRAMES = 10**10
+"""The most frames any frame count may be (frames, eval_every, the No Aux warm-up): 200x the paper's longest
+training (50M frames, Doom Hard) and about a month at the fastest rate measured here (4,314 frames/s, 8 stacked runs
+on an H100, docs/throughput.md). A larger count is a typo (an extra zero, 1e20), and beyond 2^63 a step no longer
+fits MLflow's metric steps (issue 65: 10^20 was accepted and its run named 'warm1e+20')."""
+
+
+def check_frames(name: str, value) -> None:
+    """Raise a ValueError naming ``name`` unless ``value`` is a whole number of frames from 0 to MAX_FRAMES."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_FRAMES:
+        raise ValueError(f"{name}={value!r} must be a whole number of frames from 0 to {MAX_FRAMES:,} (MAX_FRAMES)")
+
+
 def check_at_least(config, names: tuple[str, ...], minimum: int) -> None:
     """Raise a ValueError naming the first of ``config``'s integer fields ``names`` below ``minimum`` (1: a positive
     integer, 0: >= 0)."""
@@ -481,9 +494,7 @@ class ModelConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"ModelConfig.{name}={value!r} must be a positive integer (>= 1)")
-        g = self.answer_gate_frames
-        if isinstance(g, bool) or not isinstance(g, int) or g < 0:
-            raise ValueError(f"ModelConfig.answer_gate_frames={g!r} must be a whole number of frames >= 0 (0: off)")
+        check_frames("ModelConfig.answer_gate_frames", self.answer_gate_frames)  # 0: off
         check_model_options(ModelConfig, {name: getattr(self, name) for name in option_fields(ModelConfig)})
         return self
 
@@ -643,6 +654,10 @@ class TrainConfig:
         check_device_name(self.device)
         positive = ("frames", "num_envs", "num_steps", "eval_episodes", "final_eval_episodes", "checkpoint_every")
         check_at_least(self, (*positive, "log_every"), 1)
+        for name in ("frames", "eval_every"):
+            check_frames(name, getattr(self, name))
+        if "answer_gate_frames" in self.model_options:  # here too: it names the run dir (warm<N>), made after this
+            check_frames("model_options.answer_gate_frames", self.model_options["answer_gate_frames"])
         if self.frames < self.frames_per_update:  # it used to be rounded up to one update, silently
             raise ValueError(
                 f"frames={self.frames!r} is less than one update (num_envs × num_steps = {self.frames_per_update}); "

@@ -34,7 +34,7 @@ import tomllib
 from emml.config.paths import PIN_DIR, REPRODUCE_DIR, checkout_root, project_path, project_root
 from emml.experiments.tables import RunSpec
 from emml.runs.naming import run_name
-from emml.runs.records import RecordError, mirror_point, note, read_points, torn_tail
+from emml.runs.records import mirror_point, note, note_once, points_or_none, torn_tail
 from emml.runs.runlock import waiting_lock
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
@@ -344,7 +344,7 @@ def _frames_logged(metrics: Path) -> int:
     for line in lines:
         point = mirror_point(line)
         if point is None:
-            note(f"{metrics}: a line near its end is not a metric point (step,key,value): {line[:60]!r}; skipped")
+            note_once(f"{metrics}: a line near its end is not a metric point (step,key,value): {line[:60]!r}; skipped")
             continue
         steps.append(point[0])
     return max(steps, default=0)
@@ -375,12 +375,8 @@ class _Speed:
                     break
             fps, evals = [], []
             for path in files[-6:]:  # the most recent few: enough for a median, cheap to read
-                try:
-                    points = read_points(path)
-                except RecordError as e:  # one damaged mirror: named, the others measure
-                    note(f"{e}; not used to estimate the time left")
-                    continue
-                for _, name, value in points:
+                points = points_or_none(path, "not used to estimate the time left")  # damaged: named once
+                for _, name, value in points or []:
                     if name == "charts/fps":
                         fps.append(value)
                     elif name == "perf/eval_s":

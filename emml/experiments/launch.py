@@ -225,30 +225,34 @@ def run_table(
     ensure_store()  # a new store's tables made once, under a lock, whoever starts beside this launch
     tags = {"table": name, "profile": profile.name}
     report.parent_run_id = parent_run(name, f"{name}-{profile.name}", tags)
-    if backend == "slurm":
-        folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
-        from emml.experiments.slurm import submit
-
-        return submit(
-            report, todo, report.parent_run_id, train_fn, folder, pack=pack, partition=partition, time_min=time_min,
-            gpus=gpus, cpus=cpus, cluster=slurm_cluster, wait=wait, log=log, signal_delay_s=signal_delay_s,
-        )  # fmt: skip
     set_run_status(report.parent_run_id, "RUNNING")
     from emml.envs.engine import install_signal_handlers
 
     install_signal_handlers()  # SIGTERM/SIGHUP raise SystemExit here as Ctrl-C raises KeyboardInterrupt
     args = [(run, report.parent_run_id, train_fn) for run in todo]
     try:
-        _await_left_behind([run.cfg for run in todo], log)
-        if jobs == 1:
-            for a in args:
-                collect(report, a[0].name, lambda a=a: train_one(*a), log)
+        if backend == "slurm":  # the parent run ends as a local launch's does (issue 65), once the jobs are waited for
+            folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
+            from emml.experiments.slurm import submit
+
+            submit(
+                report, todo, report.parent_run_id, train_fn, folder, pack=pack, partition=partition,
+                time_min=time_min, gpus=gpus, cpus=cpus, cluster=slurm_cluster, wait=wait, log=log,
+                signal_delay_s=signal_delay_s,
+            )  # fmt: skip
+            if not wait:  # the jobs go on: the parent run stays RUNNING until a launch waits for them
+                return report
         else:
-            run_pool(report, args, jobs, log)
+            _await_left_behind([run.cfg for run in todo], log)
+            if jobs == 1:
+                for a in args:
+                    collect(report, a[0].name, lambda a=a: train_one(*a), log)
+            else:
+                run_pool(report, args, jobs, log)
     except (KeyboardInterrupt, SystemExit) as e:  # stop: the parent run ends KILLED, the caller says how to resume
         set_run_status(report.parent_run_id, "KILLED")
         finished = set(report.done) | set(report.failed)
-        report.stopped = "Ctrl-C" if isinstance(e, KeyboardInterrupt) else f"signal {_signal_name(e)}"
+        report.stopped = stop_cause(e)
         report.unfinished = [run.name for run in todo if run.name not in finished]
         return report
     except BaseException:  # a broken pool: the parent run ends, never stays RUNNING
@@ -294,9 +298,25 @@ def _signal_name(e: SystemExit) -> str:
         return str(e.code)
 
 
+def stop_cause(e: BaseException) -> str | None:
+    """What stopped a command, as its stopped line says it: 'Ctrl-C' (KeyboardInterrupt), 'signal SIGTERM' (the
+    SystemExit(128 + signum) of emml.envs.engine.install_signal_handlers); None for any other exit."""
+    if isinstance(e, KeyboardInterrupt):
+        return "Ctrl-C"
+    if isinstance(e, SystemExit) and isinstance(e.code, int) and 128 < e.code < 128 + 65:
+        return f"signal {_signal_name(e)}"
+    return None
+
+
 def stopped_line(report, again: str) -> str:
     """The one line a stopped launch ends with: what stopped, what was left, and the command that resumes it."""
+    return stop_line(report.stopped, len(report.done), len(report.unfinished), again)
+
+
+def stop_line(stopped: str, finished: int, unfinished: int, again: str) -> str:
+    """The one line every stopped command ends with (`emml run`, `campaign`, `train`), exit 130: what stopped it,
+    what was left, and the command that resumes it."""
     return (
-        f"stopped by {report.stopped}: {len(report.done)} runs finished, {len(report.unfinished)} not (those in "
-        f"progress ended KILLED, resumable from their checkpoints); resume with: {again}"
+        f"stopped by {stopped}: {finished} runs finished, {unfinished} not (those in progress ended KILLED, "
+        f"resumable from their checkpoints); resume with: {again}"
     )

@@ -137,9 +137,10 @@ def submit(
         try:
             outcome = job.result()
         except Exception as e:  # noqa: BLE001 - the job died: each of its runs is reported failed, the others go on
+            why = lost_job(job.job_id, e)
             for run in p:
-                report.failed[run.name] = f"its Slurm job failed: {type(e).__name__}: {e}"
-                log(f"  FAILED {run.name}: its Slurm job failed: {e}")
+                report.failed[run.name] = why
+                log(f"  FAILED {run.name}: {why}")
             continue
         for name in outcome["done"]:
             collect(report, name, lambda name=name: name, log)
@@ -148,6 +149,17 @@ def submit(
     if any(p.store is not None for p in jobs_of):
         _import_finished([run for p in cut for run in p], log)
     return report
+
+
+def lost_job(job_id, e: BaseException) -> str:
+    """What a job that ended without its result says (killed, out of memory, its node lost: submitit's
+    UncompletedJobError 'has not produced any output'), in one line, with what to do: its runs saved their
+    checkpoints, and rerunning the same command resumes them (issue 65)."""
+    first = (str(e).strip().splitlines() or [""])[0][:200]
+    return (
+        f"its Slurm job {job_id} ended without finishing ({type(e).__name__}: {first}); its runs are resumable from "
+        "their checkpoints: rerun the same command to resume them"
+    )
 
 
 def _import_finished(runs: list[PlannedRun], log) -> None:

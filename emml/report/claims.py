@@ -281,8 +281,8 @@ def _curve_score(claim, metric: str, spec, profile: Profile, run_root, score: Sc
     by its last evaluation) or a 'diagnostic' one (the key at its last evaluation), from its metrics.csv; None when
     the file is not here or stops short of the run's frames (a crossing after it cannot be ruled out)."""
     from emml.report.efficiency import run_efficiency
+    from emml.runs.records import points_or_none
     from emml.runs.rundir import METRICS, path_of
-    from emml.runs.tracking import read_mirror
 
     if claim.kind_of.reads == "crossing":
         eff = run_efficiency(spec, profile, run_root, chance)
@@ -293,11 +293,8 @@ def _curve_score(claim, metric: str, spec, profile: Profile, run_root, score: Sc
             return None
         value = math.inf if crossed is None else float(crossed)
         return Score(score.run, score.seed, value, 0, eff.last, every=eff.every)
-    points = sorted(
-        (step, v)
-        for step, key, v in read_mirror(path_of(run_root, spec.table, spec.run_name(profile)) / METRICS)
-        if key == claim.key
-    )
+    mirror = points_or_none(path_of(run_root, spec.table, spec.run_name(profile)) / METRICS)  # damaged: None, named
+    points = sorted((step, v) for step, key, v in mirror or [] if key == claim.key)
     if not points:
         return None
     # learned: either training split above its bar (the figure is about the conv both tasks read)

@@ -345,11 +345,14 @@ def write_pages(folder, decisions: list, profile: str, paper: dict, claims: dict
     """The claims page, its detail and its figure into ``folder``; returns their paths, the page first."""
     from pathlib import Path
 
+    from emml.runs.atomic import write_text
+    from emml.runs.diskspace import RERUN
+
     folder = Path(folder)
     names = page_names(profile)
     page, detail = folder / names["page"], folder / names["detail"]
-    page.write_text(quick_page(decisions, profile, paper, claims))
-    detail.write_text(detail_page(decisions, profile, paper, claims, chance, tables))
+    write_text(page, quick_page(decisions, profile, paper, claims), then=RERUN)  # whole or not at all
+    write_text(detail, detail_page(decisions, profile, paper, claims, chance, tables), then=RERUN)
     figs = [folder / names["png"], folder / names["pdf"]]
     figure(decisions, paper, claims, figs)
     return [page, detail, *figs]

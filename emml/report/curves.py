@@ -112,8 +112,8 @@ def plot_table(
     from emml.report import deviations
     from emml.report.chance import blind_prior
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, reports_dir, table_results
+    from emml.runs.records import points_or_none
     from emml.runs.rundir import METRICS, path_of
-    from emml.runs.tracking import read_mirror
 
     table = load_table(name)
     run_root = run_root if run_root is not None else profile_config(profile).run_root
@@ -148,10 +148,13 @@ def plot_table(
                             continue
                         if rname not in cache:
                             cache[rname] = {kk: _history(run_ids[rname], kk) for kk in keys}
+                            mirror: list | None = []
                             if not any(cache[rname].values()):  # another store's run: its run dir may be here
-                                mirror = read_mirror(path_of(run_root, spec.table, rname) / METRICS)
-                                cache[rname] = {kk: [(st, v) for st, x, v in mirror if x == kk] for kk in keys}
-                            if not any(cache[rname].values()):
+                                mirror = points_or_none(path_of(run_root, spec.table, rname) / METRICS)
+                                cache[rname] = {kk: [(st, v) for st, x, v in mirror or [] if x == kk] for kk in keys}
+                            if mirror is None:  # damaged: named once in a note with its line; this run only
+                                notes.append(f"{rname}: no curve: its metrics.csv is damaged (a note names the line)")
+                            elif not any(cache[rname].values()):
                                 notes.append(
                                     f"{rname}: no curve (MLflow run {run_ids[rname]} not here, no run dir); skipped"
                                 )

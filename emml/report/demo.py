@@ -8,6 +8,8 @@ from pathlib import Path
 from emml.config.schema import TrainConfig
 from emml.eval.diagnose import SCALARS
 from emml.report.curves import plot_run
+from emml.runs.atomic import write_text
+from emml.runs.diskspace import RERUN
 from emml.runs.naming import run_name
 from emml.runs.tracking import metric_history, portable, portable_uri, tracking_uri
 
@@ -86,5 +88,5 @@ def write_demo_report(cfg: TrainConfig, result, out: Path) -> list[Path]:
         "",
     ]
     md = out / f"{name}.md"
-    md.write_text("\n".join(lines))
+    write_text(md, "\n".join(lines), then=RERUN)
     return [md, png]

@@ -61,16 +61,22 @@ class RunEfficiency:
     resolution (the gaps of a run may alternate, e.g. 99,328 / 100,352)."""
     found: bool = True
     """False when the run has no metrics mirror here (its run dir is on the machine that trained it)."""
+    damaged: bool = False
+    """True when its metrics mirror is here but damaged (a line that is not a point: named once in a note)."""
 
 
-def curves(path: Path) -> dict[str, list[tuple[int, float]]]:
+def curves(path: Path) -> dict[str, list[tuple[int, float]]] | None:
     """metric → its greedy evaluation points (frames, accuracy) in frame order, from a metrics mirror; a point logged
-    twice (a resumed run) keeps its last value. {} when the file is absent."""
-    from emml.runs.tracking import read_mirror
+    twice (a resumed run) keeps its last value. {} when the file is absent, None when it is damaged (named once in a
+    note: `emml.runs.records.points_or_none`)."""
+    from emml.runs.records import points_or_none
 
+    points = points_or_none(path)
+    if points is None:
+        return None
     keys = {f"eval/{m}": m for m in CURVE_METRICS}
     out: dict[str, dict[int, float]] = {}
-    for step, key, value in read_mirror(path):
+    for step, key, value in points:
         if key in keys:
             out.setdefault(keys[key], {})[step] = value
     return {m: sorted(points.items()) for m, points in out.items()}
@@ -87,7 +93,7 @@ def run_efficiency(spec, profile: Profile | str, run_root: str | Path, chance: C
     path = path_of(run_root, spec.table, name) / METRICS
     found = curves(path)
     if not found:
-        eff.found = False
+        eff.found, eff.damaged = False, found is None
         return eff
     steps = sorted({s for points in found.values() for s, _ in points})
     eff.last = steps[-1]
@@ -113,9 +119,7 @@ def table_efficiency(
     return [run_efficiency(spec, prof, run_root, chance) for spec in runs if spec.run_name(prof) in wanted]
 
 
-def markdown(
-    runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS, chance: Chance | None = None
-) -> str:
+def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS, chance: Chance | None = None) -> str:
     """The page's sample-efficiency section: one line per run, per metric its three crossings."""
     from emml.config.env_kinds import env_label
     from emml.experiments.tables import METRIC_LABELS
@@ -147,7 +151,7 @@ def markdown(
         cells = []
         for m in shown:
             if not r.found:
-                cells.append("no metrics.csv here")
+                cells.append("metrics.csv damaged" if r.damaged else "no metrics.csv here")
             elif m not in r.crossings:
                 cells.append("—")
             else:

@@ -7,6 +7,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
+from emml.runs.atomic import write_text
+from emml.runs.diskspace import RERUN
 from emml.runs.rundir import CHECKPOINT, RunDirError, config_of, finished_run, path_of, variant_dir
 
 READING_ORDER = ("quick", "paper")
@@ -205,7 +207,7 @@ def write_reports(
     if demo:
         lines += ["## `make demo`", ""] + [f"- [{p.name}]({p.name})" for p in demo] + [""]
     index = out / "index.md"
-    index.write_text("\n".join(lines))
+    write_text(index, "\n".join(lines), then=RERUN)  # last, whole or not at all: it links only files written
     return index
 
 

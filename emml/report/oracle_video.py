@@ -11,6 +11,8 @@ from PIL import Image, ImageDraw
 from emml.agents.oracle import Oracle
 from emml.config.schema import DoomConfig
 from emml.envs.doom import DoomEnv
+from emml.runs.atomic import replacing, write_text
+from emml.runs.diskspace import RERUN
 
 CAPTION_HEIGHT = 22
 
@@ -47,7 +49,8 @@ def oracle_demo(out: Path, episodes: int = 3, seed: int = 0) -> list[Path]:
             finally:
                 env.close()
     gif = out / "oracle-demo.gif"
-    frames[0].save(gif, save_all=True, append_images=frames[1:], duration=120, loop=0)
+    with replacing(gif, then=RERUN) as tmp:
+        frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=120, loop=0)
     md = out / "oracle-demo.md"
     lines = [
         "# Scripted expert on the Doom tasks",
@@ -58,5 +61,5 @@ def oracle_demo(out: Path, episodes: int = 3, seed: int = 0) -> list[Path]:
         "|---|---|---|---|---|",
     ]
     lines += [f"| {d} | {t} | {s} | {ok} | {n} |" for d, t, s, ok, n in rows]
-    md.write_text("\n".join(lines) + "\n")
+    write_text(md, "\n".join(lines) + "\n", then=RERUN)
     return [gif, md]

@@ -10,6 +10,9 @@ from pathlib import Path
 import matplotlib
 import matplotlib.style
 
+from emml.runs.atomic import replacing
+from emml.runs.diskspace import RERUN
+
 METADATA = {
     ".png": {"Software": None},
     ".pdf": {"CreationDate": None, "ModDate": None, "Producer": None, "Creator": None},
@@ -31,11 +34,11 @@ use_style()
 
 
 def save(fig, path: str | Path, **kwargs) -> Path:
-    """``fig.savefig(path, **kwargs)`` with no date or version stamped into the file."""
+    """``fig.savefig(path, **kwargs)`` with no date or version stamped into the file, whole or not at all (a temp
+    file, then a rename: `emml.runs.atomic.replacing`; its format named, the temp file's suffix being .tmp)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT}):
-        fig.savefig(path, metadata=METADATA.get(path.suffix.lower()), **kwargs)
+    with replacing(path, then=RERUN) as tmp, matplotlib.rc_context({"svg.hashsalt": SVG_HASHSALT}):
+        fig.savefig(tmp, format=path.suffix[1:].lower(), metadata=METADATA.get(path.suffix.lower()), **kwargs)
     return path
 
 

@@ -21,6 +21,8 @@ from emml.config.env_kinds import ENV_KINDS, env_label
 from emml.config.paths import REPRODUCE_DIR, project_path, project_root
 from emml.config.profiles import resolve_profile
 from emml.experiments.tables import METRIC_LABELS, Table, list_tables, load_table, table_ref
+from emml.runs.atomic import write_text
+from emml.runs.diskspace import RERUN
 from emml.runs.results import read_results
 
 MISSING = "—"
@@ -316,8 +318,8 @@ def report_table(
         prior = blind_prior(profile, results_root)  # 'leaves chance': above what a blind model scores here
         md += [efficiency.markdown(efficiency.table_efficiency(table, profile, names, root, prior), chance=prior)]
     md += [f"Results: `{shown}`", ""]
-    md_path.write_text("\n".join(md))
-    tex_path.write_text(tex_table(table, profile, cells, results, devs))
+    write_text(md_path, "\n".join(md), then=RERUN)  # whole or not at all (emml/runs/atomic.py)
+    write_text(tex_path, tex_table(table, profile, cells, results, devs), then=RERUN)
     return {
         "table": name,
         "profile": profile,

@@ -15,6 +15,9 @@ from pathlib import Path
 
 import matplotlib
 
+from emml.runs.atomic import replacing
+from emml.runs.diskspace import RERUN
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -197,5 +200,6 @@ def episode_gif(ep: Episode, path: str | Path) -> Path:
     answer = f" -> {ep.words[ep.answer_word]}" if ep.task == "eqa" and ep.moves[-1] == MOVES.index("answer") else ""
     images = [_captioned(f, f"{ep.sentence} | t={t} {MOVES[m]}") for t, (f, m) in enumerate(zip(ep.frames, ep.moves))]
     images += [_captioned(ep.frames[-1], f"{ep.sentence}{answer}: {'success' if ep.success else 'failure'}")] * 5
-    images[0].save(path, save_all=True, append_images=images[1:], duration=150, loop=0)
+    with replacing(path, then=RERUN) as tmp:
+        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=150, loop=0)
     return Path(path)

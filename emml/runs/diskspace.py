@@ -17,10 +17,19 @@ class NoSpaceError(OSError):
     """A write failed for lack of disk space; the message names the folder and the file (one line)."""
 
 
+RESUME = "free some space and rerun the same command to resume from the last checkpoint"
+"""What a training does after a full disk (the default advice)."""
+RERUN = "free some space and rerun the same command"
+"""What any other writer (an import, reports, an exported mirror) does after a full disk."""
+
+
 @contextmanager
-def no_space_names(path: str | os.PathLike, tmp: str | os.PathLike | None = None) -> Iterator[None]:
+def no_space_names(
+    path: str | os.PathLike, tmp: str | os.PathLike | None = None, then: str | None = None
+) -> Iterator[None]:
     """Inside the block, a full disk while writing ``path`` (through ``tmp``, removed then) raises NoSpaceError
-    naming it; the file under ``path`` itself is left as it was (writes go through a temp file and a rename)."""
+    naming it and saying ``then`` (default `RESUME`); the file under ``path`` itself is left as it was (writes go
+    through a temp file and a rename)."""
     try:
         yield
     except OSError as e:
@@ -30,6 +39,5 @@ def no_space_names(path: str | os.PathLike, tmp: str | os.PathLike | None = None
             Path(tmp).unlink(missing_ok=True)
         path = Path(path)
         raise NoSpaceError(
-            f"no space left on {path.parent} (writing {path.name}, left as it was): free some space and rerun the "
-            "same command to resume from the last checkpoint"
+            f"no space left on {path.parent} (writing {path.name}, left as it was): {then or RESUME}"
         ) from None

@@ -35,6 +35,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from emml.runs import records
+from emml.runs.diskspace import FULL, RERUN, NoSpaceError
 from emml.runs.rundir import CHECKPOINT, METRICS, RESULTS, RUN_FILES, RunDirError, read_results
 
 MARKERS = RUN_FILES
@@ -343,6 +344,27 @@ def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float]
     return ImportResult(name, "imported", reason, run_id, new, len({(k, st) for st, k, _ in points}))
 
 
+def disk_full(e: BaseException) -> bool:
+    """Whether ``e`` is a write refused for lack of room: an OSError of ENOSPC/EDQUOT, or sqlite's 'database or disk
+    is full' as SQLAlchemy or MLflow wrap it (their message, their cause)."""
+    for _ in range(10):  # the chain of causes, bounded
+        if e is None:
+            return False
+        if isinstance(e, OSError) and e.errno in FULL or "database or disk is full" in str(e):
+            return True
+        e = e.__cause__ or e.__context__
+    return False
+
+
+def store_folder(uri: str | None) -> str:
+    """The folder of a sqlite store (the one a full disk is about), else the store's URI."""
+    from emml.runs.tracking import _sqlite_path, tracking_uri
+
+    uri = uri or tracking_uri()
+    path = _sqlite_path(uri)
+    return str(path.parent) if path is not None else uri
+
+
 def import_runs(
     paths: Iterable[Path],
     uri: str | None = None,
@@ -368,6 +390,13 @@ def import_runs(
                 result = import_run_dir(run_dir, uri, committed, bulk)
             except RunDirError as e:
                 result = ImportResult(relative(run_dir), "failed", str(e))
+            except Exception as e:
+                if not disk_full(e):
+                    raise
+                raise NoSpaceError(  # the half-made run was deleted by import_run: the store as it was before it
+                    f"no space left on {store_folder(uri)} (the MLflow store; importing {relative(run_dir)}, its "
+                    f"half-made run removed, the {len(out)} run dirs before it imported whole): {RERUN}"
+                ) from None
             if log is not None:
                 with bar.external_write_mode():
                     log(result)

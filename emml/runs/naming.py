@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 
 from emml.config.profiles import Profile, load_profiles, resolve_profile
 from emml.config.schema import NAME_PART, SHARED_MODEL_OPTIONS, ModelConfig, TrainConfig, option_fields
@@ -25,6 +26,8 @@ RESOLVED = ("env.vocabulary", "env.aux_words", "env.aux_labels")
 """Identifying fields that the trainer resolves at start (a vocabulary source becomes its word list, the aux words
 are the dataset's, aux_labels follows aux): compared on resume, never part of the name (it would change when
 resolved)."""
+NAME_CHARS = re.compile(r"[A-Za-z0-9._+-]+")
+"""What a part of a run's name may hold: it names a folder (no '/', no space)."""
 SWEPT_DIGEST_OVER = 48
 """Characters above which the swept fields are named by a digest instead of spelled out."""
 
@@ -119,7 +122,22 @@ def flat(d: dict, prefix: str = "") -> dict:
 
 
 def _short(v) -> str:
-    return f"{v:g}" if isinstance(v, float) else str(v)
+    return spell(v) if isinstance(v, float) else str(v)
+
+
+def spell(value) -> str:
+    """A number as a run name spells it, exactly (issue 65: ``f"{value:g}"`` rounded 1000001 to '1e+06', so two
+    warm-ups named one run dir): an integer in full ('400000'), a float as ``:g`` writes it when that reads back as
+    the same float ('0.25', '1e-05': every name so far), else its repr. A value a run dir's name cannot hold (not
+    finite) is a ValueError."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return str(value)
+    if isinstance(value, int):
+        return str(value)
+    if value != value or value in (float("inf"), float("-inf")):
+        raise ValueError(f"{value!r} is not a finite number: a run name cannot hold it")
+    short = f"{value:g}"
+    return short if float(short) == value else repr(value)
 
 
 def named_options(options: type) -> tuple[str, ...]:
@@ -137,9 +155,14 @@ def option_name_parts(options: type, values: dict) -> list[str]:
         if spelled is None or name not in values or values[name] == f.default:
             continue
         value = values[name]
-        parts.append(
-            spelled.replace(
-                "{}", f"{value:g}" if isinstance(value, (int, float)) and not isinstance(value, bool) else str(value)
+        try:
+            part = spelled.replace("{}", spell(value))
+        except ValueError as e:
+            raise ValueError(f"model_options.{name}={value!r}: {e}") from None
+        if not NAME_CHARS.fullmatch(part):
+            raise ValueError(
+                f"model_options.{name}={value!r}: a run name cannot hold it (its part {part!r}); allowed: letters, "
+                "digits, '.', '_', '+' and '-'"
             )
-        )
+        parts.append(part)
     return parts

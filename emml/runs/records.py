@@ -27,6 +27,20 @@ def note(message: str) -> None:
     print(f"note: {message}", file=sys.stderr, flush=True)
 
 
+_SAID: set[str] = set()
+"""The notes this process has said through `note_once`."""
+
+
+def note_once(message: str, about: str | None = None) -> None:
+    """`note`, unless this process said it already (about ``about``, default the message itself): a damaged file
+    read by several readers (a table's curves, its efficiency section, the claims page; each step of `emml campaign
+    --status`) is named once."""
+    about = message if about is None else about
+    if about not in _SAID:
+        _SAID.add(about)
+        note(message)
+
+
 def torn_tail(data: bytes) -> int:
     """The length of ``data``'s whole lines: everything up to its last newline (all of it when it ends in one)."""
     return data.rfind(b"\n") + 1 if data and not data.endswith(b"\n") else len(data)
@@ -91,3 +105,15 @@ def read_points(path: str | os.PathLike) -> list[tuple[int, str, float]]:
             )
         out.append(point)
     return out
+
+
+def points_or_none(path: str | os.PathLike, left_out: str = "that run's curve and cells are left out") -> list | None:
+    """`read_points` for a reader of many runs (reports, `emml campaign --status`): a damaged mirror costs its own run
+    only. Its RecordError (the file and the line) is said once per process in a note ending in ``left_out``, and
+    None is returned (the reader leaves that run's curve or cell out) where a whole file returns its points (issue
+    65: one garbage line in one run skipped a whole table's page, or every report)."""
+    try:
+        return read_points(path)
+    except RecordError as e:
+        note_once(f"{e}; {left_out}", about=str(e))
+        return None

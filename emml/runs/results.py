@@ -8,12 +8,11 @@ from __future__ import annotations
 
 import csv
 import io
-import os
 from pathlib import Path
 
 import pandas as pd
 
-from emml.runs.diskspace import no_space_names
+from emml.runs.atomic import replacing
 from emml.runs.records import note, torn_tail
 from emml.runs.runlock import waiting_lock
 
@@ -152,8 +151,6 @@ def upsert_result(path: str | Path, row: dict) -> Path:
         table = table[table["run_name"] != row["run_name"]]
         new = pd.DataFrame([{k: str(v) if k in TEXT else v for k, v in row.items()}])
         table = pd.concat([table, new], ignore_index=True) if not table.empty else new
-        tmp = path.with_suffix(f".csv.{os.getpid()}.tmp")
-        with no_space_names(path, tmp):
+        with replacing(path) as tmp:
             table.sort_values("run_name").to_csv(tmp, index=False)
-            os.replace(tmp, path)
     return path

@@ -23,14 +23,13 @@ functions that need them.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
 from emml.config.schema import TrainConfig, apply_overrides
-from emml.runs.diskspace import no_space_names
+from emml.runs.atomic import write_text
 from emml.runs.naming import flat, run_name
 
 CHECKPOINT = "checkpoint.pt"
@@ -224,10 +223,7 @@ def _json_object(path: Path) -> dict:
 
 def write_json(path: Path, payload: dict) -> None:
     """Atomically (a temporary file, then a rename), as 2-space JSON; a full disk names both files."""
-    tmp = path.with_name(path.name + ".tmp")
-    with no_space_names(path, tmp):
-        tmp.write_text(json.dumps(payload, indent=2))
-        os.replace(tmp, path)
+    write_text(path, json.dumps(payload, indent=2))
 
 
 def results_payload(

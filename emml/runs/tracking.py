@@ -43,7 +43,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from emml.config.paths import REPRODUCE_DIR, checkout_root, project_root
-from emml.runs.diskspace import NoSpaceError, no_space_names
+from emml.runs.atomic import replacing
+from emml.runs.diskspace import RERUN, NoSpaceError, no_space_names
 from emml.runs.records import MIRROR_HEADER, read_points
 from emml.runs.runlock import waiting_lock
 
@@ -639,11 +640,9 @@ def export_mirror(run_id: str, path: str | os.PathLike, uri: str | None = None) 
     client = _client(uri)
     keys = sorted(_retry(lambda: client.get_run(run_id)).data.metrics)
     points = sorted((st, k, v) for k in keys for st, v in metric_history(run_id, k, uri))
-    tmp = Path(f"{path}.tmp")
-    with open(tmp, "w") as f:
+    with replacing(path, then=RERUN) as tmp, open(tmp, "w") as f:  # a full disk: one line, the old file kept
         f.write(MIRROR_HEADER + "\n")
         f.writelines(f"{st},{k},{v!r}\n" for st, k, v in points)
-    os.replace(tmp, path)
     return len(points)
 
 

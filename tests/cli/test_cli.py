@@ -436,3 +436,28 @@ def test_train_takes_the_roots_as_options(tracking, monkeypatch):
     result = runner.invoke(app, ["train", *roots])
     assert result.exit_code == 0, result.output
     assert seen["cfg"].run_root == tracking["run_root"] and seen["cfg"].results_root == tracking["results_root"]
+
+
+def test_the_slurm_path_can_be_tried_without_a_cluster_and_its_resume_line_keeps_the_jobs_shape(monkeypatch):
+    """Issue 65: no option picked submitit's local executor; `--slurm-cluster local` does, and a stopped Slurm
+    launch's resume line keeps the backend and the jobs' shape."""
+    import shlex
+
+    import emml.experiments.launch
+    from emml.experiments.launch import LaunchReport
+
+    seen = {}
+
+    def stopped(table, profile, **kwargs):
+        seen.update(kwargs)
+        return LaunchReport(table=table, profile=profile, backend="slurm", total=1, stopped="Ctrl-C")
+
+    monkeypatch.setattr(emml.experiments.launch, "run_table", stopped)
+    args = ["run", "table3", "--backend", "slurm", "--slurm-cluster", "local", "--pack", "2", "--wait"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 130 and seen["slurm_cluster"] == "local" and seen["backend"] == "slurm", result.output
+    again = shlex.split(result.output.split("resume with: ", 1)[1])
+    assert again == ["emml", "run", "table3", "--profile", "quick", "--backend", "slurm", "--time-min", "1440",
+                     "--cpus", "8", "--pack", "2", "--wait", "--slurm-cluster", "local"]  # fmt: skip
+    bad = runner.invoke(app, ["run", "table3", "--backend", "slurm", "--slurm-cluster", "moon"])
+    assert bad.exit_code == 2 and "moon" in bad.output

@@ -154,7 +154,9 @@ def test_an_experiment_step_trains_its_own_rows_and_borrows_the_papers(tracking,
     assert sorted(c[0] for c in calls(tracking)) == [name for name, _ in rows]
     assert (Path(tracking["run_root"]) / "eqa_readout" / "dual_attention-easy-aux-sentmean-s0-smoke").is_dir()
     (campaigns / "bad.toml").write_text('[[steps]]\nname = "a"\ntable = "experiments/nope"\nprofile = "smoke"\n')
-    allowed = "allowed: table2, table3, table4, table5, experiments/eqa_answer, experiments/eqa_gate, experiments/eqa_readout"
+    allowed = "allowed: table2, table3, table4, table5, experiments/eqa_answer, experiments/eqa_gate, " + (
+        "experiments/eqa_readout"
+    )
     with pytest.raises(ValueError, match=allowed):
         load_campaign("bad", campaigns)
 

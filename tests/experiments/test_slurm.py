@@ -77,6 +77,36 @@ def test_a_job_trains_its_pack_and_requeues_itself_at_its_time_limit(tracking, n
         assert {s["threads"] for s in starts} == {threads}  # the job's 4 CPUs shared by its runs
         assert {s["store"] for s in starts} == {f"sqlite:///{store.resolve()}"}  # the job's own store
         assert int((folder / "progress.txt").read_text()) == starts[1]["from"] + 3
+    assert _parent_status(report) == "FINISHED"  # issue 65: it stayed RUNNING for ever
+
+
+def _parent_status(report) -> str:
+    from emml.runs.tracking import find_runs
+
+    (parent,) = [r for r in find_runs(report.table) if r["run_id"] == report.parent_run_id]
+    return parent["status"]
+
+
+def killed_train(cfg, quiet=False, parent_run_id=None):
+    """A training whose job is killed outright (kill -9: the OOM killer, a lost node), module level: picklable."""
+    import os
+    import signal
+
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_lost_job_says_that_rerunning_resumes_and_the_parent_run_ends_failed(tracking, no_leftovers):
+    """Issue 65: a killed job was reported as 'UncompletedJobError: … has not produced any output', with no hint that
+    rerunning the same command resumes, and the table's parent MLflow run stayed RUNNING."""
+    pytest.importorskip("submitit")
+    only = {"model": "da_no_sa", "aux": "true"}
+    report = run_table("table3", "smoke", backend="slurm", slurm_cluster="local", only=only, wait=True,
+                       run_root=tracking["run_root"], results_root=tracking["results_root"], train_fn=killed_train,
+                       log=lambda m: None)  # fmt: skip
+    (why,) = report.failed.values()
+    assert why.startswith(f"its Slurm job {report.submitted[0]} ended without finishing (UncompletedJobError: ")
+    assert why.endswith("rerun the same command to resume them") and "\n" not in why
+    assert _parent_status(report) == "FAILED"
 
 
 def test_packs_and_their_stores():

@@ -87,3 +87,7 @@ def test_the_table_page_lists_each_run_crossings(tmp_path):
     text = markdown([eff, run_efficiency(spec, PROFILE, tmp_path / "nowhere")])
     assert f"| w/o SA | Easy · Aux | 0 | {at / 1e6:.2f}M / {at / 1e6:.2f}M / {at / 1e6:.2f}M |" in text
     assert "no metrics.csv here" in text
+    mirror = runs / spec.table / spec.run_name(PROFILE) / "metrics.csv"  # issue 65: a garbage line costs this run
+    mirror.write_text(mirror.read_text().replace("\n", "\ngarbage\n", 2))
+    damaged = run_efficiency(spec, PROFILE, runs)
+    assert not damaged.found and damaged.damaged and "| metrics.csv damaged |" in markdown([eff, damaged])

@@ -101,3 +101,40 @@ def test_figures_are_named_by_table_and_run_so_tables_sharing_a_run_name_keep_bo
     assert [p.name for p in drawn["table4"]] == [f"channels-table4-{run}.png", f"attention-sgn-table4-{run}-s0.png"]
     assert all(p.read_text() == table for table, paths in drawn.items() for p in paths)  # neither overwritten
     assert figure_name("attention-eqa", "table2", "r", "-s1") == "attention-eqa-table2-r-s1.png"
+
+
+def test_a_garbage_line_in_one_mirror_costs_that_run_only(tmp_path, monkeypatch, capsys):
+    """Issue 65: one garbage line in one run's metrics.csv skipped the whole Table 2 page (its curves read the mirror)
+    and, in a run a diagnostic claim reads, stopped `emml reports` with no file at all. Now that run's curve and
+    cells are left out, it is named once with the line, and every other file is written."""
+    from emml.config.profiles import profile_seeds
+    from emml.report.index import write_reports
+    from emml.runs.rundir import METRICS, record_result, run_dir
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
+    roots = {"run_root": str(tmp_path / "runs"), "results_root": str(tmp_path / "results")}
+    specs = [s for s in load_table("table2").runs(profile_seeds("demo")) if s.model == "dual_attention"]
+    damaged = None
+    for spec in [s for s in specs if s.difficulty == "easy"]:
+        cfg = spec.to_config("demo", **roots)
+        metrics = {"sgn_train": 0.5, "sgn_test": 0.5, "eqa_train": 0.5, "eqa_test": 0.5}
+        payload = {"run_name": spec.run_name("demo"), "table": "table2", "model": cfg.model, "difficulty": "easy",
+                   "aux": cfg.aux, "seed": 0, "profile": "demo", "frames": 64, "git_sha": "12e0077", "run_id": "x",
+                   "eval_episodes": 1, "metrics": metrics}  # fmt: skip
+        record_result(payload, cfg)
+        folder = run_dir(cfg)
+        folder.mkdir(parents=True, exist_ok=True)
+        lines = ["step,key,value"] + [f"{s},eval/{m},0.5" for s in (32, 64) for m in metrics]
+        lines += [f"{s},diag/{k},0.8" for s in (32, 64) for k in ("attention_on_target", "detector_ap")]
+        if cfg.aux:  # the run the claim 'attention-on-target' reads, and one of the table's curves
+            damaged = folder / METRICS
+            lines.insert(3, "garbage")
+        (folder / METRICS).write_text("\n".join(lines) + "\n")
+    index = write_reports(tmp_path / "reports", roots["results_root"], roots["run_root"], log=print)
+    text, out = index.read_text(), capsys.readouterr()
+    reports = tmp_path / "reports"
+    for name in ("table2-demo.md", "table2-demo.tex", "table2-demo-curves.png", "claims-demo.md"):
+        assert (reports / name).exists(), name
+    assert "not reported" not in text and "not reported" not in out.out
+    said = f"{damaged}: line 4: not a metric point"
+    assert (out.err + out.out).count(said) == 1, out.err  # named once, with the line, for every reader of it

@@ -75,3 +75,90 @@ def test_an_import_killed_midway_and_run_again_leaves_one_finished_run_per_run_d
     assert stored[dirs[1]][0]["run_id"] != left[dirs[1]][0]["run_id"]  # the half-made run went; a whole one came
     again = import_runs([tmp_path / "runs"], uri=uri)
     assert {r.outcome for r in again} == {"skipped"} and runs_by_dir("killed", uri).keys() == stored.keys()
+
+
+def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_path, monkeypatch):
+    """Issue 65: a full disk during `emml import-runs` printed ~220 lines (two tracebacks, SQLAlchemy's dump of the
+    bound rows) and named no folder. Now one line names the store's folder and what was left as it was, the run
+    being imported is removed, and the rerun imports the rest once."""
+    import errno
+
+    from typer.testing import CliRunner
+
+    from emml.cli import app
+
+    dirs = [relative(write_run(tmp_path, "full", f"run-s{i}", f"{i + 9:x}" * 32)) for i in range(3)]
+    uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
+    real, calls = tracking._bulk_points, []
+
+    def full(*args, **kwargs):  # the second run dir's run is made, then its points meet a full disk
+        calls.append(1)
+        if len(calls) == 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tracking, "_bulk_points", full)
+    out = CliRunner().invoke(app, ["import-runs", str(tmp_path / "runs")])
+    assert out.exit_code == 2, out.output
+    (line,) = [x for x in out.output.splitlines() if x.startswith("error:")]
+    assert line == (
+        f"error: no space left on {tmp_path / 'store'} (the MLflow store; importing {dirs[1]}, its half-made run "
+        "removed, the 1 run dirs before it imported whole): free some space and rerun the same command"
+    )
+    assert "Traceback" not in out.output and sorted(runs_by_dir("full", uri)) == dirs[:1]
+    monkeypatch.setattr(tracking, "_bulk_points", real)
+    again = CliRunner().invoke(app, ["import-runs", str(tmp_path / "runs")])
+    assert again.exit_code == 0, again.output
+    stored = runs_by_dir("full", uri)
+    assert sorted(stored) == dirs and all(len(r) == 1 and r[0]["status"] == "FINISHED" for r in stored.values())
+
+
+STOPPED = textwrap.dedent(
+    """
+    import os, signal, sys, time
+    from emml.runs import tracking
+    real, calls = tracking._bulk_points, []
+    def slow(*args, **kwargs):  # the second run dir's run is made, then its import waits for the stop
+        calls.append(1)
+        if len(calls) == 2:
+            print("importing", flush=True)
+            time.sleep(120)
+        return real(*args, **kwargs)
+    tracking._bulk_points = slow
+    from emml.cli import app
+    app(["import-runs", sys.argv[1]])
+    """
+)
+
+
+def test_sigterm_ends_an_import_as_ctrl_c_does(tmp_path):
+    """Issue 65: SIGTERM killed `emml import-runs` at once (exit 143), leaving a RUNNING run in the store until the
+    next import. Now, as on Ctrl-C, the run being imported is deleted, one line says what is left, exit 130."""
+    import os
+    import signal
+
+    dirs = [relative(write_run(tmp_path, "term", f"run-s{i}", f"{i + 2:x}" * 32)) for i in range(3)]
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", STOPPED, str(tmp_path / "runs")],
+        env={**os.environ, "MLFLOW_TRACKING_URI": uri},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        for line in proc.stdout:  # the first run dir's line, then the second's import waiting
+            if line.strip() == "importing":
+                break
+        os.kill(proc.pid, signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err[-2000:]
+    assert out.splitlines()[-1].startswith("stopped by signal SIGTERM: 1 run dirs imported, the one being imported")
+    left = runs_by_dir("term", uri)
+    assert sorted(left) == dirs[:1] and left[dirs[0]][0]["status"] == "FINISHED"  # no RUNNING half-made run
+    assert "Traceback" not in err, err[-2000:]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from emml.runs.records import RecordError, cut_torn_tail, read_points
+from emml.runs.records import RecordError, cut_torn_tail, points_or_none, read_points
 from emml.runs.results import read_results
 from emml.runs.rundir import RunDirError, saved_config
 from emml.runs.rundir import read_results as read_results_json
@@ -42,6 +42,23 @@ def test_a_mirror_line_that_is_no_point_is_named_by_file_and_line(tmp_path, text
     with pytest.raises(RecordError, match=rf"^{path}: line {line}: ") as e:
         read_points(path)
     assert "\n" not in str(e.value)
+
+
+def test_a_reader_of_many_runs_gets_none_for_a_damaged_mirror_named_once(tmp_path, capsys):
+    """Issue 65: reports and --status read many runs; a damaged one costs that run only, and is named once however
+    many readers read it (--status printed each note 2-3 times)."""
+    path = tmp_path / "metrics.csv"
+    path.write_text(MIRROR.replace("64,losses/policy,-0.5", "garbage"))
+    assert points_or_none(path) is None and points_or_none(path, "not used") is None
+    err = capsys.readouterr().err
+    assert err.count(f"{path}: line 3: not a metric point") == 1 and err.count("\n") == 1
+    assert points_or_none(tmp_path / "absent.csv") == [] and len(points_or_none(_whole(tmp_path))) == 3
+
+
+def _whole(tmp_path):
+    path = tmp_path / "whole.csv"
+    path.write_text(MIRROR)
+    return path
 
 
 CSV = "run_name,seed,frames,sgn_test\na-s0,0,512,0.5\nb-s1,1,512,0.25\n"

@@ -98,8 +98,12 @@ def load_claims(path: Path = CLAIMS_FILE) -> dict[str, Claim]:
     except (OSError, tomllib.TOMLDecodeError) as e:
         raise ValueError(f"{path}: cannot be read as TOML: {e}") from None
     claims: dict[str, Claim] = {}
+    if not isinstance(data.get("claims", []), list):
+        raise ValueError(f"{path}: claims must be an array of tables ([[claims]]), got {data['claims']!r}")
     for i, raw in enumerate(data.get("claims", [])):
         where = f"{path}: claims[{i}]"
+        if not isinstance(raw, dict):
+            raise ValueError(f"{where}: must be a table ([[claims]]), got {raw!r}")
         unknown = sorted(set(raw) - set(KEYS))
         if unknown:
             raise ValueError(f"{where}: key {unknown[0]!r} is unknown; allowed: {', '.join(KEYS)}")
@@ -117,7 +121,14 @@ def load_claims(path: Path = CLAIMS_FILE) -> dict[str, Claim]:
 
 
 def _claim(where: str, raw: dict) -> Claim:
-    table = load_table(raw["table"])
+    try:
+        table = load_table(raw["table"])
+    except ValueError as e:  # issue 65: the file and the key path named ('…: claims[0].table: 'table9' is unknown…')
+        unknown = f"table={raw['table']!r} "
+        said = str(e)
+        raise ValueError(
+            f"{where}.table: {said.removeprefix('table=')}" if said.startswith(unknown) else f"{where}.table: {said}"
+        ) from None
     labels = [r.label for r in table.rows]
     kind = raw["kind"]
     for key in KINDS[kind].needs:

@@ -76,3 +76,24 @@ def test_a_claim_reads_a_test_column_or_its_train_twin_and_nothing_else(tmp_path
     path.write_text("[[claims]]\n" + head + 'metrics = ["eqa_val"]\n')
     with pytest.raises(ValueError, match=r"'eqa_val' is not a column of table2; allowed: sgn_test, eqa_test, sgn_"):
         load_claims(path)
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (
+            '[[claims]]\nid = "x"\ntext = "t"\nsource = "s"\ntable = "table9"\nkind = "best"\nrow = "GA"\n',
+            r": claims\[0\]\.table: 'table9' is unknown; choose one of 'table2', ",
+        ),
+        ('claims = "all of them"\n', r": claims must be an array of tables \(\[\[claims\]\]\), got 'all of them'"),
+        ("claims = [1]\n", r": claims\[0\]: must be a table \(\[\[claims\]\]\), got 1"),
+    ],
+)
+def test_a_claim_of_an_unknown_table_or_shape_is_named_by_file_and_key_path(tmp_path, text, message):
+    """Issue 65: an unknown table said "table='table9' is unknown", naming neither the file nor claims[0].table (and
+    stopped `emml campaign reference --status`)."""
+    path = tmp_path / "claims.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=rf"^{path}{message}") as e:
+        load_claims(path)
+    assert "\n" not in str(e.value)
