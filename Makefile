@@ -42,13 +42,15 @@ lint: setup
 # mutates; the checkout is never touched), at nice 10. `make mutate MUTATE=rl/ppo` runs one; the survivors are then
 # listed by `cd scratch/mutate/rl-ppo && ../../../.venv/bin/mutmut results` (`mutmut show NAME`: the diff).
 MUTATE ?= experiments/claims/evidence experiments/claims/kinds report/claims report/chance report/aggregate report/efficiency rl/ppo rl/rollout envs/doom
-# the claims' rules (emml/experiments/claims/) and their use on the results (report/claims, chance, efficiency) are read
-# by the same tests: the rules' own, the claims page's, the paper's table, chance, efficiency
-MUT_TESTS_CLAIMS = $(wildcard tests/experiments/claims/test_*.py tests/report/test_claims*.py) tests/report/test_chance.py tests/report/test_efficiency.py
-MUT_TESTS_experiments/claims/evidence = $(MUT_TESTS_CLAIMS)
-MUT_TESTS_experiments/claims/kinds = $(MUT_TESTS_CLAIMS)
+# the claims' rules (emml/experiments/claims/) against their own tests (hand-worked tables, milliseconds each) and the
+# paper's table; report/claims against those and the claims page's, chance's and efficiency's tests (fixtures of
+# results rows: ~45 s a survivor beside a training); report/chance against its own and the paper's table
+MUT_TESTS_RULES = $(wildcard tests/experiments/claims/test_*.py) tests/report/test_claims_on_paper.py
+MUT_TESTS_CLAIMS = $(MUT_TESTS_RULES) $(wildcard tests/report/test_claims_page.py) tests/report/test_chance.py tests/report/test_efficiency.py
+MUT_TESTS_experiments/claims/evidence = $(MUT_TESTS_RULES)
+MUT_TESTS_experiments/claims/kinds = $(MUT_TESTS_RULES)
 MUT_TESTS_report/claims = $(MUT_TESTS_CLAIMS)
-MUT_TESTS_report/chance = $(MUT_TESTS_CLAIMS)
+MUT_TESTS_report/chance = tests/report/test_chance.py tests/report/test_claims_on_paper.py
 MUT_TESTS_report/aggregate = tests/report/test_aggregate.py tests/report/test_aggregate_interval.py $(addprefix tests/report/test_tables.py::,test_the_aggregate_under_the_table test_the_aggregate_compares_like_with_like_issue_49)
 MUT_TESTS_report/efficiency = tests/report/test_efficiency.py
 MUT_TESTS_rl/ppo = tests/rl/test_ppo_losses.py tests/rl/test_advantage_normalisation.py tests/rl/test_ppo_by_hand.py tests/rl/test_gae.py tests/rl/test_rollout_buffer.py

@@ -124,6 +124,27 @@ def test_order_reports_both_rows_the_gap_and_its_error():
     )
 
 
+def test_a_tie_with_no_error_is_no_win_either_way():
+    """1.0 against 1.0 (a rate of 1 has no binomial error): gap 0, se 0; a gap must exceed Z se, so neither holds
+    nor is reversed."""
+    assert order("x", [s(1.0)], [s(1.0)]).outcome == UNCLEAR
+    assert order("x", [s(0.0)], [s(0.0, 1)]).outcome == UNCLEAR
+
+
+def test_a_rate_of_one_episode_has_its_binomial_variance_and_none_does_not_divide_by_zero():
+    # 0.5 on 1 episode: 0.25 / 1; a score of no episodes (a frame count, a figure) counts as one
+    assert variance_of_mean([s(0.5, episodes=1)]) == pytest.approx(0.25)
+    assert variance_of_mean([s(0.5, episodes=0)]) == pytest.approx(0.25)
+
+
+def test_the_error_is_between_seeds_when_either_row_has_several():
+    one, two = [s(0.6)], [s(0.4), s(0.4, 1)]
+    assert order("x", one, two).detail.endswith("(between seeds and binomial)")
+    assert order("x", two, one).detail.endswith("(between seeds and binomial)")
+    assert level("x", one, two, 0.1).detail.endswith("(between seeds and binomial)")
+    assert level("x", two, one, 0.1).detail.endswith("(between seeds and binomial)")
+
+
 def test_order_with_an_empty_cell_says_which_and_excuses_only_an_unlearned_higher_row():
     assert order("x", [], []).detail == "no run yet in either cell"
     c = order("x", [], [s(0.4)])
@@ -131,7 +152,7 @@ def test_order_with_an_empty_cell_says_which_and_excuses_only_an_unlearned_highe
     assert c.detail == "no run yet in the higher row's cell"
     hi = [s(0.6)]
     c = order("x", hi, [])
-    assert (c.outcome, c.chance, c.seeds, c.high) == (MISSING, False, 1, hi)
+    assert (c.what, c.outcome, c.chance, c.seeds, c.high) == ("x", MISSING, False, 1, hi)
     assert c.detail == "no run yet in the lower row's cell; the higher row 0.600 (s0)"
     c = order("x", [s(0.25, train=0.25)], [])
     assert (c.outcome, c.chance) == (MISSING, True)
@@ -152,7 +173,8 @@ def test_level_reports_the_difference_the_margin_and_the_reference():
     assert (c.outcome, c.chance) == (UNCLEAR, True)
     assert c.detail.endswith("(binomial, 1 seed); the reference row has not learned its training split")
     c = level("x", [], ref, 0.1)  # a missing row: the reference is the higher row of the missing check
-    assert (c.outcome, c.high) == (MISSING, ref)
+    assert (c.what, c.outcome, c.high) == ("x", MISSING, ref)
+    assert level("x", row, [], 0.1).detail == "no run yet in the higher row's cell"
     assert c.detail == "no run yet in the lower row's cell; the higher row 0.900 (s0)"
 
 
@@ -169,15 +191,28 @@ def test_level_at_exactly_the_margin_holds_and_beyond_it_by_no_error_is_reversed
 def test_threshold_reports_the_mean_against_the_value():
     """0.7 against 0.8: se sqrt(0.21 / 500) = 0.0205, 1.645 se = 0.034 < 0.1: reversed; 0.79 is within the error;
     exactly 0.8 holds."""
-    c = threshold("x", [s(0.7)], 0.8)
-    assert (c.outcome, c.chance, c.seeds, c.numbers) == (REVERSED, False, 1, "0.70 vs 0.8")
+    row = [s(0.7)]
+    c = threshold("x", row, 0.8)
+    assert (c.what, c.outcome, c.chance, c.seeds, c.high, c.numbers) == ("x", REVERSED, False, 1, row, "0.70 vs 0.8")
     assert c.detail == "0.700 (s0): mean 0.700 against 0.8, standard error 0.020 (binomial, 1 seed)"
     assert threshold("x", [s(0.79)], 0.8).outcome == UNCLEAR
     assert threshold("x", [s(0.8)], 0.8).outcome == HOLDS
     c = threshold("x", [s(0.7, train=0.1)], 0.8)
-    assert c.chance and c.detail.endswith("; the row has not learned its training split")
+    assert c.chance
+    assert c.detail == (
+        "0.700 (s0): mean 0.700 against 0.8, standard error 0.020 (binomial, 1 seed); the row has not learned its "
+        "training split"
+    )
     c = threshold("x", [], 0.8)
-    assert (c.outcome, c.detail) == (MISSING, "no run yet")
+    assert (c.what, c.outcome, c.detail) == ("x", MISSING, "no run yet")
+
+
+def test_threshold_exactly_z_standard_errors_below_is_not_beyond_them():
+    """0.5 on 4 episodes: se sqrt(0.25 / 4) = 0.25 exactly, Z se = 0.41125; a value 0.91125 is that far above the
+    mean, not beyond it (unclear), 0.912 beyond (reversed)."""
+    row = [s(0.5, episodes=4)]
+    assert threshold("x", row, 0.91125).outcome == UNCLEAR
+    assert threshold("x", row, 0.912).outcome == REVERSED
 
 
 def crossing(frames, seed=0, every=100_000, last=1_500_000):
@@ -217,7 +252,8 @@ def test_faster_with_a_cell_empty_or_no_seed_in_common_is_missing():
     assert faster("x", [crossing(1)], []).detail == "no run with a metrics.csv here in one cell"
     assert faster("x", [], [crossing(1)]).detail == "no run with a metrics.csv here in one cell"
     c = faster("x", [crossing(1, 0)], [crossing(1, 1)])
-    assert (c.outcome, c.detail) == (MISSING, "no seed in common")
+    assert (c.what, c.outcome, c.detail) == ("x", MISSING, "no seed in common")
+    assert faster("x", [], []).what == "x"
 
 
 def figure(value, seed=0, train=0.9):
@@ -225,8 +261,9 @@ def figure(value, seed=0, train=0.9):
 
 
 def test_diagnostic_reports_each_seed_at_its_frames():
-    c = diagnostic("x", [figure(0.4), figure(0.5, 1)], 0.5)  # mean 0.45 below, seed 1 at the value: neither
-    assert (c.outcome, c.chance, c.seeds, c.numbers) == (UNCLEAR, False, 2, "0.45 vs 0.5")
+    row = [figure(0.4), figure(0.5, 1)]
+    c = diagnostic("x", row, 0.5)  # mean 0.45 below, seed 1 at the value: neither
+    assert (c.what, c.outcome, c.chance, c.seeds, c.high, c.numbers) == ("x", UNCLEAR, False, 2, row, "0.45 vs 0.5")
     assert c.detail == "0.400 (s0, at 1,200,000 frames) · 0.500 (s1, at 1,200,000 frames): mean 0.450 against 0.5"
     assert diagnostic("x", [figure(0.4), figure(0.45, 1)], 0.5).outcome == REVERSED  # every seed below
     assert diagnostic("x", [figure(0.5)], 0.5).outcome == HOLDS
@@ -234,7 +271,7 @@ def test_diagnostic_reports_each_seed_at_its_frames():
     assert (c.outcome, c.chance) == (HOLDS, True)
     assert c.detail.endswith("against 0.5; the run has not learned its training split")
     c = diagnostic("x", [], 0.5)
-    assert (c.outcome, c.detail) == (MISSING, "no run with a metrics.csv here")
+    assert (c.what, c.outcome, c.detail) == ("x", MISSING, "no run with a metrics.csv here")
 
 
 def check(what, outcome, seeds=1, numbers="n"):
@@ -255,6 +292,9 @@ def test_most_counts_every_row_and_waits_for_a_missing_one():
     assert most("m", [check("A", REVERSED), check("B", REVERSED), check("C", HOLDS)], 0).outcome == REVERSED
     gone = most("m", [check("A: a", MISSING), check("B: b", HOLDS), check("C: c", MISSING)], 0)
     assert (gone.outcome, gone.detail) == (MISSING, "no run yet for A, C")
+    # the row is named by what comes before the first colon of its comparison
+    gone = most("m", [check("GA: SGN: test > EQA", MISSING)], 0)
+    assert (gone.what, gone.detail) == ("m", "no run yet for GA")
 
 
 def test_status_ranks_contradicted_then_budget_then_untestable():
@@ -286,4 +326,6 @@ def test_learned_is_above_the_bar_not_at_it_and_an_empty_row_has_not():
 
 def test_the_frames_texts():
     assert frames_text(300_000, 1_500_000) == "0.30M" and frames_text(None, 1_500_000) == ">1.50M"
+    # millions, rounded to two places: 1,255,001 is 1.255001 M
+    assert frames_text(1_255_001, 0) == "1.26M" and frames_text(None, 1_255_001) == ">1.26M"
     assert frames_list([crossing(250_000, 0), crossing(math.inf, 1, last=2_000_000)]) == "0.25M (s0) · >2.00M (s1)"
