@@ -374,7 +374,16 @@ def test_diagnostic_names_its_key_and_the_reference_it_reads():
     assert x.what == "Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5 × its Easy · Aux run's 0.60"
     (x,) = checks(c, diag_cells([run(0.9)], []))
     assert (x.outcome, x.detail) == ("missing", "no run with a metrics.csv here in Easy · Aux")
-    assert named([x]) == [(x.what, "Easy · No Aux", "diag/detector_ap", "Dual-Attention")]
+    assert named([x]) == [
+        ("Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5", "Easy · No Aux", "diag/detector_ap", "Dual-Attention")
+    ]
+
+
+def test_a_relative_diagnostic_missing_one_rows_reference_still_compares_the_next_row():
+    c = replace(diag_claim(relative={"aux": True}), rows=("GA", "Dual-Attention"))
+    cells = {**diag_cells([run(0.33)], [run(0.6)]), ("GA", "easy", False, "sgn_test"): [run(0.9)]}
+    ga, da = checks(c, cells)  # GA has no Aux run: its reference is missing
+    assert (ga.subject, ga.outcome, da.subject, da.outcome) == ("GA", "missing", "Dual-Attention", "holds")
 
 
 def test_a_diagnostic_relative_to_another_difficulty_reads_that_difficulty():
