@@ -18,7 +18,7 @@ from emml.experiments.claims.evidence import (
     Score,
     status,
 )
-from emml.experiments.claims.kinds import KINDS
+from emml.experiments.claims.kinds import KINDS, metric_text
 from emml.experiments.tables import load_table
 
 TABLE2 = load_table("table2")
@@ -407,3 +407,7 @@ def test_a_diagnostic_relative_to_another_difficulty_reads_that_difficulty():
 def test_each_kind_states_its_rule_under_its_name():
     for name, kind in KINDS.items():
         assert kind.rule.startswith(f"**{name}**") and kind.rule.endswith(".")
+
+
+def test_a_metric_without_a_label_is_named_as_it_is():
+    assert metric_text("sgn_test") == "SGN test" and metric_text("eqa_transfer") == "eqa_transfer"
