@@ -1,5 +1,6 @@
 """Chance as a blind model scores it here (emml/report/chance.py, issue 60), on a FIXTURE of made-up results rows."""
 
+import pandas as pd
 import pytest
 
 from emml.experiments.claims.evidence import Chance
@@ -59,3 +60,23 @@ def test_the_chance_text_names_each_column_and_which_are_uniform():
     text = chance_text(chance)
     assert text.count("; ") == 2 and text.split("; ")[1].startswith("Hard: SGN test 0.20 (uniform), EQA test 0.33")
     assert "SGN train 0.25, EQA train" in text and text.split("; ")[2].startswith("House: SGN test 0.20 (uniform)")
+
+
+def test_the_house_prior_is_read_without_doom_results(tmp_path):
+    """Only Table 5 (the House) has results: its Text only runs (0.1 × (seed + 1), seeds 0-2) give 0.2."""
+    fake_results("table5", tmp_path)
+    chance = blind_prior(PROFILE, tmp_path)
+    assert chance.measured("sgn_test", "house") and chance.values[("house", "eqa_test")] == pytest.approx(0.2)
+    assert not chance.measured("sgn_test", "easy")
+
+
+def test_a_results_file_without_a_column_leaves_that_column_uniform(tmp_path):
+    """Results written before a column existed: a missing score column is uniform there, no model column (no row
+    can be told blind) is uniform everywhere."""
+    for root, column in ((tmp_path / "a", "eqa_train"), (tmp_path / "b", "model")):
+        fake_results("table2", root)
+        path = root / "table2" / f"{PROFILE}.csv"
+        pd.read_csv(path).drop(columns=[column]).to_csv(path, index=False)
+    chance = blind_prior(PROFILE, tmp_path / "a")
+    assert chance.measured("sgn_test", "easy") and not chance.measured("eqa_train", "easy")
+    assert blind_prior(PROFILE, tmp_path / "b").values == {}

@@ -180,3 +180,43 @@ def test_the_section_lists_each_run_and_its_cadence(tmp_path):
     assert markdown([eff, eqa], ("sgn_test", "eqa_test")).splitlines()[-1] == (
         "| w/o SA | Easy · Aux | 0 | — | >0.30M / >0.30M / >0.30M |"
     )
+
+
+def test_the_section_states_the_chance_it_reads_and_each_cadence(tmp_path):
+    """Two runs evaluated 100,352 and 50,000 frames apart, the No Aux one in Easy; chance given: its source and
+    only the runs' difficulties are stated."""
+    no_aux = next(s for s in load_table("table3").runs([0]) if s.row == "w/o SA" and not s.aux)
+    write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,0.9" for s in (99_328, 199_680)])
+    write_points(tmp_path, no_aux, [f"{s},eval/sgn_test,0.9" for s in (50_000, 100_000)])
+    chance = Chance({("easy", "sgn_test"): 0.25}, "a fixture's blind runs")
+    runs = [run_efficiency(s, PROFILE, tmp_path, chance) for s in (W_O_SA, no_aux)]
+    runs[1].crossings["sgn_x"] = {"chance": None, "0.5": None, "0.9": None}  # a metric without a label
+    lines = markdown(runs, ("sgn_test", "sgn_x"), chance).splitlines()
+    assert lines[2] == (
+        "Frames at which each run's greedy accuracy (its periodic evaluation in `metrics.csv`) first leaves chance "
+        "(above chance + 0.10; chance is what a blind model scores here, a fixture's blind runs: Easy: SGN test 0.25, "
+        "EQA test 0.33 (uniform), SGN train 0.20 (uniform), EQA train 0.33 (uniform)), then reaches 0.5 and 0.9, as "
+        "'leaves chance / 0.5 / 0.9'; >F: not by its last evaluation at F frames. Evaluations at most 50,000, 100,352 "
+        "frames apart: a crossing is known to that resolution."
+    )
+    assert lines[3] == "" and lines[4] == "| Run | Setting | seed | SGN test | sgn_x |"
+    assert lines[-2:] == [
+        "| w/o SA | Easy · Aux | 0 | 0.10M / 0.10M / 0.10M | — |",
+        "| w/o SA | Easy · No Aux | 0 | 0.05M / 0.05M / 0.05M | >0.10M / >0.10M / >0.10M |",
+    ]
+
+
+def test_a_tables_crossings_read_the_profiles_blind_prior_by_default(tmp_path, monkeypatch):
+    import emml.report.chance
+
+    asked = []
+
+    def prior(profile, results_root=None):
+        asked.append(profile)
+        return Chance({("easy", "sgn_test"): 0.5})
+
+    monkeypatch.setattr(emml.report.chance, "blind_prior", prior)
+    points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
+    write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points])
+    (eff,) = table_efficiency(load_table("table3"), PROFILE, [W_O_SA.run_name(PROFILE)], tmp_path)
+    assert asked == [PROFILE] and eff.crossings["sgn_test"]["chance"] == 299_008  # above 0.6, not the uniform 0.3
