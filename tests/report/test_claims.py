@@ -1,0 +1,65 @@
+"""The claims page's decisions (emml/report/claims.py) in parts worked out by hand, no results read (issue 66:
+mutation testing): the label with its seeds, the phrase per setting, the missing runs' costs, the counts."""
+
+from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, STATUSES, UNCLEAR, Check, Score
+from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, counts
+from emml.report.claims import _phrase as phrase
+
+
+def decision(status: str, seeds: int = 0, **fields) -> Decision:
+    return Decision("c", "text", "§5", "best", "table3", "quick", status, "", seeds=seeds, **fields)
+
+
+def test_the_label_names_the_seeds_it_rests_on():
+    assert decision(SUPPORTED, 1).label == "supported (on 1 seed)"
+    assert decision(SUPPORTED, 3).label == "supported (on 3 seeds)"
+    assert decision(UNTESTABLE).label == "untestable yet (no comparison yet)"
+    assert decision(BUDGET).label == "not supported at this budget"
+
+
+def test_each_missing_run_is_costed_under_its_own_table():
+    d = decision(UNTESTABLE, missing=["a-s0-quick", "b-s1-quick (no sgn_train in its results row)"])
+    d.owners = {"b-s1-quick": "table2"}
+    costs = {("table3", "a-s0-quick"): "campaign step `t3`, pending: ~2.0 h here", ("table3", "b-s1-quick"): "no"}
+    assert costs_of(d, costs) == [
+        "`table3/a-s0-quick`: campaign step `t3`, pending: ~2.0 h here",
+        "`table2/b-s1-quick`: in no step of the campaign",
+    ]
+
+
+def test_the_counts_cover_every_status():
+    assert counts([decision(SUPPORTED), decision(BUDGET), decision(SUPPORTED)]) == {
+        s: {SUPPORTED: 2, BUDGET: 1}.get(s, 0) for s in STATUSES
+    }
+
+
+def check(setting, outcome, what="SGN test, Easy · Aux: DA > GA", numbers="0.30 vs 0.50", chance=False, high=()):
+    return Check(what, outcome, "", chance, 1, list(high), numbers).tag(setting, "SGN test", "DA")
+
+
+def test_the_phrase_counts_each_settings_comparisons_and_names_the_one_against():
+    held = check("Easy · Aux", HOLDS, "SGN test, Easy · Aux: DA > FiLM", "0.90 vs 0.20")
+    assert phrase([held, check("Easy · Aux", REVERSED)]) == (
+        "Easy · Aux: 1 of 2 hold; reversed: SGN test DA > GA 0.30 vs 0.50"
+    )
+    # a reversal of a row that learned goes before an excused one, which goes before one within the error
+    excused = check("Easy · Aux", REVERSED, "SGN test, Easy · Aux: DA > Concat", "0.20 vs 0.40", chance=True)
+    unclear = check("Easy · Aux", UNCLEAR, "SGN test, Easy · Aux: DA > PACMAN", "0.50 vs 0.52")
+    assert phrase([unclear, excused, check("Easy · Aux", REVERSED)]).endswith("reversed: SGN test DA > GA 0.30 vs 0.50")
+    assert phrase([unclear, excused]) == (
+        "Easy · Aux: 0 of 2 hold; reversed: SGN test DA > Concat 0.20 vs 0.40 (DA has not learned)"
+    )
+    assert phrase([held, unclear]) == "Easy · Aux: 1 of 2 hold; unclear: SGN test DA > PACMAN 0.50 vs 0.52"
+    assert phrase([held, check("Easy · Aux", MISSING)]) == "Easy · Aux: 1 of 1 hold, 1 not run yet"
+
+
+def test_the_phrase_of_a_setting_with_nothing_run_says_who_has_not_learned():
+    gone = check("Hard · Aux", MISSING)
+    assert phrase([gone, gone]) == "Hard · Aux: 2 comparisons not run yet"
+    unlearned = check(
+        "Hard · No Aux", MISSING, chance=True, high=[Score("r", 0, 0.2, 100, 0), Score("r", 1, 0.3, 100, 0)]
+    )
+    assert phrase([gone, unlearned]) == (
+        "Hard · Aux: 1 comparison not run yet; Hard · No Aux: DA has not learned (SGN test 0.25), 1 comparison not run "
+        "yet"
+    )
