@@ -1,7 +1,8 @@
 """The claims page's decisions (emml/report/claims.py) in parts worked out by hand, no results read (issue 66:
 mutation testing): the label with its seeds, the phrase per setting, the missing runs' costs, the counts."""
 
-from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, STATUSES, UNCLEAR, Check, Score
+from emml.experiments.claims import load_claims
+from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, STATUSES, UNCLEAR, Chance, Check, Score
 from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, counts
 from emml.report.claims import _phrase as phrase
 
@@ -63,3 +64,28 @@ def test_the_phrase_of_a_setting_with_nothing_run_says_who_has_not_learned():
         "Hard · Aux: 1 comparison not run yet; Hard · No Aux: DA has not learned (SGN test 0.25), 1 comparison not run "
         "yet"
     )
+
+
+def test_every_claim_is_decided_with_the_one_blind_prior_of_the_results_read(monkeypatch):
+    """decide_all: the prior read once from the profile's results under the root given, then each claim of
+    reproduce/claims.toml, in the file's order, decided from the same results and run dirs with that prior; with
+    `costs`, each decision's missing runs costed."""
+    import emml.report.claims as claims
+
+    prior, asked, decided = Chance({("easy", "eqa_test"): 0.4}), [], []
+    monkeypatch.setattr(claims, "blind_prior", lambda profile, root=None: asked.append((profile, root)) or prior)
+
+    def decide(claim, profile, results_root=None, run_root=None, chance=None):
+        decided.append((claim.id, profile, results_root, run_root, chance))
+        return decision(UNTESTABLE, missing=[f"{claim.id}-s0-quick"])
+
+    monkeypatch.setattr(claims, "decide", decide)
+    ids = list(load_claims())
+    out = claims.decide_all("quick", "RESULTS", {("table3", f"{ids[0]}-s0-quick"): "step `s`"}, "RUNS")
+    assert asked == [("quick", "RESULTS")]
+    assert decided == [(i, "quick", "RESULTS", "RUNS", prior) for i in ids]
+    assert [d.costs for d in out[:2]] == [
+        [f"`table3/{ids[0]}-s0-quick`: step `s`"],
+        [f"`table3/{ids[1]}-s0-quick`: in no step of the campaign"],
+    ]
+    assert claims.decide_all("quick", "RESULTS", None, "RUNS")[0].costs == []
