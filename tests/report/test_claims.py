@@ -89,3 +89,23 @@ def test_every_claim_is_decided_with_the_one_blind_prior_of_the_results_read(mon
         [f"`table3/{ids[1]}-s0-quick`: in no step of the campaign"],
     ]
     assert claims.decide_all("quick", "RESULTS", None, "RUNS")[0].costs == []
+
+
+def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, monkeypatch):
+    """write_claims: the decisions of the results, run dirs and costs given, the paper's own for every claim, the
+    page in a folder made for it (`out`, parents and all) as claims-<profile>.md."""
+    import emml.report.claims as claims
+    import emml.report.claims_page as page
+
+    prior, got = Chance({("easy", "eqa_test"): 0.4}), {}
+    monkeypatch.setattr(claims, "blind_prior", lambda profile, root=None: prior)
+    monkeypatch.setattr(claims, "decide_all", lambda *args: got.setdefault("decide_all", args) and ["decided"])
+    monkeypatch.setattr(claims, "decide_paper", lambda claim: f"paper {claim.id}")
+    monkeypatch.setattr(page, "markdown", lambda *args: got.setdefault("markdown", args) and "PAGE\n")
+    out = tmp_path / "a" / "b"
+    path, decisions = claims.write_claims("quick", out, "RESULTS", {"k": "v"}, "RUNS")
+    assert path == out / "claims-quick.md" and path.read_text() == "PAGE\n" and decisions == ["decided"]
+    assert got["decide_all"] == ("quick", "RESULTS", {"k": "v"}, "RUNS")
+    ids = list(load_claims())
+    assert got["markdown"][:3] == (["decided"], "quick", {i: f"paper {i}" for i in ids})
+    assert list(got["markdown"][3]) == ids and got["markdown"][4] == prior
