@@ -109,3 +109,32 @@ def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, m
     ids = list(load_claims())
     assert got["markdown"][:3] == (["decided"], "quick", {i: f"paper {i}" for i in ids})
     assert list(got["markdown"][3]) == ids and got["markdown"][4] == prior
+
+
+def test_the_campaign_costs_each_unfinished_run_by_its_step(monkeypatch):
+    """campaign_costs: (table, run) → its step, state and the hours left here and on a GPU node; finished runs left
+    out; {} when the campaign cannot be read."""
+    from types import SimpleNamespace as Row
+
+    import emml.experiments.campaign as campaign
+    from emml.report.claims import campaign_costs
+
+    rows = [
+        Row(table="table2", run_name="a", step="s1", state="pending", seconds_left=7200, node_seconds_left=1800),
+        Row(table="table3", run_name="a", step="s2", state="running", seconds_left=0, node_seconds_left=0),
+        Row(table="table2", run_name="b", step="s1", state="done", seconds_left=0, node_seconds_left=0),
+    ]
+    asked = []
+    monkeypatch.setattr(campaign, "load_campaign", lambda name: asked.append(name) or "loaded")
+    monkeypatch.setattr(campaign, "status", lambda c: rows if c == "loaded" else [])
+    assert campaign_costs("mine") == {
+        ("table2", "a"): "campaign step `s1`, pending: ~2.0 h here, ~0.5 h on a GPU node",
+        ("table3", "a"): "campaign step `s2`, running: no estimate here",
+    }
+    assert asked == ["mine"] and campaign_costs() and asked[-1] == "reference"
+
+    def unreadable(name):
+        raise ValueError("no such campaign")
+
+    monkeypatch.setattr(campaign, "load_campaign", unreadable)
+    assert campaign_costs() == {}
