@@ -1,9 +1,12 @@
 """The claims page's decisions (emml/report/claims.py) in parts worked out by hand, no results read (issue 66:
 mutation testing): the label with its seeds, the phrase per setting, the missing runs' costs, the counts."""
 
+import math
+from dataclasses import replace
+
 from emml.experiments.claims import load_claims
 from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, STATUSES, UNCLEAR, Chance, Check, Score
-from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, counts
+from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, counts, paper_evidence
 from emml.report.claims import _phrase as phrase
 
 
@@ -138,3 +141,24 @@ def test_the_campaign_costs_each_unfinished_run_by_its_step(monkeypatch):
 
     monkeypatch.setattr(campaign, "load_campaign", unreadable)
     assert campaign_costs() == {}
+
+
+def test_the_paper_evidence_reads_the_claims_rows_with_the_chance_given():
+    """reproduce/paper/table2.csv: GA 0.24 and Text only 0.33 on EQA test, Easy · Aux. Each number one seed of 500
+    episodes, its own training score; the bar chance + 0.1 (0.5 given: 0.6), none for the blind row."""
+    claims = load_claims()
+    ev = paper_evidence(
+        replace(claims["baselines-below-text-only-eqa"], rows=("GA",)), Chance({("easy", "eqa_test"): 0.5})
+    )
+    assert (
+        sorted(ev.scores) == [(row, "easy", aux, "eqa_test") for row in ("GA", "Text only") for aux in (False, True)]
+        and not ev.missing
+    )
+    (ga,) = ev.scores[("GA", "easy", True, "eqa_test")]
+    assert (ga.run, ga.seed, ga.value, ga.episodes, ga.train, ga.bar) == ("the paper's table", 0, 0.24, 500, 0.24, 0.6)
+    (blind,) = ev.scores[("Text only", "easy", True, "eqa_test")]
+    assert (blind.value, blind.bar) == (0.33, -math.inf)
+    # a training column: the paper prints none, so each cell is missing
+    train = paper_evidence(claims["da-best-hard-train"])
+    assert train.scores[("Dual-Attention", "hard", True, "sgn_train")] == []
+    assert "Dual-Attention, Hard · Aux, SGN train (no number)" in train.missing
