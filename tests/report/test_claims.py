@@ -101,7 +101,7 @@ def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, m
     import emml.report.claims_page as page
 
     prior, got = Chance({("easy", "eqa_test"): 0.4}), {}
-    monkeypatch.setattr(claims, "blind_prior", lambda profile, root=None: prior)
+    monkeypatch.setattr(claims, "blind_prior", lambda profile, root=None: prior if root == "RESULTS" else None)
     monkeypatch.setattr(claims, "decide_all", lambda *args: got.setdefault("decide_all", args) and ["decided"])
     monkeypatch.setattr(claims, "decide_paper", lambda claim: f"paper {claim.id}")
     monkeypatch.setattr(page, "markdown", lambda *args: got.setdefault("markdown", args) and "PAGE\n")
@@ -123,15 +123,15 @@ def test_the_campaign_costs_each_unfinished_run_by_its_step(monkeypatch):
     from emml.report.claims import campaign_costs
 
     rows = [
-        Row(table="table2", run_name="a", step="s1", state="pending", seconds_left=7200, node_seconds_left=1800),
-        Row(table="table3", run_name="a", step="s2", state="running", seconds_left=0, node_seconds_left=0),
         Row(table="table2", run_name="b", step="s1", state="done", seconds_left=0, node_seconds_left=0),
+        Row(table="table2", run_name="a", step="s1", state="pending", seconds_left=5580, node_seconds_left=1620),
+        Row(table="table3", run_name="a", step="s2", state="running", seconds_left=0, node_seconds_left=0),
     ]
     asked = []
     monkeypatch.setattr(campaign, "load_campaign", lambda name: asked.append(name) or "loaded")
     monkeypatch.setattr(campaign, "status", lambda c: rows if c == "loaded" else [])
     assert campaign_costs("mine") == {
-        ("table2", "a"): "campaign step `s1`, pending: ~2.0 h here, ~0.5 h on a GPU node",
+        ("table2", "a"): "campaign step `s1`, pending: ~1.6 h here, ~0.5 h on a GPU node",  # 1.55 h, 0.45 h
         ("table3", "a"): "campaign step `s2`, running: no estimate here",
     }
     assert asked == ["mine"] and campaign_costs() and asked[-1] == "reference"
