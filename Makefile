@@ -48,8 +48,16 @@ docs: setup
 # Each module is mutated in its own copy of the checkout (scratch/mutate/<module>/: mutmut rewrites the files it
 # mutates; the checkout is never touched), at nice 10. `make mutate MUTATE=rl/ppo` runs one; the survivors are then
 # listed by `cd scratch/mutate/rl-ppo && ../../../.venv/bin/mutmut results` (`mutmut show NAME`: the diff).
-MUTATE ?= report/claims report/aggregate report/efficiency rl/ppo rl/rollout envs/doom
-MUT_TESTS_report/claims = $(wildcard tests/report/test_claims*.py tests/experiments/test_claims.py tests/experiments/claims/test_*.py)
+MUTATE ?= experiments/claims/evidence experiments/claims/kinds report/claims report/chance report/aggregate report/efficiency rl/ppo rl/rollout envs/doom
+# the claims' rules (emml/experiments/claims/) against their own tests (hand-worked tables, milliseconds each) and the
+# paper's table; report/claims against those and the claims page's, chance's and efficiency's tests (fixtures of
+# results rows: ~45 s a survivor beside a training); report/chance against its own and the paper's table
+MUT_TESTS_RULES = $(wildcard tests/experiments/claims/test_*.py) tests/report/test_claims_on_paper.py
+MUT_TESTS_CLAIMS = $(MUT_TESTS_RULES) tests/report/test_claims.py tests/report/test_claims_page.py tests/report/test_chance.py tests/report/test_efficiency.py
+MUT_TESTS_experiments/claims/evidence = $(MUT_TESTS_RULES)
+MUT_TESTS_experiments/claims/kinds = $(MUT_TESTS_RULES)
+MUT_TESTS_report/claims = $(MUT_TESTS_CLAIMS)
+MUT_TESTS_report/chance = tests/report/test_chance.py tests/report/test_claims_on_paper.py
 MUT_TESTS_report/aggregate = tests/report/test_aggregate.py tests/report/test_aggregate_interval.py $(addprefix tests/report/test_tables.py::,test_the_aggregate_under_the_table test_the_aggregate_compares_like_with_like_issue_49)
 MUT_TESTS_report/efficiency = tests/report/test_efficiency.py
 MUT_TESTS_rl/ppo = tests/rl/test_ppo_losses.py tests/rl/test_advantage_normalisation.py tests/rl/test_ppo_by_hand.py tests/rl/test_gae.py tests/rl/test_rollout_buffer.py
@@ -59,7 +67,7 @@ MUT_TESTS_envs/doom = tests/envs/test_reach.py
 MUT_NAMES_envs/doom = 'emml.envs.doom.x*DoomEnv*step__mutmut_*' 'emml.envs.doom.x*DoomEnv*_reached__mutmut_*' 'emml.envs.doom.x*DoomEnv*_target_distance__mutmut_*' 'emml.envs.doom.x*DoomEnv*_distances__mutmut_*'
 # conftest.py builds an MLflow store per session (seconds per mutant): left out unless a module's tests need its
 # fixtures; torch.compile cannot trace mutmut's trampolines (the traceability test, not a number)
-MUT_CONFTEST = report/claims
+MUT_CONFTEST =
 MUT_DESELECT = --deselect tests/rl/test_ppo_losses.py::test_ppo_losses_read_nothing_back_from_the_device
 
 mutate: $(addprefix mutate/,$(MUTATE))

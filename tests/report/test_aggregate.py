@@ -115,13 +115,14 @@ def test_the_figure_keeps_sgn_and_eqa_apart_a_panel_row_each():
     fig = _field(FIELD, PAPER)
     axes = np.array(fig.axes[:6]).reshape(2, 3)
     assert [ax.get_title() for ax in axes[:, 0]] == [
-        "Easy · Aux · SGN test: IQM per row",
-        "Easy · Aux · EQA test: IQM per row",
+        "Easy · Aux · SGN test: IQM",
+        "Easy · Aux · EQA test: IQM",
     ]
     for ax, metric in zip(axes, ("SGN test", "EQA test")):
-        for panel in ax:  # every panel names its one metric, never both
-            other = "EQA" if metric.startswith("SGN") else "SGN"
-            assert metric in panel.get_xlabel() and other not in panel.get_xlabel() + panel.get_title()
+        other = "EQA" if metric.startswith("SGN") else "SGN"
+        assert metric in ax[0].get_title()  # the row's first panel names its one metric
+        for panel in ax:  # and no panel of the row names the other
+            assert other not in panel.get_xlabel() + panel.get_title()
     sgn, eqa = (_lines(axes[i, 0], "_point")["Dual-Attention"].get_xdata()[0] for i in (0, 1))
     assert sgn == pytest.approx(0.92) and eqa == pytest.approx(0.40)  # each its own cell's IQM: nothing pooled
     plt.close(fig)
@@ -138,13 +139,15 @@ def test_single_runs_are_points_without_intervals_and_n_counts_runs():
     single = _lines(iqm_ax, "_single")
     assert set(single) == {"Concat"} and single["Concat"].get_xdata()[0] == pytest.approx(0.30)
     assert single["Concat"].get_markerfacecolor() in ("white", (1.0, 1.0, 1.0, 1.0))  # hollow: one run
-    assert [t.get_text() for t in iqm_ax.get_yticklabels()] == ["Dual-Attention (n=3 runs)", "Concat (n=1 run)"]
+    # (n): the runs in the cell, as the title says; 3, not 3 runs × 2 metrics
+    assert [t.get_text() for t in iqm_ax.get_yticklabels()] == ["Dual-Attention (3)", "Concat (1)"]
     # P(DA > Concat) with one Concat run: a point, no interval; n as runs on each side
     assert set(_lines(p_ax, "_single")) == {"Concat"} and not _lines(p_ax, "_ci")
     assert _lines(p_ax, "_single")["Concat"].get_xdata()[0] == 1.0
-    assert [t.get_text() for t in p_ax.get_yticklabels()] == ["Concat (n=3 vs 1)"]
-    legend = [t.get_text() for t in profile_ax.get_legend().get_texts()]
-    assert legend == ["Concat (n=1 run)", "Dual-Attention (n=3 runs)"]  # runs, not runs × metrics (was n=6)
+    assert [t.get_text() for t in p_ax.get_yticklabels()] == ["Concat (3 vs 1)"]
+    assert "(n) = runs\nin the cell" in fig._suptitle.get_text()
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]  # one legend for the figure, under it
+    assert legend[:2] == ["Concat", "Dual-Attention"] and "one run: no interval" in legend
     plt.close(fig)
 
 
@@ -176,7 +179,7 @@ def test_the_title_and_every_label_fit_inside_the_figure():
         texts += [ax.title, ax.xaxis.label, ax.yaxis.label, *ax.get_yticklabels(), *ax.get_xticklabels()]
         if ax.get_legend() is not None:
             texts += ax.get_legend().get_texts()
-    assert "table2 [quick]" in fig._suptitle.get_text() and "SGN and EQA apart" in fig._suptitle.get_text()
+    assert "table2 [quick]" in fig._suptitle.get_text() and "per setting and metric" in fig._suptitle.get_text()
     for t in texts:
         if not t.get_text() or not t.get_visible():
             continue

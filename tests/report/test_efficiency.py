@@ -2,9 +2,10 @@
 on a FIXTURE: made-up results rows and metrics.csv files in tmp_path (never results)."""
 
 from emml.config.profiles import profile_seeds
+from emml.experiments.claims.evidence import Chance
 from emml.experiments.tables import load_table
 from emml.report.claims import BUDGET, CONTRADICTED, INCONCLUSIVE, SUPPORTED, UNTESTABLE, decide
-from emml.report.efficiency import first_crossing, markdown, run_efficiency
+from emml.report.efficiency import curves, first_crossing, level, markdown, run_efficiency, table_efficiency
 from tests.report.test_claims_page import CLAIMS
 from tests.report.test_tables import PROFILE, fake_results
 
@@ -91,3 +92,135 @@ def test_the_table_page_lists_each_run_crossings(tmp_path):
     mirror.write_text(mirror.read_text().replace("\n", "\ngarbage\n", 2))
     damaged = run_efficiency(spec, PROFILE, runs)
     assert not damaged.found and damaged.damaged and "| metrics.csv damaged |" in markdown([eff, damaged])
+
+
+# Each part of the crossings worked out by hand (issue 66: mutation testing)
+
+W_O_SA = next(s for s in load_table("table3").runs([0]) if s.row == "w/o SA" and s.aux)
+"""A declared run: Table 3's w/o SA, Easy · Aux, seed 0."""
+
+
+def write_points(run_root, spec, lines: list[str]) -> None:
+    folder = run_root / spec.table / spec.run_name(PROFILE)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "metrics.csv").write_text("\n".join(["step,key,value", *lines]) + "\n")
+
+
+def test_the_level_of_each_mark():
+    assert level("sgn_test", "chance", 0.5) == 0.6 and level("eqa_test", "0.5", 0.45) == 0.5
+    assert level("sgn_test", "0.9", 0.2) == 0.9
+
+
+def test_leaving_chance_is_strictly_above_it_and_a_number_is_reached_at_it():
+    """Chance 0.5: the bar 0.6; a point at 0.6 has not left chance but has reached 0.5; 0.9 is reached at 0.9."""
+    points = [(100, 0.6), (200, 0.61), (300, 0.9)]
+    assert first_crossing(points, "sgn_test", "chance", floor=0.5) == 200
+    assert first_crossing(points, "sgn_test", "0.5", floor=0.5) == 100
+    assert first_crossing(points, "sgn_test", "0.9", floor=0.5) == 300
+
+
+def test_the_curves_keep_a_resumed_points_last_value_in_frame_order(tmp_path):
+    path = tmp_path / "metrics.csv"
+    lines = ["200,eval/sgn_test,0.5", "100,eval/sgn_test,0.2", "200,eval/sgn_test,0.6", "100,train/loss,3.0"]
+    path.write_text("\n".join(["step,key,value", *lines, "100,eval/eqa_train,0.4"]) + "\n")
+    assert curves(path) == {"sgn_test": [(100, 0.2), (200, 0.6)], "eqa_train": [(100, 0.4)]}
+    assert curves(tmp_path / "absent.csv") == {}
+
+
+def test_a_runs_crossings_its_last_evaluation_and_its_largest_gap(tmp_path):
+    """SGN test 0.5, 0.6, 0.95 at 99,328, 199,680 and 299,008 frames (gaps 100,352 and 99,328); chance 0.5 (bar
+    0.6): it leaves chance at 299,008 and reaches 0.5 at 99,328, 0.9 at 299,008. EQA never evaluated: absent."""
+    points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
+    write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points] + ["50000,eval/sgn_train,0.1"])
+    chance = Chance({(W_O_SA.difficulty, "sgn_test"): 0.5})
+    eff = run_efficiency(W_O_SA, PROFILE, tmp_path, chance)
+    assert (eff.run, eff.row, eff.difficulty, eff.aux, eff.seed) == (
+        W_O_SA.run_name(PROFILE),
+        "w/o SA",
+        "easy",
+        True,
+        0,
+    )
+    assert eff.found and (eff.last, eff.every) == (299_008, 100_352)
+    assert eff.crossings == {
+        "sgn_test": {"chance": 299_008, "0.5": 99_328, "0.9": 299_008},
+        "sgn_train": {"chance": None, "0.5": None, "0.9": None},
+    }
+    # the uniform chance by default: SGN 0.2, its bar 0.3: left at 99,328
+    assert run_efficiency(W_O_SA, PROFILE, tmp_path).crossings["sgn_test"]["chance"] == 99_328
+    gone = run_efficiency(W_O_SA, PROFILE, tmp_path / "nowhere")
+    assert (gone.found, gone.crossings, gone.last, gone.every) == (False, {}, 0, 0)
+    one = tmp_path / "one"
+    write_points(one, W_O_SA, ["1000,eval/sgn_test,0.5"])
+    assert run_efficiency(W_O_SA, PROFILE, one).every == 0
+    assert table_efficiency(load_table("table3"), PROFILE, [eff.run], tmp_path, chance) == [eff]
+
+
+def test_the_section_lists_each_run_and_its_cadence(tmp_path):
+    points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
+    write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points])
+    eff = run_efficiency(W_O_SA, PROFILE, tmp_path, Chance({("easy", "sgn_test"): 0.5}))
+    gone = run_efficiency(W_O_SA, PROFILE, tmp_path / "nowhere")
+    text = markdown([eff, gone], ("sgn_test", "eqa_test"))
+    lines = text.splitlines()
+    assert lines[:2] == ["### Sample efficiency", ""] and text.endswith(" |\n")
+    assert (
+        "first leaves chance (above chance + 0.10; chance is what a blind model scores here, the uniform chance: "
+        in text
+    )
+    assert "Easy: SGN test 0.20 (uniform), EQA test 0.33 (uniform)" in text
+    assert "Evaluations at most 100,352 frames apart: a crossing is known to that resolution." in text
+    assert lines[-4:] == [
+        "| Run | Setting | seed | SGN test |",  # EQA test: no run evaluated it
+        "|:--|:--|--:|:--|",
+        "| w/o SA | Easy · Aux | 0 | 0.30M / 0.10M / 0.30M |",
+        "| w/o SA | Easy · Aux | 0 | no metrics.csv here |",
+    ]
+    assert markdown([]) == ""
+    assert "at most — frames apart" in markdown([gone])
+    eqa = run_efficiency(W_O_SA, PROFILE, tmp_path)
+    eqa.crossings["eqa_test"] = {"chance": None, "0.5": None, "0.9": None}
+    del eqa.crossings["sgn_test"]
+    assert markdown([eff, eqa], ("sgn_test", "eqa_test")).splitlines()[-1] == (
+        "| w/o SA | Easy · Aux | 0 | — | >0.30M / >0.30M / >0.30M |"
+    )
+
+
+def test_the_section_states_the_chance_it_reads_and_each_cadence(tmp_path):
+    """Two runs evaluated 100,352 and 50,000 frames apart, the No Aux one in Easy; chance given: its source and
+    only the runs' difficulties are stated."""
+    no_aux = next(s for s in load_table("table3").runs([0]) if s.row == "w/o SA" and not s.aux)
+    write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,0.9" for s in (99_328, 199_680)])
+    write_points(tmp_path, no_aux, [f"{s},eval/sgn_test,0.9" for s in (50_000, 100_000)])
+    chance = Chance({("easy", "sgn_test"): 0.25}, "a fixture's blind runs")
+    runs = [run_efficiency(s, PROFILE, tmp_path, chance) for s in (W_O_SA, no_aux)]
+    runs[1].crossings["sgn_x"] = {"chance": None, "0.5": None, "0.9": None}  # a metric without a label
+    lines = markdown(runs, ("sgn_test", "sgn_x"), chance).splitlines()
+    assert lines[2] == (
+        "Frames at which each run's greedy accuracy (its periodic evaluation in `metrics.csv`) first leaves chance "
+        "(above chance + 0.10; chance is what a blind model scores here, a fixture's blind runs: Easy: SGN test 0.25, "
+        "EQA test 0.33 (uniform), SGN train 0.20 (uniform), EQA train 0.33 (uniform)), then reaches 0.5 and 0.9, as "
+        "'leaves chance / 0.5 / 0.9'; >F: not by its last evaluation at F frames. Evaluations at most 50,000, 100,352 "
+        "frames apart: a crossing is known to that resolution."
+    )
+    assert lines[3] == "" and lines[4] == "| Run | Setting | seed | SGN test | sgn_x |"
+    assert lines[-2:] == [
+        "| w/o SA | Easy · Aux | 0 | 0.10M / 0.10M / 0.10M | — |",
+        "| w/o SA | Easy · No Aux | 0 | 0.05M / 0.05M / 0.05M | >0.10M / >0.10M / >0.10M |",
+    ]
+
+
+def test_a_tables_crossings_read_the_profiles_blind_prior_by_default(tmp_path, monkeypatch):
+    import emml.report.chance
+
+    asked = []
+
+    def prior(profile, results_root=None):
+        asked.append(profile)
+        return Chance({("easy", "sgn_test"): 0.5})
+
+    monkeypatch.setattr(emml.report.chance, "blind_prior", prior)
+    points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
+    write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points])
+    (eff,) = table_efficiency(load_table("table3"), PROFILE, [W_O_SA.run_name(PROFILE)], tmp_path)
+    assert asked == [PROFILE] and eff.crossings["sgn_test"]["chance"] == 299_008  # above 0.6, not the uniform 0.3

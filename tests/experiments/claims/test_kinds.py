@@ -4,6 +4,7 @@ training split (not supported at this budget) and one with a cell missing (untes
 swapped or a missing cell ignored makes one of them fail."""
 
 import math
+from dataclasses import replace
 
 import pytest
 
@@ -17,7 +18,7 @@ from emml.experiments.claims.evidence import (
     Score,
     status,
 )
-from emml.experiments.claims.kinds import KINDS
+from emml.experiments.claims.kinds import KINDS, metric_text
 from emml.experiments.tables import load_table
 
 TABLE2 = load_table("table2")
@@ -275,3 +276,138 @@ def test_a_relative_diagnostic_waits_for_its_reference():
 def test_every_kind_is_tested_here():
     tested = {"best", "below", "level", "at_least", "aux_helps", "harder", "faster", "diagnostic"}
     assert set(KINDS) == tested
+
+
+# What each kind's comparisons say on the page (issue 66: mutation testing): the comparison, its setting, metric
+# and the row it puts higher, written out by hand
+
+
+def checks(c: Claim, cells: dict) -> list:
+    keys = sorted({(d, a, m) for (_, d, a, m) in cells}, key=lambda k: (c.metrics.index(k[2]), k[0], not k[1]))
+    return KINDS[c.kind].checks(c, TABLE2, keys, lambda row, d, a, m: cells.get((row, d, a, m), []))
+
+
+def named(cs: list) -> list[tuple]:
+    return [(c.what, c.setting, c.metric, c.subject) for c in cs]
+
+
+def test_best_compares_the_row_with_every_other_in_the_table_order():
+    cs = checks(claim("best", rows=("Dual-Attention",)), best([run(0.9)]))
+    assert named(cs) == [
+        (f"SGN test, Easy · Aux: Dual-Attention > {other}", "Easy · Aux", "SGN test", "Dual-Attention")
+        for other in ("Text only", "Image only", "Concat", "GA", "FiLM", "PACMAN")
+    ]
+    assert KINDS["best"].involved(claim("best", rows=("Dual-Attention",)), TABLE2) == set(ROWS)
+
+
+def test_below_level_and_at_least_name_their_rows():
+    cells = table({"Text only": [run(0.45)], "GA": [run(0.3)], "Dual-Attention": [run(0.9)]})
+    assert named(checks(claim("below", rows=("GA",), than="Text only"), cells)) == [
+        ("SGN test, Easy · Aux: Text only > GA", "Easy · Aux", "SGN test", "Text only")
+    ]
+    assert named(checks(level_claim(), cells)) == [
+        ("SGN test, Easy · Aux: GA level with Dual-Attention", "Easy · Aux", "SGN test", "Dual-Attention")
+    ]
+    assert named(checks(at_least_claim(), cells)) == [
+        ("SGN test, Easy · Aux: GA ≥ 0.8", "Easy · Aux", "SGN test", "GA")
+    ]
+    assert KINDS["below"].involved(claim("below", rows=("GA",), than="Text only"), TABLE2) == {"GA", "Text only"}
+    assert KINDS["at_least"].involved(at_least_claim(), TABLE2) == {"GA"}
+
+
+def test_aux_helps_makes_one_comparison_per_row_and_difficulty():
+    c = claim("aux_helps", rows=("GA", "FiLM"), where={"difficulty": "easy"})
+    cells = {**aux_cells([run(0.5)], [run(0.3)]), ("FiLM", "easy", True, "sgn_test"): [run(0.6)]}
+    cells[("FiLM", "easy", False, "sgn_test")] = [run(0.6)]
+    cs = checks(c, cells)
+    assert named(cs) == [
+        ("SGN test, Easy: GA Aux > No Aux", "Easy", "SGN test", "GA Aux"),
+        ("SGN test, Easy: FiLM Aux > No Aux", "Easy", "SGN test", "FiLM Aux"),
+    ]
+    assert [x.outcome for x in cs] == ["holds", "unclear"]
+    # several subjects: one row unlearned with its other cell missing waits for the cell
+    assert not KINDS["aux_helps"].single_subject
+    assert all(KINDS[k].single_subject for k in KINDS if k != "aux_helps")
+    assert decide(c, {**cells, ("FiLM", "easy", False, "sgn_test"): []} | aux_cells([run(0.5, train=0.2)], [])) == (
+        UNTESTABLE
+    )
+
+
+def test_harder_names_the_setting_and_each_rows_comparison():
+    eqa = {row: (0.5 if i < 4 else 0.95) for i, row in enumerate(ROWS)}
+    (c,) = checks(harder_claim(), harder_cells(eqa))
+    assert named([c]) == [("Easy · Aux: EQA test below SGN test", "Easy · Aux", "", "most rows")]
+    assert c.numbers == "in 4 of 7 rows"
+    assert c.detail.startswith("Text only: SGN test > EQA test: holds, 0.80 vs 0.50; Image only: SGN test > EQA test")
+    assert c.detail.endswith("(0 of 7 rows have not learned their training split)")
+    (c,) = checks(harder_claim(), harder_cells(eqa, unlearned=tuple(ROWS[:3])))
+    assert c.detail.endswith("(3 of 7 rows have not learned their training split)") and not c.chance
+    assert KINDS["harder"].involved(harder_claim(), TABLE2) == set(ROWS)
+
+
+def test_faster_names_its_mark():
+    cs = checks(faster_claim(), faster_cells([crossing(300_000)], [crossing(500_000)]))
+    assert named(cs) == [
+        ("SGN train, Easy · Aux: Dual-Attention leaves chance before GA", "Easy · Aux", "SGN train", "Dual-Attention")
+    ]
+    labels = {
+        m: KINDS["faster"].metric_label(replace(faster_claim(), mark=m), "sgn_train") for m in ("chance", "0.5", "0.9")
+    }
+    assert labels == {
+        "chance": "SGN train: frames until it leaves chance",
+        "0.5": "SGN train: frames until it reaches 0.5",
+        "0.9": "SGN train: frames until it reaches 0.9",
+    }
+    assert KINDS["faster"].curve and KINDS["diagnostic"].curve and not KINDS["best"].curve
+    assert KINDS["best"].metric_label(faster_claim(), "sgn_train") == "SGN train"
+
+
+def test_diagnostic_names_its_key_and_the_reference_it_reads():
+    assert named(checks(diag_claim(), diag_cells([run(0.6)]))) == [
+        ("Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5", "Easy · No Aux", "diag/detector_ap", "Dual-Attention")
+    ]
+    c = diag_claim(relative={"aux": True})
+    assert KINDS["diagnostic"].wheres(c) == [{"difficulty": "easy", "aux": False}, {"difficulty": "easy", "aux": True}]
+    assert KINDS["diagnostic"].wheres(diag_claim()) == [{"difficulty": "easy", "aux": False}]
+    assert KINDS["diagnostic"].metric_label(c, "sgn_test") == "diag/detector_ap"
+    (x,) = checks(c, diag_cells([run(0.33)], [run(0.6)]))  # the Aux cell is the reference's, not compared itself
+    assert x.what == "Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5 × its Easy · Aux run's 0.60"
+    (x,) = checks(c, diag_cells([run(0.9)], []))
+    assert (x.outcome, x.detail) == ("missing", "no run with a metrics.csv here in Easy · Aux")
+    assert named([x]) == [
+        ("Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5", "Easy · No Aux", "diag/detector_ap", "Dual-Attention")
+    ]
+
+
+def test_a_relative_diagnostic_missing_one_rows_reference_still_compares_the_next_row():
+    c = replace(diag_claim(relative={"aux": True}), rows=("GA", "Dual-Attention"))
+    cells = {**diag_cells([run(0.33)], [run(0.6)]), ("GA", "easy", False, "sgn_test"): [run(0.9)]}
+    ga, da = checks(c, cells)  # GA has no Aux run: its reference is missing
+    assert (ga.subject, ga.outcome, da.subject, da.outcome) == ("GA", "missing", "Dual-Attention", "holds")
+
+
+def test_a_diagnostic_relative_to_another_difficulty_reads_that_difficulty():
+    """Hard · No Aux against 0.5 × the same row's Easy · No Aux figure 0.8: the threshold 0.4."""
+    c = claim(
+        "diagnostic",
+        rows=("Dual-Attention",),
+        key="diag/detector_ap",
+        value=0.5,
+        where={"difficulty": "hard", "aux": False},
+        relative={"difficulty": "easy"},
+    )
+    cells = {("Dual-Attention", "hard", False, "sgn_test"): [run(0.45)]}
+    cells[("Dual-Attention", "easy", False, "sgn_test")] = [run(0.8)]
+    (x,) = checks(c, cells)
+    assert x.outcome == "holds" and x.what.endswith("≥ 0.5 × its Easy · No Aux run's 0.80")
+    cells[("Dual-Attention", "easy", False, "sgn_test")] = [run(0.95)]  # 0.475: 0.45 below it
+    assert checks(c, cells)[0].outcome == "reversed"
+
+
+def test_each_kind_states_its_rule_under_its_name():
+    for name, kind in KINDS.items():
+        assert kind.rule.startswith(f"**{name}**") and kind.rule.endswith(".")
+
+
+def test_a_metric_without_a_label_is_named_as_it_is():
+    assert metric_text("sgn_test") == "SGN test" and metric_text("eqa_transfer") == "eqa_transfer"
