@@ -16,6 +16,18 @@ README = ROOT / "README.md"
 MKDOCS = importlib.util.find_spec("mkdocs") is not None and importlib.util.find_spec("material") is not None
 
 
+def _strict_build(folder):
+    """`mkdocs build --strict` of the site copied into ``folder`` (the generated pages there), into folder/site."""
+    return subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(folder / "mkdocs.yml"), "-d", "site"],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={"NO_MKDOCS_2_WARNING": "1", "PATH": "/usr/bin:/bin", "HOME": str(folder)},
+    )
+
+
 @pytest.mark.skipif(not MKDOCS, reason="mkdocs or mkdocs-material not installed (the dev extra: pip install -e .[dev])")
 def test_the_docs_site_builds_strictly_with_its_generated_references(tmp_path):
     shutil.copy(ROOT / "mkdocs.yml", tmp_path / "mkdocs.yml")
@@ -33,14 +45,7 @@ def test_the_docs_site_builds_strictly_with_its_generated_references(tmp_path):
     for section in ("## TrainConfig", "## DoomConfig", "## PPOConfig", "## ModelConfig"):
         assert section in config
     assert "| `max_steps` | `int` | `210` | Episode limit in agent steps" in config  # a field's own docstring
-    build = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(tmp_path / "mkdocs.yml"), "-d", "site"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={"NO_MKDOCS_2_WARNING": "1", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)},
-    )
+    build = _strict_build(tmp_path)
     assert build.returncode == 0, build.stderr[-3000:]
     assert (tmp_path / "site" / "reference" / "cli" / "index.html").is_file()
     assert (tmp_path / "site" / "experiments" / "index.html").is_file()
@@ -55,14 +60,7 @@ def test_a_broken_link_or_a_page_left_out_fails_the_strict_build(tmp_path):
         (docs / "reference" / name).parent.mkdir(exist_ok=True)
         (docs / "reference" / name).write_text(f"# {name}\n")
     (docs / "orphan.md").write_text("# Orphan\n\n[gone](fidelity.md#no-such-section)\n")
-    build = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(tmp_path / "mkdocs.yml"), "-d", "site"],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={"NO_MKDOCS_2_WARNING": "1", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)},
-    )
+    build = _strict_build(tmp_path)
     assert build.returncode != 0
     assert "orphan.md" in build.stderr and "no-such-section" in build.stderr
 

@@ -6,6 +6,26 @@ from pathlib import Path
 from emml.experiments.tables import load_table
 from emml.report.index import profiles_with_results
 
+GREEDY = ("sgn_train", "sgn_test", "eqa_train", "eqa_test")
+"""The greedy metrics a recorded run's results row holds."""
+
+
+def _recorded_easy_dual_attention(tmp_path, monkeypatch, roots: dict):
+    """Table 2's Easy Dual-Attention runs of the demo profile, each recorded (a results row of 0.5 everywhere) under
+    ``roots``, with a store of the test's own: yields each run's config."""
+    from emml.config.profiles import profile_seeds
+    from emml.runs.rundir import record_result
+
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
+    specs = [s for s in load_table("table2").runs(profile_seeds("demo")) if s.model == "dual_attention"]
+    for spec in [s for s in specs if s.difficulty == "easy"]:
+        cfg = spec.to_config("demo", **roots)
+        payload = {"run_name": spec.run_name("demo"), "table": "table2", "model": cfg.model, "difficulty": "easy",
+                   "aux": cfg.aux, "seed": 0, "profile": "demo", "frames": 64, "git_sha": "12e0077", "run_id": "x",
+                   "eval_episodes": 1, "metrics": dict.fromkeys(GREEDY, 0.5)}  # fmt: skip
+        record_result(payload, cfg)
+        yield cfg
+
 
 def test_quick_first_then_paper_then_the_rest_and_never_smoke(tmp_path):
     for table, profile in [("table2", "demo"), ("table2", "smoke"), ("table2", "paper"), ("table3", "quick")]:
@@ -28,21 +48,12 @@ def test_a_damaged_run_dir_is_named_and_the_reports_go_on(tmp_path, monkeypatch,
     """Issue 54: a garbage results.json in a finished run dir killed `emml reports` with a JSON traceback naming no
     file, and no report was written. Now it is named, its run shown with its declared config, and the rest goes on;
     a checkpoint that cannot be read costs its figures only."""
-    from emml.config.profiles import profile_seeds
     from emml.report.index import write_reports
-    from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir
+    from emml.runs.rundir import CHECKPOINT, RESULTS, run_dir
 
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
     roots = {"run_root": str(tmp_path / "runs"), "results_root": str(tmp_path / "results")}
-    specs = [s for s in load_table("table2").runs(profile_seeds("demo")) if s.model == "dual_attention"]
     damaged = None
-    for spec in [s for s in specs if s.difficulty == "easy"]:
-        cfg = spec.to_config("demo", **roots)
-        metrics = {"sgn_train": 0.5, "sgn_test": 0.5, "eqa_train": 0.5, "eqa_test": 0.5}
-        payload = {"run_name": spec.run_name("demo"), "table": "table2", "model": cfg.model, "difficulty": "easy",
-                   "aux": cfg.aux, "seed": 0, "profile": "demo", "frames": 64, "git_sha": "12e0077", "run_id": "x",
-                   "eval_episodes": 1, "metrics": metrics}  # fmt: skip
-        record_result(payload, cfg)
+    for cfg in _recorded_easy_dual_attention(tmp_path, monkeypatch, roots):
         if cfg.aux:
             damaged = run_dir(cfg)
             damaged.mkdir(parents=True)
@@ -107,24 +118,15 @@ def test_a_garbage_line_in_one_mirror_costs_that_run_only(tmp_path, monkeypatch,
     """Issue 65: one garbage line in one run's metrics.csv skipped the whole Table 2 page (its curves read the mirror)
     and, in a run a diagnostic claim reads, stopped `emml reports` with no file at all. Now that run's curve and
     cells are left out, it is named once with the line, and every other file is written."""
-    from emml.config.profiles import profile_seeds
     from emml.report.index import write_reports
-    from emml.runs.rundir import METRICS, record_result, run_dir
+    from emml.runs.rundir import METRICS, run_dir
 
-    monkeypatch.setenv("MLFLOW_TRACKING_URI", f"sqlite:///{tmp_path}/mlflow.db")
     roots = {"run_root": str(tmp_path / "runs"), "results_root": str(tmp_path / "results")}
-    specs = [s for s in load_table("table2").runs(profile_seeds("demo")) if s.model == "dual_attention"]
     damaged = None
-    for spec in [s for s in specs if s.difficulty == "easy"]:
-        cfg = spec.to_config("demo", **roots)
-        metrics = {"sgn_train": 0.5, "sgn_test": 0.5, "eqa_train": 0.5, "eqa_test": 0.5}
-        payload = {"run_name": spec.run_name("demo"), "table": "table2", "model": cfg.model, "difficulty": "easy",
-                   "aux": cfg.aux, "seed": 0, "profile": "demo", "frames": 64, "git_sha": "12e0077", "run_id": "x",
-                   "eval_episodes": 1, "metrics": metrics}  # fmt: skip
-        record_result(payload, cfg)
+    for cfg in _recorded_easy_dual_attention(tmp_path, monkeypatch, roots):
         folder = run_dir(cfg)
         folder.mkdir(parents=True, exist_ok=True)
-        lines = ["step,key,value"] + [f"{s},eval/{m},0.5" for s in (32, 64) for m in metrics]
+        lines = ["step,key,value"] + [f"{s},eval/{m},0.5" for s in (32, 64) for m in GREEDY]
         lines += [f"{s},diag/{k},0.8" for s in (32, 64) for k in ("attention_on_target", "detector_ap")]
         if cfg.aux:  # the run the claim 'attention-on-target' reads, and one of the table's curves
             damaged = folder / METRICS
