@@ -107,7 +107,7 @@ def test_the_demo_figure_plots_the_logged_curves(demo_run, tmp_path, monkeypatch
     assert list(series["SGN test, greedy eval"].get_ydata()) == pytest.approx(list(SGN_TEST.values()))
     assert list(series["SGN, training episodes"].get_ydata()) == pytest.approx([v - 0.05 for v in SGN_TRAIN.values()])
     assert not any("EQA" in label for label in series)  # nothing logged for EQA: no EQA series
-    assert ax.get_xlabel() == "frames (agent steps)" and ax.get_ylabel() == "accuracy"
+    assert ax.get_xlabel() == "M frames" and ax.get_ylabel() == "accuracy"  # frames in millions (the reports' axis)
     assert "dual_attention, Doom easy, SGN only, aux=True: profile demo, 163,840 frames" in ax.get_title()
     with Image.open(png) as img:
         assert img.format == "PNG"
