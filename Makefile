@@ -61,7 +61,7 @@ MUT_TESTS_report/chance = tests/report/test_chance.py tests/report/test_claims_o
 MUT_TESTS_report/aggregate = tests/report/test_aggregate.py tests/report/test_aggregate_interval.py $(addprefix tests/report/test_tables.py::,test_the_aggregate_under_the_table test_the_aggregate_compares_like_with_like_issue_49)
 MUT_TESTS_report/efficiency = tests/report/test_efficiency.py
 MUT_TESTS_rl/ppo = tests/rl/test_ppo_losses.py tests/rl/test_advantage_normalisation.py tests/rl/test_ppo_by_hand.py tests/rl/test_gae.py tests/rl/test_rollout_buffer.py
-MUT_TESTS_rl/rollout = tests/rl/test_gae.py tests/rl/test_rollout_buffer.py tests/rl/test_ppo_losses.py tests/rl/test_ppo_by_hand.py
+MUT_TESTS_rl/rollout = tests/rl/test_gae.py tests/rl/test_rollout_buffer.py tests/rl/test_rollout_split_insert.py tests/rl/test_ppo_losses.py tests/rl/test_ppo_by_hand.py
 MUT_TESTS_envs/doom = tests/envs/test_reach.py
 # doom.py: its reward and success only (the engine's setup, spaces and labels are other tests' business)
 MUT_NAMES_envs/doom = 'emml.envs.doom.x*DoomEnv*step__mutmut_*' 'emml.envs.doom.x*DoomEnv*_reached__mutmut_*' 'emml.envs.doom.x*DoomEnv*_target_distance__mutmut_*' 'emml.envs.doom.x*DoomEnv*_distances__mutmut_*'
