@@ -129,18 +129,18 @@ def run_table(
         _fail(str(e))
     data = asdict(report)
     if report.stopped:
+        from emml.experiments.resume import command_line
         from emml.models.plugins import configured
 
-        plugins = [arg for p in configured() for arg in ("--plugin", p)]  # a model of one's own needs its plugin
-        only_args = [arg for o in only for arg in ("--only", o)]
-        # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
-        roots = [a for k, v in (("--run-root", run_root), ("--results-root", results_root)) if v for a in (k, v)]
-        how = (["--jobs", str(jobs)] if jobs else []) + (["--device", device] if device != "cpu" else [])
+        options = [("--profile", profile), ("--run-root", run_root), ("--results-root", results_root)]
+        options += [("--only", only), ("--jobs", jobs), ("--device", device if device != "cpu" else None)]
         if backend == "slurm":  # the same jobs' shape: a rerun resumes them there
-            slurm = [("--partition", partition), ("--time-min", time_min), ("--gpus", gpus), ("--cpus", cpus)]
-            how += ["--backend", "slurm", *[a for k, v in slurm if v for a in (k, str(v))], "--pack", str(pack)]
-            how += ["--wait"] * wait + (["--slurm-cluster", slurm_cluster] if slurm_cluster != "slurm" else [])
-        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *roots, *only_args, *how])
+            options += [("--backend", "slurm"), ("--partition", partition), ("--time-min", time_min)]
+            options += [("--gpus", gpus), ("--cpus", cpus), ("--pack", pack), ("--wait", wait)]
+            options += [("--slurm-cluster", slurm_cluster if slurm_cluster != "slurm" else None)]
+        # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'"); a model of one's own needs
+        # its plugin
+        again = shlex.join(command_line(["run", table], options, configured()))
         _echo(data, as_json, stopped_line(report, again))
         raise typer.Exit(130)
     _echo(
