@@ -156,8 +156,13 @@ def run_table(
 
 
 def campaign(
-    name: str = typer.Argument(..., help="A campaign of reproduce/campaigns/ (e.g. reference)."),
-    show_status: bool = typer.Option(False, "--status", help="Show each run as done / running / interrupted / to do."),
+    name: str = typer.Argument(
+        ..., help="A campaign of reproduce/campaigns/ (e.g. reference), or `status` followed by one: its status."
+    ),
+    of: str = typer.Argument(None, metavar="[NAME]", help="After `status`: the campaign whose status is shown."),
+    show_status: bool = typer.Option(
+        False, "--status", help="Show each run as done / running / interrupted / to do (`emml campaign status NAME`)."
+    ),
     pin: bool = typer.Option(
         True,
         "--pin/--no-pin",
@@ -172,7 +177,7 @@ def campaign(
     ),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Train a campaign's unfinished runs in its order, or show its status.
+    """Train a campaign's unfinished runs in its order, or show its status (`emml campaign status NAME`).
 
     Interrupted runs resume; with --pin (the default) it trains from a git worktree of this commit."""
     from dataclasses import asdict
@@ -191,6 +196,10 @@ def campaign(
     )
     from emml.experiments.launch import stopped_line
 
+    if of is not None:  # `emml campaign status NAME`: the same as `emml campaign NAME --status`
+        if name != "status":
+            _fail(f"campaign {name!r} {of!r}: expected `emml campaign NAME` or `emml campaign status NAME`")
+        name, show_status = of, True
     try:
         plan = select_steps(load_campaign(name), steps)
     except ValueError as e:

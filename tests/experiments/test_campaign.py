@@ -198,6 +198,10 @@ def test_cli_status_and_an_unknown_campaign(tracking):
     assert f"~{5_000_192 / 360 / 60:.0f} min of a GPU node (8 at a time" in result.output
     rows = json.loads(runner.invoke(app, ["campaign", "reference", "--status", "--json", *roots]).output)
     assert rows[0]["run_name"] == "concat-easy-aux-s0-quick" and rows[0]["state"] == "to do"
+    # issue 63: `emml campaign status NAME`, the flag kept as its alias; anything else in status's place is refused
+    assert runner.invoke(app, ["campaign", "status", "reference", *roots]).output == result.output
+    result = runner.invoke(app, ["campaign", "reference", "status", *roots])
+    assert result.exit_code == 2 and "expected `emml campaign NAME` or `emml campaign status NAME`" in result.output
 
 
 def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_path, campaign_lock, monkeypatch):
