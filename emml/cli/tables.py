@@ -157,9 +157,11 @@ def run_table(
 
 def campaign(
     name: str = typer.Argument(
-        ..., help="A campaign of reproduce/campaigns/ (e.g. reference), or `status` followed by one: its status."
+        ...,
+        metavar="NAME|status",
+        help="A campaign of reproduce/campaigns/ (e.g. reference), or `status` followed by one: its status.",
     ),
-    of: str = typer.Argument(None, metavar="[NAME]", help="After `status`: the campaign whose status is shown."),
+    of: str = typer.Argument(None, metavar="NAME", help="After `status`: the campaign whose status is shown."),
     show_status: bool = typer.Option(
         False, "--status", help="Show each run as done / running / interrupted / to do (`emml campaign status NAME`)."
     ),

@@ -72,9 +72,7 @@ class Trainer:
     def __init__(
         self, cfg: TrainConfig, tracker: Tracker | None = None, quiet: bool = False, parent_run_id: str | None = None
     ):
-        # the values, then the model registry and the machine, before compute; what it writes to was checked where the
-        # run was started (emml train, emml run: emml/rl/prepare.py)
-        (self.cfg,) = prepare(cfg, writes=False)
+        (self.cfg,) = prepare(cfg, writes=False)  # values, registry, machine: before compute (its writes: its caller's)
         self.parent_run_id = parent_run_id
         self.name = run_name(cfg)
         self.dir = path_of(cfg.run_root, cfg.table, self.name)
