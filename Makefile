@@ -136,7 +136,7 @@ campaign: setup
 	$(EMML) campaign $(CAMPAIGN)
 
 campaign-status: setup
-	$(EMML) campaign $(CAMPAIGN) --status
+	$(EMML) campaign status $(CAMPAIGN)
 
 # every profile with results: reports/tableN-PROFILE.{md,tex}, -curves.{png,pdf}, the best Dual-Attention run's
 # figures (when its run dir is here), the same for the experiments of reproduce/experiments/ with results, and

@@ -129,18 +129,18 @@ def run_table(
         _fail(str(e))
     data = asdict(report)
     if report.stopped:
+        from emml.experiments.resume import command_line
         from emml.models.plugins import configured
 
-        plugins = [arg for p in configured() for arg in ("--plugin", p)]  # a model of one's own needs its plugin
-        only_args = [arg for o in only for arg in ("--only", o)]
-        # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'")
-        roots = [a for k, v in (("--run-root", run_root), ("--results-root", results_root)) if v for a in (k, v)]
-        how = (["--jobs", str(jobs)] if jobs else []) + (["--device", device] if device != "cpu" else [])
+        options = [("--profile", profile), ("--run-root", run_root), ("--results-root", results_root)]
+        options += [("--only", only), ("--jobs", jobs), ("--device", device if device != "cpu" else None)]
         if backend == "slurm":  # the same jobs' shape: a rerun resumes them there
-            slurm = [("--partition", partition), ("--time-min", time_min), ("--gpus", gpus), ("--cpus", cpus)]
-            how += ["--backend", "slurm", *[a for k, v in slurm if v for a in (k, str(v))], "--pack", str(pack)]
-            how += ["--wait"] * wait + (["--slurm-cluster", slurm_cluster] if slurm_cluster != "slurm" else [])
-        again = shlex.join(["emml", *plugins, "run", table, "--profile", profile, *roots, *only_args, *how])
+            options += [("--backend", "slurm"), ("--partition", partition), ("--time-min", time_min)]
+            options += [("--gpus", gpus), ("--cpus", cpus), ("--pack", pack), ("--wait", wait)]
+            options += [("--slurm-cluster", slurm_cluster if slurm_cluster != "slurm" else None)]
+        # quoted for the shell: a row label has spaces ("--only 'row=softplus, mean'"); a model of one's own needs
+        # its plugin
+        again = shlex.join(command_line(["run", table], options, configured()))
         _echo(data, as_json, stopped_line(report, again))
         raise typer.Exit(130)
     _echo(
@@ -156,8 +156,15 @@ def run_table(
 
 
 def campaign(
-    name: str = typer.Argument(..., help="A campaign of reproduce/campaigns/ (e.g. reference)."),
-    show_status: bool = typer.Option(False, "--status", help="Show each run as done / running / interrupted / to do."),
+    name: str = typer.Argument(
+        ...,
+        metavar="NAME|status",
+        help="A campaign of reproduce/campaigns/ (e.g. reference), or `status` followed by one: its status.",
+    ),
+    of: str = typer.Argument(None, metavar="NAME", help="After `status`: the campaign whose status is shown."),
+    show_status: bool = typer.Option(
+        False, "--status", help="Show each run as done / running / interrupted / to do (`emml campaign status NAME`)."
+    ),
     pin: bool = typer.Option(
         True,
         "--pin/--no-pin",
@@ -172,7 +179,7 @@ def campaign(
     ),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
-    """Train a campaign's unfinished runs in its order, or show its status.
+    """Train a campaign's unfinished runs in its order, or show its status (`emml campaign status NAME`).
 
     Interrupted runs resume; with --pin (the default) it trains from a git worktree of this commit."""
     from dataclasses import asdict
@@ -191,6 +198,10 @@ def campaign(
     )
     from emml.experiments.launch import stopped_line
 
+    if of is not None:  # `emml campaign status NAME`: the same as `emml campaign NAME --status`
+        if name != "status":
+            _fail(f"campaign {name!r} {of!r}: expected `emml campaign NAME` or `emml campaign status NAME`")
+        name, show_status = of, True
     try:
         plan = select_steps(load_campaign(name), steps)
     except ValueError as e:

@@ -172,11 +172,11 @@ def bench_train_cmd(
     aggregate of N packed runs against the raw simulator limit of the machine's cores."""
     from emml.config.profiles import profile_config
     from emml.rl.bench import PARTS, bench_train
-    from emml.rl.hardware import check_runnable
+    from emml.rl.prepare import prepare
 
     try:
-        cfg = profile_config(profile, "easy", _parse_sets(sets), model=model, aux=aux, device=device).validate()
-        check_runnable(cfg)  # bench runs the model without a Trainer: the registry and the machine, before compute
+        cfg = profile_config(profile, "easy", _parse_sets(sets), model=model, aux=aux, device=device)
+        (cfg,) = prepare(cfg, writes=False)  # bench runs the model without a Trainer: the registry and the machine
     except ValueError as e:
         _fail(str(e))
     if part not in PARTS:
@@ -235,11 +235,11 @@ def _child_bench_args(profile: str, updates: int, sets: list[str], variants: lis
     """`bench train` options for child processes, after validating the config of every variant here: bad input
     fails before any child starts."""
     from emml.config.profiles import profile_config
-    from emml.rl.hardware import check_runnable
+    from emml.rl.prepare import prepare
 
     for extra in variants:
         try:
-            check_runnable(profile_config(profile, "easy", {**_parse_sets(sets), **extra}).validate())
+            prepare(profile_config(profile, "easy", {**_parse_sets(sets), **extra}), writes=False)
         except ValueError as e:
             _fail(str(e))
     return ["--profile", profile, "--updates", str(updates), *(a for s in sets for a in ("--set", s))]

@@ -57,7 +57,7 @@ def train(
     Dual-Attention without aux on Doom Easy under the quick profile (1.5M frames), and says so first. With
     --pack-seeds, several seeds train in one process, each written as its own run."""
     from emml.config.profiles import profile_config
-    from emml.rl.hardware import check_runnable
+    from emml.rl.prepare import prepare
 
     overrides = _parse_sets(sets)
     if frames:
@@ -72,14 +72,13 @@ def train(
             profile_config(profile, difficulty, overrides, model=model, aux=aux, seed=s, table=table, device=device)
             for s in seeds
         ]
-        cfg = check_runnable(cfgs[0].validate())  # the values, then the model registry and the machine (rl/hardware.py)
         if pack_seeds:
             from emml.rl.packed_trainer import check_packable
 
             check_packable(cfgs)
-        from emml.runs.preflight import check_train
-
-        check_train(*cfgs)  # the store, the run and results folders, the results CSV: before any engine or run
+        # the values, the model registry and the machine, then the store, the run and results folders, the results
+        # CSV: before any engine or run (emml/rl/prepare.py)
+        cfg = prepare(*cfgs)[0]
     except ValueError as e:
         _fail(str(e))
     _use_tcmalloc()
@@ -282,10 +281,10 @@ def demo(
     over = {"env.tasks": "sgn"}
     over.update({k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None})
     try:
-        cfg = profile_config(profile, "easy", over, model="dual_attention", aux=True, seed=0, table="demo").validate()
-        from emml.runs.preflight import check_train
+        cfg = profile_config(profile, "easy", over, model="dual_attention", aux=True, seed=0, table="demo")
+        from emml.rl.prepare import prepare
 
-        check_train(cfg)  # before any engine or MLflow run
+        (cfg,) = prepare(cfg)  # before any engine or MLflow run
     except ValueError as e:
         _fail(str(e))
     _use_tcmalloc()

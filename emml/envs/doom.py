@@ -134,7 +134,7 @@ class DoomEnv(gym.Env):
 
     ## Arguments
 
-    The keyword arguments of `DoomConfig` (emml/config/schema.py), or ``config=DoomConfig(...)``; e.g.
+    The keyword arguments of `DoomConfig` (emml/config/env.py), or ``config=DoomConfig(...)``; e.g.
     ``gym.make("emml/Doom-v0", difficulty="hard", split="test", tasks="sgn", aux_labels=True)``. The main ones:
     `difficulty` ('easy', 'hard'), `split` ('train', 'test'), `tasks` ('both', 'sgn', 'eqa'), `height` and `width`
     (168 × 300), `aux_labels`, `target_in_obs`, `max_steps`, `shaping`. ``render_mode='rgb_array'`` renders the

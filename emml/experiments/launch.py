@@ -213,10 +213,9 @@ def run_table(
     todo = [run for run in runs if run.state != "finished"]
     report.skipped = [run.name for run in runs if run.state == "finished"]
     if todo:  # each run's config, the store, the run and results folders, the results CSV: before the parent run
-        from emml.rl.hardware import check_runnable
-        from emml.runs.preflight import check_train
+        from emml.rl.prepare import prepare
 
-        check_train(*(check_runnable(run.cfg.validate()) for run in todo))
+        prepare(*(run.cfg for run in todo))
     log(f"{name} [{profile.name}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
     if not todo:
         return report

@@ -259,7 +259,7 @@ def list_tables(directory: Path = REPRODUCE_DIR) -> list[str]:
 
 EXPERIMENTS_DIR = REPRODUCE_DIR / "experiments"
 """Tables beyond the paper's (reproduce/experiments/<name>.toml): a setting an issue measures, e.g. issue 34's x_sent
-readout. A campaign step names one as ``experiments/<name>`` (emml/experiments/campaign.py); `emml reports` reports
+readout. A campaign step names one as ``experiments/<name>`` (emml/experiments/campaign/); `emml reports` reports
 those with results."""
 
 

@@ -23,16 +23,8 @@ from typing import Any, TypeVar
 
 from emml.config.schema import ModelConfig, check_model_options, option_fields
 from emml.models import plugins
-from emml.models.fusion import (
-    Concat,
-    DualAttention,
-    FiLM,
-    Fusion,
-    GatedAttention,
-    ImageOnly,
-    Pacman,
-    TextOnly,
-)
+from emml.models.baselines import Concat, FiLM, GatedAttention, ImageOnly, Pacman, TextOnly
+from emml.models.fusion import DualAttention, Fusion
 
 F = TypeVar("F", bound=type[Fusion])
 

@@ -1,6 +1,6 @@
 """What this installation and this machine can run of a run's config, checked where training starts
-(`check_runnable`): by the trainer before any compute, and by `emml train`, `emml run` and `emml bench train` before
-any run starts.
+(`check_runnable`), part of the one pre-run step (`emml.rl.prepare.prepare`): by the trainer before any compute,
+and by `emml train`, `emml run` and `emml bench train` before any run starts.
 
 `TrainConfig.validate` checks the values (it is a leaf and imports no torch); these are the checks that ask the model
 registry (the model's name and options, plugins loaded: `emml.models.model_config`) and the machine: a C++ compiler

@@ -29,9 +29,9 @@ from emml.rl import alloc
 from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
 from emml.rl.graphs import Graphs, Kept, captures, mean_stats
-from emml.rl.hardware import check_runnable
 from emml.rl.ppo import explained_variance, make_optimizer, model_forward, ppo_step, ppo_update
 from emml.rl.precision import conv_precision
+from emml.rl.prepare import prepare
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
@@ -72,7 +72,7 @@ class Trainer:
     def __init__(
         self, cfg: TrainConfig, tracker: Tracker | None = None, quiet: bool = False, parent_run_id: str | None = None
     ):
-        self.cfg = check_runnable(cfg.validate())  # the values, then the model registry and the machine: before compute
+        (self.cfg,) = prepare(cfg, writes=False)  # values, registry, machine: before compute (its writes: its caller's)
         self.parent_run_id = parent_run_id
         self.name = run_name(cfg)
         self.dir = path_of(cfg.run_root, cfg.table, self.name)

@@ -198,6 +198,10 @@ def test_cli_status_and_an_unknown_campaign(tracking):
     assert f"~{5_000_192 / 360 / 60:.0f} min of a GPU node (8 at a time" in result.output
     rows = json.loads(runner.invoke(app, ["campaign", "reference", "--status", "--json", *roots]).output)
     assert rows[0]["run_name"] == "concat-easy-aux-s0-quick" and rows[0]["state"] == "to do"
+    # issue 63: `emml campaign status NAME`, the flag kept as its alias; anything else in status's place is refused
+    assert runner.invoke(app, ["campaign", "status", "reference", *roots]).output == result.output
+    result = runner.invoke(app, ["campaign", "reference", "status", *roots])
+    assert result.exit_code == 2 and "expected `emml campaign NAME` or `emml campaign status NAME`" in result.output
 
 
 def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_path, campaign_lock, monkeypatch):
@@ -213,7 +217,7 @@ def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_
     monkeypatch.chdir(os.getcwd())  # restored after the test: the command changes directory before it execs
     tree = tmp_path / "tree"
     tree.mkdir()
-    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log, need: tree)
+    monkeypatch.setattr(emml.experiments.campaign.run, "pin_worktree", lambda root, log, need: tree)
     seen = {}
 
     def execve(path, args, env):
@@ -300,7 +304,7 @@ def test_cli_step_filters_the_status_and_travels_to_the_pinned_worktree(tracking
     result = runner.invoke(app, ["campaign", "reference", "--status", "--step", "nope", *roots])
     assert result.exit_code == 2 and "step='nope' is not a step of campaign 'reference'" in result.output
     monkeypatch.chdir(os.getcwd())
-    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", lambda root, log, need: tmp_path)
+    monkeypatch.setattr(emml.experiments.campaign.run, "pin_worktree", lambda root, log, need: tmp_path)
     seen = {}
 
     def execve(path, args, env):
@@ -354,7 +358,7 @@ def campaign_lock(tmp_path, monkeypatch):
     import emml.experiments.campaign
 
     path = tmp_path / "lock" / "campaign.lock"
-    monkeypatch.setattr(emml.experiments.campaign, "campaign_lock_path", lambda: path)
+    monkeypatch.setattr(emml.experiments.campaign.lock, "campaign_lock_path", lambda: path)
     return path
 
 
@@ -371,7 +375,7 @@ def test_one_campaign_per_checkout_the_second_is_refused_naming_the_first(tracki
         raise AssertionError("nothing may start")
 
     monkeypatch.setattr(emml.experiments.campaign, "run_campaign", never)
-    monkeypatch.setattr(emml.experiments.campaign, "pin_worktree", never)
+    monkeypatch.setattr(emml.experiments.campaign.run, "pin_worktree", never)
     roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
     with hold_campaign("reference"):
         with pytest.raises(

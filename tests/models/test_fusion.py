@@ -5,16 +5,8 @@ import math
 import pytest
 import torch
 
-from emml.models.fusion import (
-    Concat,
-    DualAttention,
-    FiLM,
-    GatedAttention,
-    ImageOnly,
-    Pacman,
-    TextOnly,
-    spatial_attention,
-)
+from emml.models.baselines import Concat, FiLM, GatedAttention, ImageOnly, Pacman, TextOnly
+from emml.models.fusion import DualAttention, spatial_attention
 
 # Vocabulary of the hand-made example: 0 pillar, 1 torch, 2 red, 3 green.
 PILLAR, TORCH, RED, GREEN = range(4)

@@ -4,7 +4,8 @@ shown, and what each fusion needs read from its declared attributes."""
 import pytest
 
 from emml.models import ARCHITECTURES, MODELS, ModelConfig, build_model, check_architecture, model_config
-from emml.models.fusion import DualAttention, Fusion, Pacman
+from emml.models.baselines import Pacman
+from emml.models.fusion import DualAttention, Fusion
 from emml.models.registry import architecture
 
 PAPER = {
