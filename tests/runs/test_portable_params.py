@@ -6,6 +6,7 @@ import json
 import shutil
 
 import pytest
+from typer.testing import CliRunner
 
 from emml.config.paths import checkout_root
 from emml.runs import import_runs as importer
@@ -90,3 +91,19 @@ def test_a_moved_run_dir_is_named_by_the_root_it_is_in(tmp_path):
     trained.rename(run)
     [result] = importer.import_runs([run])
     assert store.client().get_run(result.mlflow_run_id).data.params["run_root"] == "runs/extended"
+
+
+def test_import_runs_takes_the_run_and_results_roots(tmp_path):
+    from emml.cli import app
+
+    write_run(tmp_path, "roots-cli", "r", "d" * 32, config={**CONFIG, "results_root": "/work/main/results"})
+    missing = CliRunner().invoke(app, ["import-runs", "--run-root", str(tmp_path / "nowhere")])
+    assert missing.exit_code == 2, missing.output
+    assert f"no such run dir or folder: {tmp_path / 'nowhere'} (--run-root)" in missing.output
+    out = CliRunner().invoke(
+        app, ["import-runs", "--run-root", str(tmp_path / "runs"), "--results-root", "results/alt", "--json"]
+    )
+    assert out.exit_code == 0, out.output
+    assert json.loads(out.stdout)["imported"] == 1
+    [run] = store.find_runs("roots-cli")
+    assert run["params"]["results_root"] == "results/alt"  # its rows are there in this checkout
