@@ -81,7 +81,13 @@ def backfill_config(
 
 
 def import_runs_cmd(
-    paths: list[Path] = typer.Argument(None, help="Run dirs, or folders holding them (default: runs/)."),
+    paths: list[Path] = typer.Argument(None, help="Run dirs, or folders holding them (default: the run root)."),
+    run_root: Path = typer.Option(Path("runs"), help="The folder whose run dirs are imported when no path is given."),
+    results_root: Path = typer.Option(
+        Path("results"),
+        help="The folder of this checkout holding the runs' results rows: the results_root param of each run whose "
+        "own results root was a results/ folder (on the machine that trained it).",
+    ),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """Import finished run dirs into the MLflow store (`make ui` shows them).
@@ -92,12 +98,14 @@ def import_runs_cmd(
     so is an unfinished one (its trainer logs it)."""
     from emml.config.paths import project_path
     from emml.runs.import_runs import import_runs
-    from emml.runs.tracking import tracking_uri
+    from emml.runs.store import tracking_uri
 
-    roots = [project_path(p) for p in paths] if paths else [project_path("runs")]
-    missing = [str(p) for p in roots if paths and not p.exists()]
+    roots = [project_path(p) for p in paths] if paths else [project_path(run_root)]
+    missing = [str(p) for p in roots if not p.exists() and (paths or run_root != Path("runs"))]
     if missing:
-        _fail(f"no such run dir or folder: {', '.join(missing)}")
+        _fail(f"no such run dir or folder: {', '.join(missing)}" + ("" if paths else " (--run-root)"))
+    if project_path(results_root).exists() and not project_path(results_root).is_dir():
+        _fail(f"--results-root: {results_root} is not a folder")
     _check_store()
     from emml.envs.engine import install_signal_handlers
     from emml.experiments.launch import stop_cause
@@ -112,7 +120,7 @@ def import_runs_cmd(
             typer.echo(r.line())
 
     try:
-        results = import_runs(roots, log=log, progress=not as_json)
+        results = import_runs(roots, log=log, progress=not as_json, results_root=results_root)
     except NoSpaceError as e:
         _fail(str(e))
     except (KeyboardInterrupt, SystemExit) as e:

@@ -109,7 +109,7 @@ def submit(
         import submitit
     except ImportError as e:
         raise ValueError("backend='slurm' needs submitit: pip install -e '.[slurm]'") from e
-    from emml.runs.tracking import tracking_uri
+    from emml.runs.store import tracking_uri
 
     name = f"emml-{report.table}-{report.profile}"
     if cluster == "local":  # submitit's local executor (a workstation, the tests): Slurm's time limit and signal

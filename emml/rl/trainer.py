@@ -35,12 +35,13 @@ from emml.rl.prepare import prepare
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
-from emml.runs.import_runs import FINAL, display_name, score_tags, utc_ms
+from emml.runs.mirror import read_mirror
 from emml.runs.preflight import ensure_store
 from emml.runs.records import cut_torn_tail, read_points
 from emml.runs.rundir import (
     CHECKPOINT,
     EVAL_SEED,
+    FINAL,
     METRICS,
     RESULTS,
     RunResult,
@@ -53,10 +54,12 @@ from emml.runs.rundir import (
     run_name,
     run_tags,
     save_results,
+    score_tags,
+    utc_ms,
 )
 from emml.runs.runlock import hold_run
 from emml.runs.segments import begin_segment
-from emml.runs.tracking import Tracker, read_mirror
+from emml.runs.tracking import Tracker, display_name
 from emml.tasks.language import load_dataset, resolve_vocabulary
 
 log = logging.getLogger(__name__)

@@ -2,7 +2,9 @@
 (runs/<table>/<run>/ with results.json and metrics.csv) becomes one FINISHED run of the experiment named by its
 table (described by the table's caption), with the tags the trainer sets, its saved config as params, its whole
 curve and its final score (``final/<key>``, apart from the periodic ``eval/<key>`` curve), dated when it trained
-(emml/runs/tracking.py, `import_run`).
+(`import_run`), written through MLflow's public API (``MlflowClient.log_batch``, emml/runs/store.py). The params name
+the run's roots as this checkout does (``runs``, ``results``: `run_params`), never a folder of the machine that
+trained it.
 
 Once and idempotently: a run dir whose run is already in the store (trained here, imported or resumed here before:
 `stored_run`, keyed by the MLflow run id the run dir recorded) is skipped, so a second import changes nothing.
@@ -28,35 +30,38 @@ from __future__ import annotations
 import bisect
 import hashlib
 import subprocess
+import tempfile
 import time
-from collections.abc import Callable, Iterable
+import warnings
+from collections.abc import Callable, Iterable, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
+from typing import Any
 
-from emml.runs import records
+from emml.config.paths import project_path
+from emml.runs import records, store
 from emml.runs.diskspace import FULL, RERUN, NoSpaceError
-from emml.runs.rundir import CHECKPOINT, METRICS, RESULTS, RUN_FILES, RunDirError, read_results
+from emml.runs.portable import ROOTS, portable, root_name
+from emml.runs.preflight import ensure_store
+from emml.runs.provenance import NOTE, experiment_note
+from emml.runs.rundir import CHECKPOINT, FINAL, METRICS, RENAMED, RESULTS, RUN_FILES, RunDirError, read_results, utc_ms
+from emml.runs.runlock import holder, waiting_lock
+from emml.runs.tracking import IMPORTED_RUN_ID, Tracker, display_name, stored_run
 
 MARKERS = RUN_FILES
 """Files any of which makes a folder a run dir (emml/runs/rundir.py)."""
 IMPORTED_FROM = "emml.imported_from"
-"""Tag of an imported run: its run dir, relative to the checkout (emml.runs.tracking.portable)."""
+"""Tag of an imported run: its run dir, relative to the checkout (emml.runs.portable.portable)."""
+IMPORT_KEY = "emml.import_key"
+"""Tag of a run being imported, set when it is created: its run dir (relative to the checkout) and a digest of its
+files (`import_key`). A run with this tag but not ``IMPORTED_RUN_ID`` is an import cut short (SIGTERM, ``kill -9``),
+which the next import deletes (`leftover_imports`)."""
 TIMES = "emml.times"
 """Tag of an imported run: where its start and end times come from (`run_times`)."""
 NOT_TAGS = ("run_name", "run_id", "metrics", "config", "started_at", "ended_at")
 """results.json keys that are not tags: the run name, the id (tag ``IMPORTED_RUN_ID``), the score and config, and
 when it trained (the MLflow run's own start and end)."""
-RENAMED = {"frames": "trained_frames", "eval_episodes": "score_eval_episodes", "eval_seed": "score_eval_seed"}
-"""results.json keys tagged under another name, apart from the params of the same name: ``frames`` is the frames
-trained (whole updates: 1,500,160) where the param ``frames`` is the config's target (1,500,000); ``eval_episodes``
-and ``eval_seed`` are the final score's (500 episodes, `final_eval_episodes`) where the param ``eval_episodes`` is
-the periodic evaluations' (100)."""
-FINAL = "final/"
-"""Prefix of the final score's metrics (results.json "metrics"): ``final/sgn_test``…, apart from the periodic
-evaluations' ``eval/sgn_test`` curve."""
-DEFAULT_ROOT = "runs"
-"""The run root whose run dirs are named by their run name alone in the store (`display_name`)."""
 
 
 @dataclass
@@ -85,31 +90,13 @@ class ImportResult:
 
 
 def relative(path: Path) -> str:
-    """``path`` relative to the checkout (emml.runs.tracking.portable: '../..' where it is outside)."""
-    from emml.runs.tracking import portable
-
+    """``path`` relative to the checkout (emml.runs.portable.portable: '../..' where it is outside)."""
     return portable(str(Path(path).resolve()))
-
-
-def display_name(run_dir: Path, name: str) -> str:
-    """A run's name in the store, unique in its experiment for the run dirs of a checkout: its run name, followed by
-    its run root when that is not a folder named runs/: a root inside the checkout's runs/ by its path from there
-    (``dual_attention-easy-aux-s1-quick [extended]`` for runs/extended/table2, beside the run of the same name in
-    runs/table2), another by its folder's name (never a path of the machine)."""
-    from emml.runs.tracking import checkout_root
-
-    root = Path(run_dir).resolve().parent.parent
-    if root.name == DEFAULT_ROOT and root.parent.resolve() != (checkout_root() / DEFAULT_ROOT).resolve():
-        return name
-    try:
-        return f"{name} [{root.relative_to((checkout_root() / DEFAULT_ROOT).resolve())}]"
-    except ValueError:
-        return f"{name} [{root.name}]"
 
 
 def import_key(run_dir: Path) -> str:
     """The run dir (relative to the checkout) and a digest of its results.json and metrics.csv: tag
-    ``emml.import_key`` of its imported run (emml.runs.tracking.IMPORT_KEY)."""
+    ``emml.import_key`` of its imported run (`IMPORT_KEY`)."""
     digest = hashlib.sha256()
     for name in (RESULTS, METRICS):
         path = Path(run_dir) / name
@@ -156,12 +143,6 @@ def run_tags(results: dict, run_dir: Path) -> dict:
     return tags
 
 
-def score_tags(results: dict) -> dict:
-    """How the final score was measured, as tags (`RENAMED`): the trainer sets them on its run when it writes
-    results.json, so that a run trained in the store and one imported read alike."""
-    return {RENAMED[k]: results[k] for k in RENAMED if results.get(k) is not None}
-
-
 def as_trained(value):
     """The saved config as `TrainConfig.to_dict()` gave it (JSON turned its tuples into lists), so that its params
     read as a run trained in this store logs them."""
@@ -185,14 +166,6 @@ def final_points(results: dict, path: Path) -> list[tuple[int, str, float]]:
         return [(frames, f"{FINAL}{k}", float(v)) for k, v in metrics.items() if v is not None]
     except (TypeError, ValueError):
         raise RunDirError(f"{path}: 'frames' or a metric is not a number") from None
-
-
-def utc_ms(text: str) -> int:
-    """An ISO 8601 time (results.json ``started_at``) as ms since the epoch; naive times are UTC."""
-    when = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
-    if when.tzinfo is None:
-        when = when.replace(tzinfo=timezone.utc)
-    return int(when.timestamp() * 1000)
 
 
 def curve_seconds(points: list[tuple[int, str, float]]) -> list[tuple[int, float]]:
@@ -280,29 +253,112 @@ def commit_times(run_dirs: list[Path]) -> dict[Path, float]:
     return found
 
 
+@contextmanager
+def import_lock(uri: str | None = None):
+    """Held while one run dir is imported into the store at ``uri``: an exclusive lock (fcntl, released by the kernel
+    however the process ends) on a file beside a sqlite store, or in the temporary folder for another store (imports
+    on one machine). Two imports at once take turns run dir by run dir, so that each finds the other's runs before
+    it would create one."""
+    uri = uri or store.tracking_uri()
+    db = store.sqlite_path(uri)
+    if db is not None:
+        db.parent.mkdir(parents=True, exist_ok=True)
+        path = db.with_name(db.name + ".import.lock")
+    else:
+        path = Path(tempfile.gettempdir()) / f"emml-import-{hashlib.sha1(uri.encode()).hexdigest()[:12]}.lock"
+    with waiting_lock(path):
+        yield
+
+
+def import_run(
+    experiment: str,
+    run_name: str,
+    run_id: str,
+    tags: Mapping[str, Any],
+    params: Mapping[str, Any],
+    points: Iterable[tuple[int, str, float]],
+    uri: str | None = None,
+    start_time: int | None = None,
+    end_time: int | None = None,
+    when: Callable[[int], int] | None = None,
+) -> str:
+    """Log a finished run recorded elsewhere (a run dir's results.json and metrics.csv) as a new FINISHED run of
+    ``experiment`` that started at ``start_time`` and ended at ``end_time`` (ms): ``tags``, ``params`` (flattened as
+    the tracker logs a config, emml.runs.tracking.flatten) and every metric point (step, key, value), at
+    ``when(step)`` (ms), through MLflow's public API (``MlflowClient.log_batch``, emml.runs.store.log_points). The
+    tag ``IMPORTED_RUN_ID`` = ``run_id``, which marks the import done (`stored_run`), is set last, and a failure on
+    the way deletes the half-made run; a run left half-made by a kill is found by the next import (its
+    ``IMPORT_KEY`` tag, `leftover_imports`). Data the store refuses (a metric name MLflow does not take) is a
+    ValueError. Returns the new run's id."""
+    tracker = Tracker(uri)
+    try:
+        tracker.start(experiment, run_name, tags, params, start_time=start_time)
+        log_points(tracker._client, tracker.run_id, list(points), when)
+        tracker.set_tags({IMPORTED_RUN_ID: run_id})
+        tracker.finish("FINISHED", end_time=end_time)
+    except BaseException as e:
+        if tracker._run_id is not None:
+            _discard(tracker._client, tracker._run_id)
+        if getattr(e, "error_code", None) == "INVALID_PARAMETER_VALUE":
+            raise ValueError(f"MLflow refused it: {getattr(e, 'message', e)}") from e
+        raise
+    return tracker.run_id
+
+
+log_points = store.log_points
+"""How an imported run's points are written (a name of this module's: tests stop an import midway through it)."""
+
+
+def _discard(client, run_id: str) -> None:
+    """Delete a half-made run; a store that fails too is warned about (the error that stopped the run matters more)."""
+    try:
+        store.retry(lambda: client.delete_run(run_id))
+    except Exception as e:  # noqa: BLE001
+        warnings.warn(f"MLflow run {run_id} could not be deleted: {type(e).__name__}: {e}", stacklevel=3)
+
+
+def leftover_imports(experiment: str, run_dir: str, uri: str | None = None) -> list[str]:
+    """Runs of ``experiment`` imported from ``run_dir`` (tag ``IMPORTED_FROM``) that no import finished (no
+    ``IMPORTED_RUN_ID``): a kill (SIGTERM, ``kill -9``) cut their import short. Under `import_lock` none is being
+    written."""
+    found = store.find_runs(experiment, {IMPORTED_FROM: run_dir}, uri=uri)
+    return [r["run_id"] for r in found if IMPORTED_RUN_ID not in r["tags"]]
+
+
+def set_experiment_note(experiment: str, uri: str | None = None) -> None:
+    """Give ``experiment`` its description (emml.runs.provenance.experiment_note) unless it has one (an experiment
+    created before descriptions were written, or by another program)."""
+    client = store.client(uri)
+    exp = store.retry(lambda: client.get_experiment_by_name(experiment))
+    if exp is not None and not exp.tags.get(NOTE):
+        store.retry(lambda: client.set_experiment_tag(exp.experiment_id, NOTE, experiment_note(experiment)))
+
+
 def import_run_dir(
-    run_dir: Path, uri: str | None = None, committed: dict[Path, float] | None = None, bulk: bool = True
+    run_dir: Path, uri: str | None = None, committed: dict[Path, float] | None = None, results_root: str = "results"
 ) -> ImportResult:
     """Import one run dir into the store at ``uri`` (default: tracking_uri()) unless it is unfinished, being
     trained, or already in the store; under the store's import lock, after deleting what an import cut short
-    left of it. ``committed``: `commit_times` (read here when None). RunDirError names a file that cannot be read."""
-    from emml.runs.tracking import import_lock
-
+    left of it. ``committed``: `commit_times` (read here when None); ``results_root``: `run_params`. RunDirError
+    names a file that cannot be read."""
     with import_lock(uri):
-        return _import_run_dir(Path(run_dir), uri, committed, bulk)
+        return _import_run_dir(Path(run_dir), uri, committed, results_root)
 
 
-def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float] | None, bulk: bool) -> ImportResult:
-    from emml.runs.runlock import holder
-    from emml.runs.tracking import (
-        IMPORT_KEY,
-        delete_runs,
-        import_run,
-        leftover_imports,
-        set_experiment_note,
-        stored_run,
-    )
+def run_params(results: dict, run_dir: Path, results_root: str | Path = "results") -> dict:
+    """The params of an imported run: its saved config as the trainer logs it (`as_trained`), its roots where they
+    are in this checkout (the tracker writes them by name, emml.runs.portable.root_name): ``run_root`` the folder
+    that holds the run dir's table folder, ``results_root`` ``results_root`` (a folder of this checkout) when the
+    run's own results root was a folder named results/ (on whichever machine), else its own."""
+    params = as_trained(results.get("config") or {})
+    if "run_root" in params:
+        params["run_root"] = str(Path(run_dir).resolve().parent.parent)
+    if root_name(str(params.get("results_root")), ROOTS["results_root"]) == ROOTS["results_root"]:
+        params["results_root"] = str(project_path(results_root))
+    return params
 
+
+def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float] | None, results_root) -> ImportResult:
     name = relative(run_dir)
     if not (run_dir / RESULTS).is_file():
         return ImportResult(name, "skipped", f"unfinished (no {RESULTS}): its trainer logs it")
@@ -314,9 +370,11 @@ def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float]
     if stored is not None:
         set_experiment_note(experiment, uri)
         return ImportResult(name, "skipped", f"in the store as MLflow run {stored}", run_id, stored)
-    left = leftover_imports(experiment, IMPORTED_FROM, name, uri)
+    left = leftover_imports(experiment, name, uri)
     if left:  # an import killed midway: its half-made run goes, the run dir is imported whole below
-        delete_runs(left, uri)
+        client = store.client(uri)
+        for leftover in left:
+            store.retry(lambda leftover=leftover: client.delete_run(leftover))
     curve = read_points(run_dir / METRICS) if (run_dir / METRICS).is_file() else []
     points = curve + final_points(results, run_dir / RESULTS)
     if committed is None:
@@ -329,13 +387,12 @@ def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float]
             display_name(run_dir, str(results.get("run_name") or run_dir.name)),
             run_id,
             tags,
-            as_trained(results.get("config") or {}),
+            run_params(results, run_dir, results_root),
             points,
             uri,
             start_time=start,
             end_time=end,
             when=when,
-            bulk=bulk,
         )
     except ValueError as e:  # data the store refuses (a metric name it does not take)
         raise RunDirError(f"{run_dir}: {e}") from None
@@ -358,10 +415,8 @@ def disk_full(e: BaseException) -> bool:
 
 def store_folder(uri: str | None) -> str:
     """The folder of a sqlite store (the one a full disk is about), else the store's URI."""
-    from emml.runs.tracking import _sqlite_path, tracking_uri
-
-    uri = uri or tracking_uri()
-    path = _sqlite_path(uri)
+    uri = uri or store.tracking_uri()
+    path = store.sqlite_path(uri)
     return str(path.parent) if path is not None else uri
 
 
@@ -370,14 +425,13 @@ def import_runs(
     uri: str | None = None,
     log: Callable[[ImportResult], None] | None = None,
     progress: bool = False,
-    bulk: bool = True,
+    results_root: str | Path = "results",
 ) -> list[ImportResult]:
     """Import every run dir at or under ``paths`` (emml import-runs); a run dir that cannot be read is 'failed'
     (its error named) and the others are imported all the same. ``log`` sees each result as it comes;
-    ``progress``: a progress bar over the run dirs with its ETA on stderr (a terminal only)."""
+    ``progress``: a progress bar over the run dirs with its ETA on stderr (a terminal only); ``results_root``: the
+    folder of this checkout that holds the runs' results rows (`run_params`)."""
     from tqdm import tqdm
-
-    from emml.runs.preflight import ensure_store
 
     dirs = run_dirs(paths)
     ensure_store(uri)  # a new store's tables are made by one process at a time, under the lock the trainer takes too
@@ -387,7 +441,7 @@ def import_runs(
         for run_dir in dirs:
             bar.set_postfix_str(run_dir.name[:40], refresh=False)
             try:
-                result = import_run_dir(run_dir, uri, committed, bulk)
+                result = import_run_dir(run_dir, uri, committed, results_root)
             except RunDirError as e:
                 result = ImportResult(relative(run_dir), "failed", str(e))
             except Exception as e:

@@ -20,7 +20,7 @@ from urllib.parse import urlparse
 
 from emml.config.schema import TrainConfig
 from emml.runs.runlock import waiting_lock
-from emml.runs.tracking import _sqlite_path, tracking_uri
+from emml.runs.store import client, sqlite_path, tracking_uri
 
 STORE_TIMEOUT_S = 5.0
 """The longest a store check waits (a lock held by another writer, a server that does not answer)."""
@@ -78,7 +78,7 @@ def check_store(uri: str | None = None, timeout: float = STORE_TIMEOUT_S) -> Non
     if uri in ("databricks", "databricks-uc"):  # a profile of the Databricks CLI, not a path
         return
     if scheme == "sqlite":
-        db = _sqlite_path(uri)
+        db = sqlite_path(uri)
         if db is not None:  # None: in memory
             _check_sqlite(where, db, timeout)
     elif scheme in ("", "file"):
@@ -161,15 +161,13 @@ def ensure_store(uri: str | None = None) -> None:
     store) fail with `table _alembic_tmp_experiments already exists` (issue 54). A store that has its tables, and any
     store that is not an sqlite file, is left to MLflow."""
     uri = uri or tracking_uri()
-    db = _sqlite_path(uri) if urlparse(uri).scheme.split("+")[0] == "sqlite" else None
+    db = sqlite_path(uri) if urlparse(uri).scheme.split("+")[0] == "sqlite" else None
     if db is None or _has_tables(db):
         return
-    from emml.runs.tracking import _client
-
     db.parent.mkdir(parents=True, exist_ok=True)
     with waiting_lock(db):  # a second start waits here while the first builds the tables (opened to append: never cut)
         if not _has_tables(db):
-            _client(uri).search_experiments(max_results=1)
+            client(uri).search_experiments(max_results=1)
 
 
 def _has_tables(db: Path) -> bool:

@@ -270,6 +270,33 @@ session and the end of its final evaluation; the MLflow run's own start and end 
 unknown column as a metric."""
 
 
+FINAL = "final/"
+"""Prefix of the final score's metrics in the MLflow run (results.json "metrics"): ``final/sgn_test``…, apart from
+the periodic evaluations' ``eval/sgn_test`` curve."""
+RENAMED = {"frames": "trained_frames", "eval_episodes": "score_eval_episodes", "eval_seed": "score_eval_seed"}
+"""results.json keys tagged under another name in the MLflow run, apart from the params of the same name: ``frames``
+is the frames trained (whole updates: 1,500,160) where the param ``frames`` is the config's target (1,500,000);
+``eval_episodes`` and ``eval_seed`` are the final score's (500 episodes, `final_eval_episodes`) where the param
+``eval_episodes`` is the periodic evaluations' (100)."""
+
+
+def score_tags(results: dict) -> dict:
+    """How the final score was measured, as tags (`RENAMED`): the trainer sets them on its run when it writes
+    results.json, and the import (emml/runs/import_runs.py) on the run it makes of a run dir, so that both read
+    alike."""
+    return {RENAMED[k]: results[k] for k in RENAMED if results.get(k) is not None}
+
+
+def utc_ms(text: str) -> int:
+    """An ISO 8601 time (results.json ``started_at``, `TIMES`) as ms since the epoch; naive times are UTC."""
+    from datetime import datetime, timezone
+
+    when = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=timezone.utc)
+    return int(when.timestamp() * 1000)
+
+
 JSON_ONLY = ("segments",)
 """Keys of results.json that are not columns of the results row (as `TIMES`: a pinned campaign's reader from before
 them would read an unknown column as a metric): the commits a run trained under (emml/runs/segments.py)."""

@@ -1,202 +1,53 @@
-"""Experiment tracking: the project's only interface to MLflow.
+"""Experiment tracking: a run's MLflow run, the project's only writer of the runs it trains (emml/runs/store.py is
+how the store is reached, through MLflow's public API).
 
-Every other module logs through :class:`Tracker` so that swapping the backend
-(local sqlite file, shared ``mlflow server``) is a matter of the
-``MLFLOW_TRACKING_URI`` environment variable. ``mlflow`` is imported lazily
-inside functions: it takes over a second to import and ``import emml`` must
-stay fast.
+Every other module logs through :class:`Tracker`, so that swapping the backend (local sqlite file, shared ``mlflow
+server``) is a matter of the ``MLFLOW_TRACKING_URI`` environment variable.
 
-Conventions (see docs / shared notes on MLflow 3.x):
-
-* Default store is ``sqlite:///<project root>/mlflow.db`` (the plain file store
-  is deprecated); artifacts of experiments created here go to
-  ``<db dir>/mlartifacts`` rather than the current directory.
-* Metrics are logged once per update in one batched call; SQLite "database is
-  locked" errors (many concurrent writers) are retried with backoff.
-* A run is resumed by passing its ``run_id`` to :meth:`Tracker.start`; steps
-  should keep increasing (use the global env-step counter).
-* :func:`metric_history` returns full curves (``search_runs`` only keeps the
-  latest value per metric).
-* A finished run dir from another store becomes a run here with :func:`import_run` (``emml import-runs``,
-  emml/runs/import_runs.py); :func:`stored_run` finds a run dir's run here (trained, imported or resumed), so that
-  nothing is imported twice and a resumed run dir continues that run.
-* What the MLflow UI reads is set as it expects: ``mlflow.source.git.commit`` (and ``mlflow.source.name``) from
-  the ``git_sha`` tag (:func:`source_tags`), the experiment's description ``mlflow.note.content`` from its table's
-  caption (:func:`experiment_note`), and no absolute path of the machine in a param or tag: a path is written
-  relative to the checkout (:func:`portable`).
+* Metrics are logged once per update in one batched call, mirrored to the run dir's metrics.csv
+  (emml/runs/mirror.py).
+* A run is resumed by passing its ``run_id`` to :meth:`Tracker.start`; steps should keep increasing (use the global
+  env-step counter). :func:`stored_run` finds a run dir's run in this store (trained, imported by ``emml
+  import-runs`` (emml/runs/import_runs.py, which owns the import) or resumed here), so that nothing is imported twice
+  and a resumed run dir continues that run.
+* What the MLflow UI reads is set as it expects (emml/runs/provenance.py), and no path of the machine is in a param
+  or tag: a path is written relative to the checkout, a run's roots by their names (emml/runs/portable.py).
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
-import random
-import re
-import subprocess
-import tempfile
 import time
 import warnings
-from collections.abc import Callable, Iterable, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
-from emml.config.paths import REPRODUCE_DIR, checkout_root, project_root
-from emml.runs.atomic import replacing
-from emml.runs.diskspace import RERUN, NoSpaceError, no_space_names
-from emml.runs.records import MIRROR_HEADER, read_points
-from emml.runs.runlock import waiting_lock
+from emml.config.paths import checkout_root
+from emml.runs import store
+from emml.runs.mirror import append_mirror, export_mirror, read_mirror
+from emml.runs.portable import ROOTS, portable, portable_uri, root_name
+from emml.runs.provenance import NOTE, experiment_note, source_tags
+from emml.runs.store import MAX_PARAM_LEN, MAX_TAG_LEN, metric_history, retry, tracking_uri
 
-T = TypeVar("T")
+__all__ = ["Tracker", "display_name", "flatten", "parent_run", "set_run_status", "stored_run", "tag_strings"]
+__all__ += ["metric_history", "portable", "portable_uri", "tracking_uri"]  # read here by emml/report and campaign.py
 
-_MAX_PARAM_LEN = 6000  # mlflow.utils.validation.MAX_PARAM_VAL_LENGTH
-_MAX_TAG_LEN = 8000  # mlflow.utils.validation.MAX_TAG_VAL_LENGTH
-_BATCH_PARAMS = 100  # MAX_PARAMS_TAGS_PER_BATCH
-_BATCH_METRICS = 1000  # MAX_METRICS_PER_BATCH
-_STATUSES = ("FINISHED", "FAILED", "KILLED")
+STATUSES = ("FINISHED", "FAILED", "KILLED")
 IMPORTED_RUN_ID = "emml.imported_run_id"
-"""Tag of a run imported from a finished run dir (:func:`import_run`): the MLflow run id the run dir recorded."""
+"""Tag of a run imported from a finished run dir (emml/runs/import_runs.py): the MLflow run id the run dir
+recorded; set last, it marks the import done (`stored_run` finds the run by it)."""
 RESUMED_FROM = "emml.resumed_from_run_id"
 """Tag of a run that resumed a run dir from another store (:meth:`Tracker.start`): the run id the run dir recorded."""
-IMPORT_KEY = "emml.import_key"
-"""Tag of a run being imported, set when it is created: its run dir (relative to the checkout) and a digest of its
-files (emml/runs/import_runs.py, `import_key`). A run with this tag but not ``IMPORTED_RUN_ID`` is an import cut
-short (SIGTERM, ``kill -9``), which the next import deletes (:func:`leftover_imports`)."""
-NOTE = "mlflow.note.content"
-"""The description MLflow's UI shows for an experiment (or a run)."""
-GIT_COMMIT = "mlflow.source.git.commit"
-"""The commit MLflow's UI shows in a run's Source column (from the ``git_sha`` tag, :func:`source_tags`)."""
-
-
-def tracking_uri() -> str:
-    """``$MLFLOW_TRACKING_URI`` if set, else ``sqlite:///<project root>/mlflow.db``."""
-    env = os.environ.get("MLFLOW_TRACKING_URI")
-    if env:
-        return env
-    return f"sqlite:///{project_root() / 'mlflow.db'}"
-
-
-def _sqlite_path(uri: str) -> Path | None:
-    """Filesystem path of a ``sqlite:///`` database (None for other backends / in-memory)."""
-    prefix = "sqlite:///"
-    if not uri.startswith(prefix):
-        return None
-    path = uri[len(prefix) :].split("?", 1)[0]
-    if not path or path == ":memory:":
-        return None
-    return Path(path).resolve()
-
-
-_ABSOLUTE = re.compile(r"(?<![\w.:/~-])/[^\s'\",()\[\]{}]+")
-"""An absolute POSIX path inside a value (a path alone, or in a tuple's repr): '/' not after a word, dot, colon
-(a URI's 'sqlite:///x' is left alone) or another '/'."""
-
-
-def portable(value: str) -> str:
-    """``value`` with every absolute path in it written relative to the checkout (:func:`checkout_root`): what a
-    param or tag may hold, so that the store names no folder of the machine that trained or imported (e.g.
-    '/home/me/emml/runs' -> 'runs', '/tmp/x' -> '../../tmp/x' from /home/me/emml)."""
-    if "/" not in value:
-        return value
-    root = str(checkout_root())
-
-    def rel(m: re.Match) -> str:
-        path = m.group(0)
-        return os.path.relpath(path, root) if os.path.isabs(path) else path
-
-    return _ABSOLUTE.sub(rel, value)
-
-
-def portable_uri(uri: str) -> str:
-    """A tracking URI as a report may print it: a sqlite store's file relative to the checkout
-    ('sqlite:////home/me/emml/mlflow.db' -> 'sqlite:///mlflow.db'), any other URI as it is."""
-    path = _sqlite_path(uri)
-    return f"sqlite:///{portable(str(path))}" if path is not None else uri
-
-
-_COMMITS: dict[str, str] = {}
-
-
-def full_commit(sha: str) -> str:
-    """The full hash of commit ``sha`` (a run's short ``git_sha``) in the checkout's repository; ``sha`` itself when
-    git does not know it (a run trained elsewhere, no git)."""
-    if sha in _COMMITS:
-        return _COMMITS[sha]
-    full = sha
-    if re.fullmatch(r"[0-9a-f]{4,40}", sha or ""):
-        try:
-            out = subprocess.run(
-                ["git", "rev-parse", "--verify", "--quiet", f"{sha}^{{commit}}"],
-                cwd=project_root(),
-                capture_output=True,
-                text=True,
-                timeout=5,
-            )
-            full = out.stdout.strip() or sha
-        except (OSError, subprocess.SubprocessError):
-            pass
-    _COMMITS[sha] = full
-    return full
-
-
-def source_tags(tags: Mapping[str, Any]) -> dict[str, str]:
-    """The tags MLflow's UI reads for a run's Source, from the run's own ``git_sha`` tag (kept too): its commit (in
-    full when this checkout's git knows it) and the program."""
-    sha = str(tags.get("git_sha") or "")
-    if not sha or sha == "unknown":
-        return {}
-    return {GIT_COMMIT: full_commit(sha), "mlflow.source.name": "emml", "mlflow.source.type": "LOCAL"}
-
-
-def experiment_note(name: str) -> str:
-    """An experiment's description (``mlflow.note.content``): the caption (``title``) of the table it holds the
-    runs of, reproduce/<name>.toml or reproduce/experiments/<name>.toml, with the file; a name no file declares (a
-    ``--set table=...`` of one's own) says so."""
-    import tomllib
-
-    for path in (REPRODUCE_DIR / f"{name}.toml", REPRODUCE_DIR / "experiments" / f"{name}.toml"):
-        if path.is_file():
-            try:
-                data = tomllib.loads(path.read_text())
-            except (OSError, tomllib.TOMLDecodeError):
-                break
-            title = str(data.get("title") or "").strip() or name
-            ref = name if path.parent == REPRODUCE_DIR else f"experiments/{name}"
-            return f"{title}\n\nThe runs of `{path.relative_to(REPRODUCE_DIR.parent)}` (`emml run {ref}`)."
-    return f"Runs trained with table={name!r}; no table file of reproduce/ declares it."
-
-
-def _client(uri: str | None = None):
-    """MlflowClient for ``uri``; creates the sqlite file's directory if missing."""
-    from mlflow import MlflowClient
-
-    uri = uri or tracking_uri()
-    db = _sqlite_path(uri)
-    if db is not None:
-        db.parent.mkdir(parents=True, exist_ok=True)
-    return _retry(lambda: MlflowClient(tracking_uri=uri))
-
-
-def _is_lock_error(exc: BaseException) -> bool:
-    text = str(exc).lower()
-    return "database is locked" in text or "database table is locked" in text
-
-
-def _retry(fn: Callable[[], T], attempts: int = 8, base_delay: float = 0.1) -> T:
-    """Call ``fn``; retry SQLite lock errors with jittered exponential backoff."""
-    for i in range(attempts):
-        try:
-            return fn()
-        except Exception as exc:  # mlflow wraps sqlalchemy errors in MlflowException
-            if not _is_lock_error(exc) or i == attempts - 1:
-                raise
-            time.sleep(base_delay * (2**i) * (0.5 + random.random()))
-    raise AssertionError("unreachable")
+DEFAULT_ROOT = ROOTS["run_root"]
+"""The run root whose run dirs are named by their run name alone in the store (`display_name`)."""
 
 
 def flatten(params: Mapping[str, Any] | Any, prefix: str = "") -> dict[str, str]:
-    """Flatten nested dicts/dataclasses into ``{"a.b.c": "value"}`` strings."""
+    """Flatten nested dicts/dataclasses into ``{"a.b.c": "value"}`` strings, as a param may hold them: the run's
+    roots (``run_root``, ``results_root``) by their names (``runs``, `root_name`), every other path relative to the
+    checkout (`portable`), cut at MLflow's limit."""
     if is_dataclass(params) and not isinstance(params, type):
         params = asdict(params)
     out: dict[str, str] = {}
@@ -207,15 +58,30 @@ def flatten(params: Mapping[str, Any] | Any, prefix: str = "") -> dict[str, str]
         if isinstance(value, Mapping):
             out.update(flatten(value, prefix=f"{name}."))
         else:
-            out[name] = portable(str(value))[:_MAX_PARAM_LEN]
+            text = root_name(str(value), ROOTS[name]) if name in ROOTS else portable(str(value))
+            out[name] = text[:MAX_PARAM_LEN]
     return out
 
 
 def tag_strings(tags: Mapping[str, Any]) -> dict[str, str]:
     """Tags as MLflow stores them: strings (cut at its limit) with paths relative to the checkout (:func:`portable`),
     plus the Source tags of a run that names its commit (:func:`source_tags`)."""
-    out = {k: portable(str(v))[:_MAX_TAG_LEN] for k, v in tags.items()}
+    out = {k: portable(str(v))[:MAX_TAG_LEN] for k, v in tags.items()}
     return {**source_tags(out), **out}
+
+
+def display_name(run_dir: Path, name: str) -> str:
+    """A run's name in the store, unique in its experiment for the run dirs of a checkout: its run name, followed by
+    its run root when that is not a folder named runs/: a root inside the checkout's runs/ by its path from there
+    (``dual_attention-easy-aux-s1-quick [extended]`` for runs/extended/table2, beside the run of the same name in
+    runs/table2), another by its folder's name (never a path of the machine)."""
+    root = Path(run_dir).resolve().parent.parent
+    if root.name == DEFAULT_ROOT and root.parent.resolve() != (checkout_root() / DEFAULT_ROOT).resolve():
+        return name
+    try:
+        return f"{name} [{root.relative_to((checkout_root() / DEFAULT_ROOT).resolve())}]"
+    except ValueError:
+        return f"{name} [{root.name}]"
 
 
 class Tracker:
@@ -252,14 +118,14 @@ class Tracker:
         if self._resume_step is None or step <= self._resume_step:
             return False
         if key not in self._logged:  # once per key after a resume
-            hist = _retry(lambda: self._client.get_metric_history(self.run_id, key))
+            hist = retry(lambda: self._client.get_metric_history(self.run_id, key))
             self._logged[key] = {m.step for m in hist if m.step > self._resume_step}
         return step in self._logged[key]
 
     @property
     def _client(self):
         if self._client_obj is None:
-            self._client_obj = _client(self._uri)
+            self._client_obj = store.client(self._uri)
         return self._client_obj
 
     @property
@@ -271,17 +137,17 @@ class Tracker:
     def _experiment_id(self, name: str) -> str:
         from mlflow.exceptions import MlflowException
 
-        exp = _retry(lambda: self._client.get_experiment_by_name(name))
+        exp = retry(lambda: self._client.get_experiment_by_name(name))
         if exp is not None:
             return exp.experiment_id
-        db = _sqlite_path(self._uri or tracking_uri())
+        db = store.sqlite_path(self._uri or store.tracking_uri())
         artifacts = (db.parent / "mlartifacts").as_uri() if db is not None else None
         try:
             note = {NOTE: experiment_note(name)}
-            return _retry(lambda: self._client.create_experiment(name, artifact_location=artifacts, tags=note))
+            return retry(lambda: self._client.create_experiment(name, artifact_location=artifacts, tags=note))
         except MlflowException:
             # Another process created it between our lookup and create.
-            exp = _retry(lambda: self._client.get_experiment_by_name(name))
+            exp = retry(lambda: self._client.get_experiment_by_name(name))
             if exp is None:
                 raise
             return exp.experiment_id
@@ -322,24 +188,24 @@ class Tracker:
         if run_id is None:
             exp_id = self._experiment_id(experiment)
             tag_strs = tag_strings(tags or {})
-            run = _retry(lambda: self._client.create_run(exp_id, start_time, tag_strs, run_name))
+            run = retry(lambda: self._client.create_run(exp_id, start_time, tag_strs, run_name))
             self._run_id = run.info.run_id
         elif stored is None:  # the run dir came from another store: a new run, its curve replayed
             exp_id = self._experiment_id(experiment)
             tag_strs = tag_strings(tags or {})
             tag_strs[RESUMED_FROM] = run_id
-            run = _retry(lambda: self._client.create_run(exp_id, start_time, tag_strs, run_name))
+            run = retry(lambda: self._client.create_run(exp_id, start_time, tag_strs, run_name))
             self._run_id = run.info.run_id
             replayed = self._replay()
             warnings.warn(
-                f"MLflow run {run_id} is not in this store ({self._uri or tracking_uri()}): continuing as run "
+                f"MLflow run {run_id} is not in this store ({self._uri or store.tracking_uri()}): continuing as run "
                 f"{self._run_id}, {replayed} metric points replayed from {self._mirror}",
                 stacklevel=3,
             )
         else:  # this store's run of the run dir: trained here, or imported (emml import-runs) or resumed before
-            run = _retry(lambda: self._client.get_run(stored))
+            run = retry(lambda: self._client.get_run(stored))
             self._run_id = run.info.run_id
-            _retry(lambda: self._client.update_run(stored, status="RUNNING"))
+            retry(lambda: self._client.update_run(stored, status="RUNNING"))
             existing = run.data.params
             changed = sorted(k for k, v in flat.items() if k in existing and existing[k] != v)
             if changed:
@@ -347,22 +213,12 @@ class Tracker:
             flat = {k: v for k, v in flat.items() if k not in existing}
             if tags:
                 self.set_tags(tags)
-        items = [Param(k, v) for k, v in flat.items()]
-        for i in range(0, len(items), _BATCH_PARAMS):
-            chunk = items[i : i + _BATCH_PARAMS]
-            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, params=chunk))
+        store.log_batch(self._client, self.run_id, params=[Param(k, v) for k, v in flat.items()])
         return self.run_id
 
     def has_run(self, run_id: str) -> bool:
-        from mlflow.exceptions import MlflowException
-
-        try:
-            _retry(lambda: self._client.get_run(run_id))
-            return True
-        except MlflowException as e:
-            if e.error_code == "RESOURCE_DOES_NOT_EXIST":
-                return False
-            raise
+        """Whether this store holds run ``run_id``."""
+        return store.has_run(run_id, mlflow_client=self._client)
 
     def export_to_mirror(self, run_id: str) -> int:
         """Fill the mirror file from the store's copy of ``run_id`` (a run dir from before mirrors existed)."""
@@ -372,7 +228,7 @@ class Tracker:
         """Log the mirror file's points into the current run (one value per key and step: the last)."""
         if self._mirror is None:
             return 0
-        return _log_points(self._client, self.run_id, read_mirror(self._mirror))
+        return store.log_points(self._client, self.run_id, read_mirror(self._mirror))
 
     def log_metrics(self, metrics: Mapping[str, float], step: int) -> None:
         """Log all ``metrics`` at ``step`` in one batched call (chunked at MLflow's 1000 limit)."""
@@ -380,41 +236,26 @@ class Tracker:
 
         now = int(time.time() * 1000)
         if self._mirror is not None:
-            fresh = [(k, v) for k, v in metrics.items() if (k, int(step)) not in self._mirrored]
-            text = "step,key,value\n" if not self._mirror.exists() else ""
-            text += "".join(f"{int(step)},{k},{float(v)!r}\n" for k, v in fresh)
-            with open(self._mirror, "ab", buffering=0) as f:  # unbuffered: a full disk fails here, not at close
-                end, data = f.tell(), memoryview(text.encode())
-                try:
-                    with no_space_names(self._mirror):
-                        while data:
-                            data = data[f.write(data) :]
-                except NoSpaceError:  # no half line for a resumed run to append to: the file as it was
-                    f.truncate(end)
-                    raise
+            fresh = {k: v for k, v in metrics.items() if (k, int(step)) not in self._mirrored}
+            append_mirror(self._mirror, fresh, step)
         items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items() if not self._already_logged(k, step)]
-        for i in range(0, len(items), _BATCH_METRICS):
-            chunk = items[i : i + _BATCH_METRICS]
-            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, metrics=chunk))
+        store.log_batch(self._client, self.run_id, metrics=items)
 
     def log_artifact(self, path: str | os.PathLike, artifact_path: str | None = None) -> None:
         """Copy a local file (or directory) into the run's artifact store."""
-        _retry(lambda: self._client.log_artifact(self.run_id, str(path), artifact_path))
+        retry(lambda: self._client.log_artifact(self.run_id, str(path), artifact_path))
 
     def set_tags(self, tags: Mapping[str, Any]) -> None:
         """Set (or overwrite) run tags, e.g. ``{"mlflow.parentRunId": parent}`` for nesting."""
         from mlflow.entities import RunTag
 
-        items = [RunTag(k, v) for k, v in tag_strings(tags).items()]
-        for i in range(0, len(items), _BATCH_PARAMS):
-            chunk = items[i : i + _BATCH_PARAMS]
-            _retry(lambda chunk=chunk: self._client.log_batch(self.run_id, tags=chunk))
+        store.log_batch(self._client, self.run_id, tags=[RunTag(k, v) for k, v in tag_strings(tags).items()])
 
     def finish(self, status: str = "FINISHED", end_time: int | None = None) -> None:
         """Mark the run terminated with ``status`` (FINISHED, FAILED or KILLED), at ``end_time`` (ms; default now)."""
-        if status not in _STATUSES:
-            raise ValueError(f"status must be one of {_STATUSES}, got {status!r}")
-        _retry(lambda: self._client.set_terminated(self.run_id, status=status, end_time=end_time))
+        if status not in STATUSES:
+            raise ValueError(f"status must be one of {STATUSES}, got {status!r}")
+        retry(lambda: self._client.set_terminated(self.run_id, status=status, end_time=end_time))
 
     def abort(self, exc: BaseException) -> None:
         """End the run after ``exc``, never leaving it RUNNING: KILLED for Ctrl-C or a termination signal
@@ -442,249 +283,32 @@ def parent_run(experiment: str, run_name: str, tags: Mapping[str, Any], uri: str
     A relaunch finds the same parent, so resumed children stay nested under one run.
     """
     tags = {**tags, "emml.role": "parent"}
-    found = find_runs(experiment, tags, uri=uri)
+    found = store.find_runs(experiment, tags, uri=uri)
     if found:
         return min(found, key=lambda r: r["start_time"])["run_id"]
     tracker = Tracker(uri)
     return tracker.start(experiment, run_name, tags)
 
 
-def _log_points(
-    client, run_id: str, points: Iterable[tuple[int, str, float]], when: Callable[[int], int] | None = None
-) -> int:
-    """Log (step, key, value) points into ``run_id``, one per key and step (the last), in batches of MLflow's
-    limit (``MlflowClient.log_batch``), each point timestamped ``when(step)`` (ms; default now); returns how many
-    were logged."""
-    from mlflow.entities import Metric
-
-    items = [Metric(k, v, ts, st) for k, st, v, ts in _last_points(points, when)]
-    for i in range(0, len(items), _BATCH_METRICS):
-        chunk = items[i : i + _BATCH_METRICS]
-        _retry(lambda chunk=chunk: client.log_batch(run_id, metrics=chunk))
-    return len(items)
-
-
-def _last_points(points: Iterable[tuple[int, str, float]], when: Callable[[int], int] | None):
-    """(key, step, value, timestamp) per key and step (the last value given), by key then step."""
-    now = int(time.time() * 1000)
-    last = {(k, st): v for st, k, v in points}
-    return [(k, st, v, when(st) if when else now) for (k, st), v in sorted(last.items())]
-
-
-def _bulk_points(client, run_id: str, points, when: Callable[[int], int] | None) -> int | None:
-    """Write a new run's points into a sqlite store in one transaction through the installed MLflow's own tables
-    (its SqlMetric and SqlLatestMetric models; values as its store sanitizes them, names as its validator checks
-    them): 0.3 s for a quick run's 26k points where ``log_batch`` takes 2.5 s of CPU, for the same rows (its ORM
-    builds an object per point). None when the store is not sqlite or this MLflow lacks what it uses: then the
-    caller logs them with ``log_batch``. A name MLflow refuses is its MlflowException, as from ``log_batch``."""
-    store = getattr(getattr(client, "_tracking_client", None), "store", None)
-    engine = getattr(store, "engine", None)
-    if engine is None or engine.dialect.name != "sqlite" or not hasattr(store, "sanitize_metric_value"):
-        return None
-    try:
-        from mlflow.store.tracking.dbmodels.models import SqlLatestMetric, SqlMetric
-        from mlflow.utils.validation import _validate_metric
-    except ImportError:
-        return None
-    columns = ("run_uuid", "key", "value", "timestamp", "step", "is_nan")
-    rows, latest = [], {}
-    for k, st, v, ts in _last_points(points, when):
-        if k not in latest:
-            _validate_metric(k, v, ts, st)
-        is_nan, value = store.sanitize_metric_value(v)
-        row = (run_id, k, value, ts, st, is_nan)
-        rows.append(row)
-        latest[k] = row  # by key then step: the last row of a key is its latest (MLflow: max step, then time)
-
-    def insert(table) -> str:  # the driver's executemany over tuples: SQLAlchemy's per-row processing costs as much
-        missing = [c for c in columns if c not in table.columns]
-        missing += [c.name for c in table.columns if c.name not in columns and not (c.nullable or c.default)]
-        if missing:  # another MLflow's schema: log_batch
-            raise ImportError(f"{table.name}: {missing}")
-        return f"INSERT INTO {table.name} ({', '.join(columns)}) VALUES ({', '.join('?' * len(columns))})"
-
-    try:
-        sql = insert(SqlMetric.__table__), insert(SqlLatestMetric.__table__)
-    except ImportError:
-        return None
-
-    def write() -> None:
-        with engine.begin() as conn:
-            conn.exec_driver_sql(sql[0], rows)
-            conn.exec_driver_sql(sql[1], list(latest.values()))
-
-    if rows:
-        _retry(write)
-    return len(rows)
-
-
-@contextmanager
-def import_lock(uri: str | None = None):
-    """Held while one run dir is imported into the store at ``uri`` (emml/runs/import_runs.py): an exclusive lock
-    (fcntl, released by the kernel however the process ends) on a file beside a sqlite store, or in the temporary
-    folder for another store (imports on one machine). Two imports at once take turns run dir by run dir, so that
-    each finds the other's runs before it would create one."""
-    uri = uri or tracking_uri()
-    db = _sqlite_path(uri)
-    if db is not None:
-        db.parent.mkdir(parents=True, exist_ok=True)
-        path = db.with_name(db.name + ".import.lock")
-    else:
-        path = Path(tempfile.gettempdir()) / f"emml-import-{hashlib.sha1(uri.encode()).hexdigest()[:12]}.lock"
-    with waiting_lock(path):
-        yield
-
-
 def stored_run(experiment: str, run_id: str, uri: str | None = None) -> str | None:
     """This store's run of the run dir that recorded MLflow run ``run_id``: that run when it is here (trained here),
     else the run of ``experiment`` imported from the run dir (tag ``IMPORTED_RUN_ID``) or resuming it (tag
     ``RESUMED_FROM``), the earliest if several; None when the store has none."""
-    if Tracker(uri).has_run(run_id):
+    if store.has_run(run_id, uri):
         return run_id
     for tag in (IMPORTED_RUN_ID, RESUMED_FROM):
-        found = find_runs(experiment, {tag: run_id}, uri=uri)
+        found = store.find_runs(experiment, {tag: run_id}, uri=uri)
         if found:
             return min(found, key=lambda r: r["start_time"])["run_id"]
     return None
 
 
-def import_run(
-    experiment: str,
-    run_name: str,
-    run_id: str,
-    tags: Mapping[str, Any],
-    params: Mapping[str, Any],
-    points: Iterable[tuple[int, str, float]],
-    uri: str | None = None,
-    start_time: int | None = None,
-    end_time: int | None = None,
-    when: Callable[[int], int] | None = None,
-    bulk: bool = True,
-) -> str:
-    """Log a finished run recorded elsewhere (a run dir's results.json and metrics.csv, emml/runs/import_runs.py) as a
-    new FINISHED run of ``experiment`` that started at ``start_time`` and ended at ``end_time`` (ms): ``tags``,
-    ``params`` (flattened as :meth:`Tracker.start` logs a config) and every metric point (step, key, value), at
-    ``when(step)`` (ms). The tag ``IMPORTED_RUN_ID`` = ``run_id``, which marks the import done
-    (:func:`stored_run`), is set last, and a failure on the way deletes the half-made run; a run left half-made by a
-    kill is found by the next import (its ``IMPORT_KEY`` tag, :func:`leftover_imports`). ``bulk``: a sqlite store's
-    points in one transaction (:func:`_bulk_points`), else ``log_batch``. Data the store refuses (a metric name
-    MLflow does not take) is a ValueError. Returns the new run's id."""
-    tracker = Tracker(uri)
-    try:
-        tracker.start(experiment, run_name, tags, params, start_time=start_time)
-        points = list(points)
-        done = _bulk_points(tracker._client, tracker.run_id, points, when) if bulk else None
-        if done is None:
-            _log_points(tracker._client, tracker.run_id, points, when)
-        tracker.set_tags({IMPORTED_RUN_ID: run_id})
-        tracker.finish("FINISHED", end_time=end_time)
-    except BaseException as e:
-        if tracker._run_id is not None:
-            _discard(tracker._client, tracker._run_id)
-        if getattr(e, "error_code", None) == "INVALID_PARAMETER_VALUE":
-            raise ValueError(f"MLflow refused it: {getattr(e, 'message', e)}") from e
-        raise
-    return tracker.run_id
-
-
-def leftover_imports(experiment: str, key_tag: str, key: str, uri: str | None = None) -> list[str]:
-    """Runs of ``experiment`` whose tag ``key_tag`` is ``key`` that no import finished (no ``IMPORTED_RUN_ID``): a
-    kill (SIGTERM, ``kill -9``) cut their import short. Under :func:`import_lock` none is being written."""
-    return [r["run_id"] for r in find_runs(experiment, {key_tag: key}, uri=uri) if IMPORTED_RUN_ID not in r["tags"]]
-
-
-def delete_runs(run_ids: Iterable[str], uri: str | None = None) -> None:
-    """Delete runs (an import's leftovers)."""
-    client = _client(uri)
-    for run_id in run_ids:
-        _retry(lambda run_id=run_id: client.delete_run(run_id))
-
-
-def set_experiment_note(experiment: str, uri: str | None = None) -> None:
-    """Give ``experiment`` its description (:func:`experiment_note`) unless it has one (an experiment created before
-    descriptions were written, or by another program)."""
-    client = _client(uri)
-    exp = _retry(lambda: client.get_experiment_by_name(experiment))
-    if exp is not None and not exp.tags.get(NOTE):
-        _retry(lambda: client.set_experiment_tag(exp.experiment_id, NOTE, experiment_note(experiment)))
-
-
-def _discard(client, run_id: str) -> None:
-    """Delete a half-made run; a store that fails too is warned about (the error that stopped the run matters more)."""
-    try:
-        _retry(lambda: client.delete_run(run_id))
-    except Exception as e:  # noqa: BLE001
-        warnings.warn(f"MLflow run {run_id} could not be deleted: {type(e).__name__}: {e}", stacklevel=3)
-
-
 def set_run_status(run_id: str, status: str, uri: str | None = None) -> None:
     """Mark a run (e.g. a parent run once its children are done) FINISHED, FAILED, KILLED or RUNNING."""
-    if status not in (*_STATUSES, "RUNNING"):
-        raise ValueError(f"status must be one of {(*_STATUSES, 'RUNNING')}, got {status!r}")
-    client = _client(uri)
+    if status not in (*STATUSES, "RUNNING"):
+        raise ValueError(f"status must be one of {(*STATUSES, 'RUNNING')}, got {status!r}")
+    client = store.client(uri)
     if status == "RUNNING":
-        _retry(lambda: client.update_run(run_id, status="RUNNING"))
+        retry(lambda: client.update_run(run_id, status="RUNNING"))
     else:
-        _retry(lambda: client.set_terminated(run_id, status=status))
-
-
-def read_mirror(path: str | os.PathLike | None) -> list[tuple[int, str, float]]:
-    """The points of a run's metrics mirror (:meth:`Tracker.mirror_to`) as (step, key, value); [] if absent.
-    A last line cut short by a kill is skipped (`emml.runs.records.read_points`, the mirror's one reader)."""
-    return [] if path is None else read_points(path)
-
-
-def export_mirror(run_id: str, path: str | os.PathLike, uri: str | None = None) -> int:
-    """Write a run's whole curve from the store to a mirror file (for run dirs from before the mirror existed);
-    returns the number of points."""
-    client = _client(uri)
-    keys = sorted(_retry(lambda: client.get_run(run_id)).data.metrics)
-    points = sorted((st, k, v) for k in keys for st, v in metric_history(run_id, k, uri))
-    with replacing(path, then=RERUN) as tmp, open(tmp, "w") as f:  # a full disk: one line, the old file kept
-        f.write(MIRROR_HEADER + "\n")
-        f.writelines(f"{st},{k},{v!r}\n" for st, k, v in points)
-    return len(points)
-
-
-def metric_history(run_id: str, key: str, uri: str | None = None) -> list[tuple[int, float]]:
-    """Full curve of metric ``key`` as ``[(step, value), ...]`` sorted by step (then time)."""
-    client = _client(uri)
-    hist = _retry(lambda: client.get_metric_history(run_id, key))
-    return [(m.step, m.value) for m in sorted(hist, key=lambda m: (m.step, m.timestamp))]
-
-
-def _quote(value: Any) -> str:
-    return "'" + str(value).replace("\\", "\\\\").replace("'", "\\'") + "'"
-
-
-def find_runs(experiment: str, filter_tags: Mapping[str, Any] | None = None, uri: str | None = None) -> list[dict]:
-    """Runs of ``experiment`` whose tags equal ``filter_tags`` (all pages).
-
-    Each run is a dict: ``run_id``, ``run_name``, ``status``, ``start_time``
-    (ms), ``tags``, ``params`` and ``metrics`` (latest value of each). Missing
-    experiment -> empty list.
-    """
-    client = _client(uri)
-    exp = _retry(lambda: client.get_experiment_by_name(experiment))
-    if exp is None:
-        return []
-    filt = " and ".join(f"tags.`{k}` = {_quote(v)}" for k, v in (filter_tags or {}).items())
-    runs: list[dict] = []
-    token = None
-    while True:
-        page = _retry(lambda token=token: client.search_runs([exp.experiment_id], filter_string=filt, page_token=token))
-        for r in page:
-            runs.append(
-                {
-                    "run_id": r.info.run_id,
-                    "run_name": r.info.run_name,
-                    "status": r.info.status,
-                    "start_time": r.info.start_time,
-                    "tags": dict(r.data.tags),
-                    "params": dict(r.data.params),
-                    "metrics": dict(r.data.metrics),
-                }
-            )
-        token = page.token
-        if not token:
-            return runs
+        retry(lambda: client.set_terminated(run_id, status=status))

@@ -18,7 +18,7 @@ from emml.experiments.campaign import load_campaign, run_campaign
 from emml.runs.checkpoint import load_checkpoint
 from emml.runs.records import read_points
 from emml.runs.rundir import CHECKPOINT, METRICS, RESULTS
-from emml.runs.tracking import find_runs
+from emml.runs.store import find_runs
 
 CAMPAIGN = """
 [[steps]]

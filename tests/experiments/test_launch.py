@@ -11,7 +11,8 @@ from emml.experiments.launch import run_states, run_table
 from emml.runs.checkpoint import save_checkpoint
 from emml.runs.naming import run_name
 from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir
-from emml.runs.tracking import Tracker, find_runs
+from emml.runs.store import find_runs
+from emml.runs.tracking import Tracker
 
 PROFILE = "smoke"  # one seed: table3 has 16 runs
 

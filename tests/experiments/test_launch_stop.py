@@ -61,7 +61,7 @@ def _children(pid: int) -> set[int]:
 
 @pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
 def test_a_stopped_launch_starts_nothing_more_and_leaves_no_worker(tracking, how):
-    from emml.runs.tracking import find_runs
+    from emml.runs.store import find_runs
 
     runs, results = Path(tracking["run_root"]), Path(tracking["results_root"])
     proc = subprocess.Popen(

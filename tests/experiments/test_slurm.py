@@ -81,7 +81,7 @@ def test_a_job_trains_its_pack_and_requeues_itself_at_its_time_limit(tracking, n
 
 
 def _parent_status(report) -> str:
-    from emml.runs.tracking import find_runs
+    from emml.runs.store import find_runs
 
     (parent,) = [r for r in find_runs(report.table) if r["run_id"] == report.parent_run_id]
     return parent["status"]

@@ -205,8 +205,8 @@ def test_a_run_with_cuda_graphs_trains_as_the_plain_run(tracking, no_leftovers, 
     every update and the same weights at the end as the plain run of the same seed."""
     from emml.rl.trainer import train
     from emml.runs.checkpoint import load_checkpoint
+    from emml.runs.mirror import read_mirror
     from emml.runs.rundir import CHECKPOINT
-    from emml.runs.tracking import read_mirror
     from tests.rl.test_trainer import smoke
 
     made = []

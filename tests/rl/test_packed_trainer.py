@@ -13,7 +13,7 @@ from emml.rl.packed_trainer import check_packable, train_packed
 from emml.rl.trainer import train
 from emml.runs.checkpoint import load_checkpoint
 from emml.runs.rundir import CHECKPOINT, RESULTS
-from emml.runs.tracking import metric_history
+from emml.runs.store import metric_history
 from tests.rl.test_trainer import smoke
 
 

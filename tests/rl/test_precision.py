@@ -15,10 +15,10 @@ from emml.models import build_model
 from emml.rl import precision
 from emml.rl.hardware import check_runnable
 from emml.rl.trainer import Trainer
+from emml.runs.mirror import read_mirror
 from emml.runs.naming import run_name
 from emml.runs.results import read_results
 from emml.runs.rundir import METRICS, results_csv
-from emml.runs.tracking import read_mirror
 from tests.conftest import SMOKE
 
 

@@ -17,6 +17,7 @@ from emml.eval.evaluate import evaluate_checkpoint
 from emml.models import MODELS
 from emml.rl.trainer import train
 from emml.runs.checkpoint import load_checkpoint, save_checkpoint
+from emml.runs.mirror import read_mirror
 from emml.runs.results import read_results
 from emml.runs.rundir import (
     CHECKPOINT,
@@ -28,7 +29,7 @@ from emml.runs.rundir import (
     run_dir,
     run_name,
 )
-from emml.runs.tracking import metric_history, read_mirror
+from emml.runs.store import metric_history
 
 
 def smoke(tracking, **over) -> TrainConfig:

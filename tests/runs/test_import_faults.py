@@ -6,7 +6,8 @@ import subprocess
 import sys
 import textwrap
 
-from emml.runs import tracking
+from emml.runs import import_runs as importer
+from emml.runs import store
 from emml.runs.import_runs import IMPORTED_FROM, import_runs, relative
 from tests.runs.test_import_runs import write_run
 
@@ -22,16 +23,15 @@ KILLED = textwrap.dedent(
     """
     import os, signal, sys
     from pathlib import Path
-    from emml.runs import tracking
-    from emml.runs.import_runs import import_runs
-    real, calls = tracking._bulk_points, []
+    from emml.runs import import_runs as importer
+    real, calls = importer.log_points, []
     def dying(*args, **kwargs):  # the second run dir's run is made, then the process is killed before its points
         calls.append(1)
         if len(calls) == 2:
             os.kill(os.getpid(), signal.SIGKILL)
         return real(*args, **kwargs)
-    tracking._bulk_points = dying
-    import_runs([Path(sys.argv[1])], uri=sys.argv[2])
+    importer.log_points = dying
+    importer.import_runs([Path(sys.argv[1])], uri=sys.argv[2])
     """
 )
 
@@ -39,7 +39,7 @@ KILLED = textwrap.dedent(
 def runs_by_dir(experiment: str, uri: str) -> dict[str, list[dict]]:
     """The store's live runs of ``experiment`` by the run dir they were imported from."""
     out: dict[str, list[dict]] = {}
-    for run in tracking.find_runs(experiment, uri=uri):
+    for run in store.find_runs(experiment, uri=uri):
         out.setdefault(run["tags"].get(IMPORTED_FROM), []).append(run)
     return out
 
@@ -90,7 +90,7 @@ def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_pa
     dirs = [relative(write_run(tmp_path, "full", f"run-s{i}", f"{i + 9:x}" * 32)) for i in range(3)]
     uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
     monkeypatch.setenv("MLFLOW_TRACKING_URI", uri)
-    real, calls = tracking._bulk_points, []
+    real, calls = importer.log_points, []
 
     def full(*args, **kwargs):  # the second run dir's run is made, then its points meet a full disk
         calls.append(1)
@@ -98,7 +98,7 @@ def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_pa
             raise OSError(errno.ENOSPC, "No space left on device")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(tracking, "_bulk_points", full)
+    monkeypatch.setattr(importer, "log_points", full)
     out = CliRunner().invoke(app, ["import-runs", str(tmp_path / "runs")])
     assert out.exit_code == 2, out.output
     (line,) = [x for x in out.output.splitlines() if x.startswith("error:")]
@@ -107,7 +107,7 @@ def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_pa
         "removed, the 1 run dirs before it imported whole): free some space and rerun the same command"
     )
     assert "Traceback" not in out.output and sorted(runs_by_dir("full", uri)) == dirs[:1]
-    monkeypatch.setattr(tracking, "_bulk_points", real)
+    monkeypatch.setattr(importer, "log_points", real)
     again = CliRunner().invoke(app, ["import-runs", str(tmp_path / "runs")])
     assert again.exit_code == 0, again.output
     stored = runs_by_dir("full", uri)
@@ -117,15 +117,15 @@ def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_pa
 STOPPED = textwrap.dedent(
     """
     import os, signal, sys, time
-    from emml.runs import tracking
-    real, calls = tracking._bulk_points, []
+    from emml.runs import import_runs as importer
+    real, calls = importer.log_points, []
     def slow(*args, **kwargs):  # the second run dir's run is made, then its import waits for the stop
         calls.append(1)
         if len(calls) == 2:
             print("importing", flush=True)
             time.sleep(120)
         return real(*args, **kwargs)
-    tracking._bulk_points = slow
+    importer.log_points = slow
     from emml.cli import app
     app(["import-runs", sys.argv[1]])
     """

@@ -1,13 +1,12 @@
 """emml.runs.import_runs (`emml import-runs`): finished run dirs into a throwaway sqlite store, once."""
 
 import json
-import os
 import warnings
 
 import pytest
 from typer.testing import CliRunner
 
-from emml.runs import tracking
+from emml.runs import portable, provenance, store, tracking
 from emml.runs.import_runs import IMPORTED_FROM, as_trained, import_run_dir, import_runs, read_points, run_dirs
 
 CONFIG = {
@@ -58,9 +57,9 @@ def write_run(root, table, name, run_id, curve=CURVE, score=None, config=CONFIG)
 def points_in_store(table):
     """Every metric point of every run of ``table``: (run id, key, step, value)."""
     out = []
-    for run in tracking.find_runs(table):
+    for run in store.find_runs(table):
         for key in run["metrics"]:
-            out += [(run["run_id"], key, s, v) for s, v in tracking.metric_history(run["run_id"], key)]
+            out += [(run["run_id"], key, s, v) for s, v in store.metric_history(run["run_id"], key)]
     return sorted(out)
 
 
@@ -69,14 +68,14 @@ def test_a_finished_run_dir_is_imported_with_its_tags_params_curve_and_score(tmp
     run = write_run(tmp_path, "imp-a", "da-s3-quick", "0" * 32, score=score)
     result = import_run_dir(run)
     assert (result.outcome, result.run_id, result.points) == ("imported", "0" * 32, len(CURVE) + 2)
-    [stored] = tracking.find_runs("imp-a")
+    [stored] = store.find_runs("imp-a")
     assert stored["run_id"] == result.mlflow_run_id and stored["status"] == "FINISHED"
     assert stored["run_name"] == "da-s3-quick"
     tags = stored["tags"]
     expected = {"table": "imp-a", "model": "dual_attention", "aux": "True", "seed": "3", "profile": "quick"}
     expected |= {"git_sha": "abc1234", "tasks": "both", "shaping": "True", "precision": "fp32"}
-    expected |= {IMPORTED_FROM: tracking.portable(str(run.resolve())), tracking.IMPORTED_RUN_ID: "0" * 32}
-    expected |= {"trained_frames": "192", "score_eval_episodes": "500", tracking.GIT_COMMIT: "abc1234"}
+    expected |= {IMPORTED_FROM: portable.portable(str(run.resolve())), tracking.IMPORTED_RUN_ID: "0" * 32}
+    expected |= {"trained_frames": "192", "score_eval_episodes": "500", provenance.GIT_COMMIT: "abc1234"}
     assert expected.items() <= tags.items()
     assert not {"frames", "eval_episodes"} & set(tags)  # the params' names: the target frames, the periodic episodes
     assert stored["params"] == {
@@ -91,10 +90,10 @@ def test_a_finished_run_dir_is_imported_with_its_tags_params_curve_and_score(tmp
     }
     rid = stored["run_id"]
     for key in ("train/loss", "train/success_sgn"):
-        assert tracking.metric_history(rid, key) == [(s, v) for s, k, v in CURVE if k == key]
-    assert tracking.metric_history(rid, "eval/sgn_test") == [(128, 0.25), (192, 0.5)]  # the periodic curve
-    assert tracking.metric_history(rid, "final/sgn_test") == [(192, 0.75)]  # the score, apart
-    assert tracking.metric_history(rid, "final/sgn_transfer:go to the red pillar") == [(192, 0.4)]
+        assert store.metric_history(rid, key) == [(s, v) for s, k, v in CURVE if k == key]
+    assert store.metric_history(rid, "eval/sgn_test") == [(128, 0.25), (192, 0.5)]  # the periodic curve
+    assert store.metric_history(rid, "final/sgn_test") == [(192, 0.75)]  # the score, apart
+    assert store.metric_history(rid, "final/sgn_transfer:go to the red pillar") == [(192, 0.4)]
 
 
 def test_a_second_import_changes_nothing(tmp_path):
@@ -106,7 +105,7 @@ def test_a_second_import_changes_nothing(tmp_path):
     second = import_runs([tmp_path])
     assert [r.outcome for r in second] == ["skipped", "skipped"]
     assert [r.mlflow_run_id for r in second] == [r.mlflow_run_id for r in first]
-    assert points_in_store("imp-b") == before and len(tracking.find_runs("imp-b")) == 2
+    assert points_in_store("imp-b") == before and len(store.find_runs("imp-b")) == 2
 
 
 def test_a_run_trained_in_this_store_is_not_duplicated(tmp_path):
@@ -117,8 +116,8 @@ def test_a_run_trained_in_this_store_is_not_duplicated(tmp_path):
     run = write_run(tmp_path, "imp-c", "trained-here", trained)
     result = import_run_dir(run)
     assert (result.outcome, result.mlflow_run_id) == ("skipped", trained)
-    [stored] = tracking.find_runs("imp-c")
-    assert tracking.metric_history(stored["run_id"], "train/loss") == [(64, 1.0)]
+    [stored] = store.find_runs("imp-c")
+    assert store.metric_history(stored["run_id"], "train/loss") == [(64, 1.0)]
 
 
 def test_a_trainer_resuming_an_imported_run_dir_continues_its_imported_run(tmp_path):
@@ -132,8 +131,8 @@ def test_a_trainer_resuming_an_imported_run_dir_continues_its_imported_run(tmp_p
         assert tracker.start("imp-d", "extended", {"seed": 3}, as_trained(CONFIG), run_id="4" * 32) == imported
     tracker.log_metrics({"train/loss": 0.125}, step=256)
     tracker.finish()
-    [stored] = tracking.find_runs("imp-d")
-    assert tracking.metric_history(imported, "train/loss")[-2:] == [(192, 0.25), (256, 0.125)]
+    [stored] = store.find_runs("imp-d")
+    assert store.metric_history(imported, "train/loss")[-2:] == [(192, 0.25), (256, 0.125)]
     assert stored["run_id"] == imported
 
 
@@ -161,7 +160,7 @@ def test_bad_files_fail_by_name_and_the_other_run_dirs_import(tmp_path):
     assert results["bad-line"].reason.startswith(f"{where}: not a metric point (step,key,value): '256,train/loss'")
     assert str(refused) in results["refused"].reason and "train/../loss" in results["refused"].reason
     assert results["unfinished"].reason.startswith("unfinished")
-    assert [r["run_name"] for r in tracking.find_runs("imp-e")] == ["good"]  # the refused one's half-made run: gone
+    assert [r["run_name"] for r in store.find_runs("imp-e")] == ["good"]  # the refused one's half-made run: gone
 
 
 def test_read_points_and_run_dirs(tmp_path):
@@ -189,24 +188,3 @@ def test_import_runs_command(tmp_path):
     (run / "results.json").write_text("[]")
     bad = CliRunner().invoke(app, ["import-runs", str(run)])
     assert bad.exit_code == 2 and f"{run / 'results.json'}: not a JSON object" in bad.output
-
-
-def test_a_sqlite_store_gets_in_one_transaction_what_log_batch_writes(tmp_path):
-    """The bulk path (emml.runs.tracking._bulk_points: MLflow's own tables, one transaction) stores the same points,
-    timestamps and latest values as MlflowClient.log_batch, NaN and infinities included."""
-    curve = CURVE + [(256, "train/loss", float("nan")), (256, "charts/fps", float("inf")), (64, "charts/fps", 32.0)]
-    fast, slow = (
-        write_run(tmp_path / root, "imp-g", "b", rid, curve=curve) for root, rid in (("x", "b" * 32), ("y", "c" * 32))
-    )
-    for run in (fast, slow):
-        os.utime(run / "metrics.csv", (1_700_000_000, 1_700_000_000))  # the same end (no ended_at: estimated)
-    stored = {}
-    for run, bulk in ((fast, True), (slow, False)):
-        rid = import_run_dir(run, bulk=bulk).mlflow_run_id
-        client = tracking._client()
-        data = client.get_run(rid).data
-        keys = sorted(data.metrics)
-        history = {k: sorted((m.step, m.timestamp, m.value) for m in client.get_metric_history(rid, k)) for k in keys}
-        stored[bulk] = (data.metrics, history, {k: v for k, v in data.tags.items() if "import" not in k})
-    assert repr(stored[True]) == repr(stored[False])  # repr: nan == nan
-    assert stored[True][0]["train/loss"] != stored[True][0]["train/loss"]  # the latest point: NaN, at 256

@@ -11,18 +11,19 @@ from emml.config import paths
 from emml.config.paths import project_root
 from emml.config.profiles import profile_config
 from emml.rl.trainer import train
-from emml.runs import tracking
-from emml.runs.import_runs import TIMES, commit_times, display_name, import_run_dir, run_times, utc_ms
+from emml.runs import mirror, portable, provenance, store
+from emml.runs.import_runs import TIMES, commit_times, import_run_dir, run_times
 from emml.runs.results import read_results
-from emml.runs.rundir import METRICS, RESULTS, results_csv
+from emml.runs.rundir import METRICS, RESULTS, results_csv, utc_ms
+from emml.runs.tracking import display_name
 from tests.runs.test_import_runs import write_run
 
 
 def no_machine_path(values: dict, *folders) -> list[str]:
     """The values that hold an absolute path: one of ``folders`` (not as the end of a relative path, '../../tmp/x'),
-    or any other (emml.runs.tracking.portable would rewrite them)."""
+    or any other (emml.runs.portable.portable would rewrite them)."""
     absolute = [re.compile(r"(?<![\w.])" + re.escape(str(f))) for f in folders]
-    return [f"{k}={v}" for k, v in values.items() if tracking.portable(v) != v or any(a.search(v) for a in absolute)]
+    return [f"{k}={v}" for k, v in values.items() if portable.portable(v) != v or any(a.search(v) for a in absolute)]
 
 
 def test_a_trained_run_records_when_it_trained_and_its_import_keeps_it(tmp_path, monkeypatch, no_leftovers):
@@ -35,29 +36,30 @@ def test_a_trained_run_records_when_it_trained_and_its_import_keeps_it(tmp_path,
     start, end = utc_ms(record["started_at"]), utc_ms(record["ended_at"])
     assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\+00:00", record["started_at"]) and start <= end
     assert not {"started_at", "ended_at"} & set(read_results(results_csv(cfg)).columns)  # results.json only
-    [run] = tracking.find_runs("table2")
-    info = tracking._client(uri).get_run(run["run_id"]).info
+    [run] = store.find_runs("table2")
+    info = store.client(uri).get_run(run["run_id"]).info
     assert abs(info.start_time - start) < 5_000 and info.end_time >= end - 1_000
     tags, params = run["tags"], run["params"]
     assert tags["trained_frames"] == "64" and tags["score_eval_episodes"] == "1"
-    assert tags[tracking.GIT_COMMIT] == tracking.full_commit(tags["git_sha"])
-    assert params["run_root"] == os.path.relpath(tmp_path / "runs", tracking.checkout_root())
+    assert tags[provenance.GIT_COMMIT] == provenance.full_commit(tags["git_sha"])
+    assert (params["run_root"], params["results_root"]) == ("runs", "results")  # by name: no path of the machine
     assert no_machine_path(tags | params, tmp_path, project_root()) == []
     finals = sorted(k for k in run["metrics"] if k.startswith("final/"))
     assert finals == [f"final/{k}" for k in sorted(record["metrics"])]  # the score, apart from eval/*
-    assert tracking.metric_history(run["run_id"], "final/sgn_test") == [(64, record["metrics"]["sgn_test"])]
-    assert any(k.startswith("final/") for _, k, _ in tracking.read_mirror(result.run_dir / METRICS))
-    exp = tracking._client(uri).get_experiment_by_name("table2")
-    assert exp.tags[tracking.NOTE].startswith("Accuracy of all models on SGN & EQA test sets")
+    assert store.metric_history(run["run_id"], "final/sgn_test") == [(64, record["metrics"]["sgn_test"])]
+    assert any(k.startswith("final/") for _, k, _ in mirror.read_mirror(result.run_dir / METRICS))
+    exp = store.client(uri).get_experiment_by_name("table2")
+    assert exp.tags[provenance.NOTE].startswith("Accuracy of all models on SGN & EQA test sets")
 
     other = f"sqlite:///{tmp_path}/other.db"  # the run dir imported into another store: the same dates
     assert import_run_dir(result.run_dir, other).outcome == "imported"
-    [imported] = tracking.find_runs("table2", uri=other)
-    info = tracking._client(other).get_run(imported["run_id"]).info
+    [imported] = store.find_runs("table2", uri=other)
+    info = store.client(other).get_run(imported["run_id"]).info
     assert (info.start_time, info.end_time, imported["tags"][TIMES]) == (start, end, RESULTS)
     assert no_machine_path(imported["tags"] | imported["params"], tmp_path, project_root()) == []
+    assert imported["params"] == params  # as the trainer logged them
     assert imported["metrics"]["final/sgn_test"] == record["metrics"]["sgn_test"]
-    history = tracking._client(other).get_metric_history(imported["run_id"], "train/success_sgn")
+    history = store.client(other).get_metric_history(imported["run_id"], "train/success_sgn")
     assert all(start <= m.timestamp <= end for m in history)
 
 
@@ -87,17 +89,17 @@ def test_commit_times_reads_when_git_added_each_results_json(tmp_path):
 
 
 def test_paths_and_names_in_the_store_hold_no_path_of_the_machine():
-    root = tracking.checkout_root()
-    assert tracking.portable(str(root / "runs")) == "runs"
-    assert tracking.portable(f"('{root}/a', '/tmp/b')") == "('a', '" + os.path.relpath("/tmp/b", root) + "')"
+    root = portable.checkout_root()
+    assert portable.portable(str(root / "runs")) == "runs"
+    assert portable.portable(f"('{root}/a', '/tmp/b')") == "('a', '" + os.path.relpath("/tmp/b", root) + "')"
     for kept in ("sqlite:///x/mlflow.db", "env/tasks", "1/2", "train/success_sgn", "https://host/a"):
-        assert tracking.portable(kept) == kept
+        assert portable.portable(kept) == kept
     assert display_name(root / "runs" / "table2" / "x", "x") == "x"
     assert display_name(root / "runs" / "extended" / "table2" / "x", "x") == "x [extended]"
     assert display_name(root / "scratch" / "runs" / "test" / "x", "x") == "x"  # the smoke profile's root
     assert display_name(root / "elsewhere" / "t" / "x", "x") == "x [elsewhere]"
-    assert tracking.experiment_note("eqa_gate").endswith("(`emml run experiments/eqa_gate`).")
-    assert "no table file" in tracking.experiment_note("my-own")
+    assert provenance.experiment_note("eqa_gate").endswith("(`emml run experiments/eqa_gate`).")
+    assert "no table file" in provenance.experiment_note("my-own")
 
 
 def test_a_campaign_worktree_writes_paths_relative_to_its_checkout(tmp_path, monkeypatch):
@@ -107,6 +109,6 @@ def test_a_campaign_worktree_writes_paths_relative_to_its_checkout(tmp_path, mon
     pinned.mkdir(parents=True)
     (pinned / "pyproject.toml").write_text("")
     monkeypatch.setattr(paths, "project_root", lambda: pinned)  # checkout_root reads it from its own module
-    assert tracking.checkout_root() == tmp_path
-    assert tracking.portable(str(tmp_path / "runs" / "table2")) == "runs/table2"
+    assert portable.checkout_root() == tmp_path
+    assert portable.portable(str(tmp_path / "runs" / "table2")) == "runs/table2"
     assert display_name(tmp_path / "runs" / "table2" / "x", "x") == "x"

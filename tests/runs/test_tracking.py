@@ -2,7 +2,7 @@
 
 import pytest
 
-from emml.runs import tracking
+from emml.runs import store, tracking
 
 
 @pytest.fixture(scope="module")
@@ -19,9 +19,9 @@ def _env(uri, monkeypatch):
 
 
 def test_tracking_uri_default_and_env(monkeypatch, uri):
-    assert tracking.tracking_uri() == uri
+    assert store.tracking_uri() == uri
     monkeypatch.delenv("MLFLOW_TRACKING_URI")
-    default = tracking.tracking_uri()
+    default = store.tracking_uri()
     assert default.startswith("sqlite:///") and default.endswith("/mlflow.db")
 
 
@@ -51,16 +51,16 @@ def test_start_log_resume_find(tmp_path, uri):
     t2.log_metrics({"loss": 0.25}, step=30)
     t2.finish()
 
-    assert tracking.metric_history(rid, "loss") == [(10, 1.0), (20, 0.5), (30, 0.25)]
+    assert store.metric_history(rid, "loss") == [(10, 1.0), (20, 0.5), (30, 0.25)]
     tracking.Tracker().start("exp-a", "run2", tags={"model": "ga", "seed": 1}, params={})
-    runs = tracking.find_runs("exp-a", {"model": "dual"})
+    runs = store.find_runs("exp-a", {"model": "dual"})
     assert [r["run_id"] for r in runs] == [rid]
     r = runs[0]
     assert r["status"] == "FINISHED" and r["tags"]["resumed"] == "yes"
     assert r["params"] == {"ppo.lr": "0.00025", "seed": "1", "extra": "5"}
     assert r["metrics"]["loss"] == 0.25
-    assert len(tracking.find_runs("exp-a", {"seed": 1})) == 2
-    assert tracking.find_runs("no-such-exp", {}) == []
+    assert len(store.find_runs("exp-a", {"seed": 1})) == 2
+    assert store.find_runs("no-such-exp", {}) == []
     # artifacts go beside the (previously missing) db directory, not into the cwd
     stored = list((tmp_path_db(uri) / "mlartifacts").rglob("note.txt"))
     assert len(stored) == 1 and stored[0].read_text() == "hi" and rid in str(stored[0])
@@ -73,7 +73,7 @@ def tmp_path_db(uri):
 
 
 def test_retry_on_database_locked(monkeypatch):
-    monkeypatch.setattr(tracking.time, "sleep", lambda s: None)
+    monkeypatch.setattr(store.time, "sleep", lambda s: None)
     calls = []
 
     def flaky():
@@ -82,13 +82,14 @@ def test_retry_on_database_locked(monkeypatch):
             raise RuntimeError("(sqlite3.OperationalError) database is locked")
         return "ok"
 
-    assert tracking._retry(flaky) == "ok" and len(calls) == 3
+    assert store.retry(flaky) == "ok" and len(calls) == 3
     with pytest.raises(ValueError):
-        tracking._retry(lambda: (_ for _ in ()).throw(ValueError("other")))
+        store.retry(lambda: (_ for _ in ()).throw(ValueError("other")))
 
 
 def test_a_run_exports_its_whole_curve_to_a_mirror_file(tmp_path):
-    from emml.runs.tracking import Tracker, read_mirror
+    from emml.runs.mirror import read_mirror
+    from emml.runs.tracking import Tracker
 
     t = Tracker(f"sqlite:///{tmp_path}/m.db")
     run_id = t.start("exp", "r")
@@ -117,7 +118,7 @@ def test_a_run_that_fails_once_created_ends_failed_not_running(monkeypatch):
     monkeypatch.setattr(t._client, "log_batch", no_room_for_params)
     with pytest.raises(OSError, match="No space left"):
         t.start("exp-fail", "r", params={"a": 1})
-    assert [r["status"] for r in tracking.find_runs("exp-fail")] == ["FAILED"]
+    assert [r["status"] for r in store.find_runs("exp-fail")] == ["FAILED"]
 
 
 def test_abort_ends_a_started_run_and_never_hides_the_cause(monkeypatch):
@@ -134,7 +135,7 @@ def test_abort_ends_a_started_run_and_never_hides_the_cause(monkeypatch):
     monkeypatch.setattr(broken._client, "set_terminated", store_down)
     with pytest.warns(UserWarning, match=r"could not be marked ended: RuntimeError: store down"):
         broken.abort(ValueError("the cause"))
-    assert {r["run_name"]: r["status"] for r in tracking.find_runs("exp-abort")}["signalled"] == "KILLED"
+    assert {r["run_name"]: r["status"] for r in store.find_runs("exp-abort")}["signalled"] == "KILLED"
 
 
 def test_a_full_disk_leaves_the_mirror_without_a_half_line(tmp_path, monkeypatch):
@@ -142,7 +143,8 @@ def test_a_full_disk_leaves_the_mirror_without_a_half_line(tmp_path, monkeypatch
     import errno
 
     from emml.runs.diskspace import NoSpaceError
-    from emml.runs.tracking import Tracker, read_mirror
+    from emml.runs.mirror import read_mirror
+    from emml.runs.tracking import Tracker
 
     class Filling:
         """A file whose first write lands in part, the next fails: the disk filled in the middle of a batch."""
@@ -171,7 +173,7 @@ def test_a_full_disk_leaves_the_mirror_without_a_half_line(tmp_path, monkeypatch
     t.mirror_to(mirror)
     t.log_metrics({"a": 1.0}, step=64)
     before = mirror.read_bytes()
-    monkeypatch.setattr(tracking, "open", lambda *a, **k: Filling(builtins.open(*a, **k)), raising=False)
+    monkeypatch.setattr("emml.runs.mirror.open", lambda *a, **k: Filling(builtins.open(*a, **k)), raising=False)
     with pytest.raises(NoSpaceError, match=rf"^no space left on {tmp_path} \(writing metrics.csv, left as it was\)"):
         t.log_metrics({"a": 2.0, "b": 3.0}, step=128)
     monkeypatch.undo()
@@ -203,6 +205,6 @@ def test_a_run_dir_from_another_store_resumed_twice_continues_one_run(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # nothing replayed again
         assert resume(192, 0.25) == first
-    [run] = tracking.find_runs("exp-resumed")
+    [run] = store.find_runs("exp-resumed")
     assert run["tags"][tracking.RESUMED_FROM] == "f" * 32
-    assert tracking.metric_history(first, "loss") == [(64, 1.0), (128, 0.5), (192, 0.25)]
+    assert store.metric_history(first, "loss") == [(64, 1.0), (128, 0.5), (192, 0.25)]

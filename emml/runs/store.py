@@ -1,0 +1,166 @@
+"""The MLflow store: where it is, a client for it, and what the project reads and writes in it through MLflow's
+public API (`MlflowClient`) only. ``mlflow`` is imported lazily inside functions: it takes over a second to import
+and ``import emml`` must stay fast.
+
+* Default store is ``sqlite:///<project root>/mlflow.db`` (the plain file store is deprecated); any other backend
+  (a shared ``mlflow server``) is a matter of the ``MLFLOW_TRACKING_URI`` environment variable.
+* Writes go in batches of MLflow's limits (`log_batch`: 1000 metrics, 100 params or tags a call); SQLite "database
+  is locked" errors (many concurrent writers) are retried with backoff (`retry`).
+* :func:`metric_history` returns full curves (``search_runs`` only keeps the latest value per metric).
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import time
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+from emml.config.paths import project_root
+
+T = TypeVar("T")
+
+MAX_PARAM_LEN = 6000  # mlflow.utils.validation.MAX_PARAM_VAL_LENGTH
+MAX_TAG_LEN = 8000  # mlflow.utils.validation.MAX_TAG_VAL_LENGTH
+BATCH_PARAMS = 100  # mlflow.utils.validation.MAX_PARAMS_TAGS_PER_BATCH
+BATCH_METRICS = 1000  # mlflow.utils.validation.MAX_METRICS_PER_BATCH
+
+
+def tracking_uri() -> str:
+    """``$MLFLOW_TRACKING_URI`` if set, else ``sqlite:///<project root>/mlflow.db``."""
+    env = os.environ.get("MLFLOW_TRACKING_URI")
+    if env:
+        return env
+    return f"sqlite:///{project_root() / 'mlflow.db'}"
+
+
+def sqlite_path(uri: str) -> Path | None:
+    """Filesystem path of a ``sqlite:///`` database (None for other backends / in-memory)."""
+    prefix = "sqlite:///"
+    if not uri.startswith(prefix):
+        return None
+    path = uri[len(prefix) :].split("?", 1)[0]
+    if not path or path == ":memory:":
+        return None
+    return Path(path).resolve()
+
+
+def client(uri: str | None = None):
+    """MlflowClient for ``uri`` (default `tracking_uri`); creates the sqlite file's directory if missing."""
+    from mlflow import MlflowClient
+
+    uri = uri or tracking_uri()
+    db = sqlite_path(uri)
+    if db is not None:
+        db.parent.mkdir(parents=True, exist_ok=True)
+    return retry(lambda: MlflowClient(tracking_uri=uri))
+
+
+def _is_lock_error(exc: BaseException) -> bool:
+    text = str(exc).lower()
+    return "database is locked" in text or "database table is locked" in text
+
+
+def retry(fn: Callable[[], T], attempts: int = 8, base_delay: float = 0.1) -> T:
+    """Call ``fn``; retry SQLite lock errors with jittered exponential backoff."""
+    for i in range(attempts):
+        try:
+            return fn()
+        except Exception as exc:  # mlflow wraps sqlalchemy errors in MlflowException
+            if not _is_lock_error(exc) or i == attempts - 1:
+                raise
+            time.sleep(base_delay * (2**i) * (0.5 + random.random()))
+    raise AssertionError("unreachable")
+
+
+def log_batch(mlflow_client, run_id: str, metrics=(), params=(), tags=()) -> None:
+    """``MlflowClient.log_batch`` for any number of entities, in calls of MLflow's limits (`BATCH_METRICS` metrics,
+    `BATCH_PARAMS` params or tags), each retried on a lock."""
+    for items, size, name in ((metrics, BATCH_METRICS, "metrics"), (params, BATCH_PARAMS, "params"),
+                              (tags, BATCH_PARAMS, "tags")):  # fmt: skip
+        items = list(items)
+        for i in range(0, len(items), size):
+            chunk = {name: items[i : i + size]}
+            retry(lambda chunk=chunk: mlflow_client.log_batch(run_id, **chunk))
+
+
+def last_points(points: Iterable[tuple[int, str, float]], when: Callable[[int], int] | None = None):
+    """(key, step, value, timestamp) per key and step (the last value given), by key then step, each timestamped
+    ``when(step)`` (ms; default now)."""
+    now = int(time.time() * 1000)
+    last = {(k, st): v for st, k, v in points}
+    return [(k, st, v, when(st) if when else now) for (k, st), v in sorted(last.items())]
+
+
+def log_points(
+    mlflow_client, run_id: str, points: Iterable[tuple[int, str, float]], when: Callable[[int], int] | None = None
+) -> int:
+    """Log (step, key, value) points into ``run_id``, one per key and step (the last), timestamped ``when(step)`` (ms;
+    default now), with `log_batch`; returns how many were logged."""
+    from mlflow.entities import Metric
+
+    items = [Metric(k, v, ts, st) for k, st, v, ts in last_points(points, when)]
+    log_batch(mlflow_client, run_id, metrics=items)
+    return len(items)
+
+
+def has_run(run_id: str, uri: str | None = None, mlflow_client=None) -> bool:
+    """Whether the store holds run ``run_id`` (deleted or not)."""
+    from mlflow.exceptions import MlflowException
+
+    mlflow_client = mlflow_client or client(uri)
+    try:
+        retry(lambda: mlflow_client.get_run(run_id))
+        return True
+    except MlflowException as e:
+        if e.error_code == "RESOURCE_DOES_NOT_EXIST":
+            return False
+        raise
+
+
+def metric_history(run_id: str, key: str, uri: str | None = None) -> list[tuple[int, float]]:
+    """Full curve of metric ``key`` as ``[(step, value), ...]`` sorted by step (then time)."""
+    mlflow_client = client(uri)
+    hist = retry(lambda: mlflow_client.get_metric_history(run_id, key))
+    return [(m.step, m.value) for m in sorted(hist, key=lambda m: (m.step, m.timestamp))]
+
+
+def _quote(value: Any) -> str:
+    return "'" + str(value).replace("\\", "\\\\").replace("'", "\\'") + "'"
+
+
+def find_runs(experiment: str, filter_tags: Mapping[str, Any] | None = None, uri: str | None = None) -> list[dict]:
+    """Runs of ``experiment`` whose tags equal ``filter_tags`` (all pages).
+
+    Each run is a dict: ``run_id``, ``run_name``, ``status``, ``start_time``
+    (ms), ``tags``, ``params`` and ``metrics`` (latest value of each). Missing
+    experiment -> empty list.
+    """
+    mlflow_client = client(uri)
+    exp = retry(lambda: mlflow_client.get_experiment_by_name(experiment))
+    if exp is None:
+        return []
+    filt = " and ".join(f"tags.`{k}` = {_quote(v)}" for k, v in (filter_tags or {}).items())
+    runs: list[dict] = []
+    token = None
+    while True:
+        page = retry(
+            lambda token=token: mlflow_client.search_runs([exp.experiment_id], filter_string=filt, page_token=token)
+        )
+        for r in page:
+            runs.append(
+                {
+                    "run_id": r.info.run_id,
+                    "run_name": r.info.run_name,
+                    "status": r.info.status,
+                    "start_time": r.info.start_time,
+                    "tags": dict(r.data.tags),
+                    "params": dict(r.data.params),
+                    "metrics": dict(r.data.metrics),
+                }
+            )
+        token = page.token
+        if not token:
+            return runs
