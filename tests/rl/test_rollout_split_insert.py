@@ -43,8 +43,9 @@ def _fill_as_the_sampler_does() -> RolloutBuffer:
     for t in range(T):
         for g, envs in enumerate(GROUPS):
             p = _policy(t, g)
-            buf.insert_policy(t, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"],
-                              p["episode_start"], envs=envs)
+            buf.insert_policy(
+                t, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"], p["episode_start"], envs=envs
+            )
         for g, envs in enumerate(GROUPS):
             buf.insert_outcome(t, **_outcome(t, g), envs=envs)
     return buf
@@ -71,8 +72,10 @@ def test_the_halves_in_groups_store_what_one_whole_insert_per_step_stores():
     for t in range(T):
         halves = [(_policy(t, g), _outcome(t, g)) for g in range(2)]
         obs = {k: torch.cat([p["obs"][k] for p, _ in halves]) for k in SHAPES}
-        cat = {f: torch.cat([p[f] for p, _ in halves]) for f in ("action", "answer_target", "logprob", "value",
-                                                                  "episode_start")}
+        cat = {
+            f: torch.cat([p[f] for p, _ in halves])
+            for f in ("action", "answer_target", "logprob", "value", "episode_start")
+        }
         out = {f: torch.cat([o[f] for _, o in halves]) for f in ("reward", "done")}
         whole.insert(t, obs, **cat, **out)
     for name in ("actions", "answer_targets", "logprobs", "values", "rewards", "dones", "episode_starts"):
@@ -84,8 +87,9 @@ def test_the_halves_in_groups_store_what_one_whole_insert_per_step_stores():
 def test_a_half_leaves_every_other_cell_as_it_was():
     buf = RolloutBuffer(T, B, SHAPES)
     p = _policy(1, 1)
-    buf.insert_policy(1, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"], p["episode_start"],
-                      envs=GROUPS[1])
+    buf.insert_policy(
+        1, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"], p["episode_start"], envs=GROUPS[1]
+    )
     # the outcome's fields untouched by the policy's half
     assert not buf.rewards.any() and not buf.dones.any()
     # the other group and the other steps still hold the storage's initial values
@@ -108,8 +112,9 @@ def test_each_half_takes_exactly_the_steps_of_the_rollout(t, ok):
     p, o = _policy(0, 0), _outcome(0, 0)
 
     def policy():
-        buf.insert_policy(t, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"],
-                          p["episode_start"], envs=GROUPS[0])
+        buf.insert_policy(
+            t, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"], p["episode_start"], envs=GROUPS[0]
+        )
 
     def outcome():
         buf.insert_outcome(t, **o, envs=GROUPS[0])
@@ -130,8 +135,9 @@ def test_refusals_name_the_field_and_both_shapes_or_key_sets():
     buf = RolloutBuffer(T, B, SHAPES)
     p = _policy(0, 0)
     args = [p["action"], p["answer_target"], p["logprob"], p["value"], p["episode_start"]]
-    with pytest.raises(KeyError, match=re.escape("obs keys ['image', 'task'] != buffer keys ['image', 'task', "
-                                                 "'tokens']")):
+    with pytest.raises(
+        KeyError, match=re.escape("obs keys ['image', 'task'] != buffer keys ['image', 'task', 'tokens']")
+    ):
         buf.insert_policy(0, {k: v for k, v in p["obs"].items() if k != "tokens"}, *args, envs=GROUPS[0])
     with pytest.raises(KeyError, match="extra"):
         buf.insert_policy(0, {**p["obs"], "extra": p["obs"]["task"]}, *args, envs=GROUPS[0])
@@ -153,8 +159,7 @@ def test_values_with_autograd_history_are_stored_without_it():
     p = _policy(0, 1)
     value = p["value"].clone().requires_grad_(True) * 2  # a non-leaf, as the critic's output is
     logprob = p["logprob"].clone().requires_grad_(True) + 0
-    buf.insert_policy(0, p["obs"], p["action"], p["answer_target"], logprob, value, p["episode_start"],
-                      envs=GROUPS[1])
+    buf.insert_policy(0, p["obs"], p["action"], p["answer_target"], logprob, value, p["episode_start"], envs=GROUPS[1])
     assert not buf.values.requires_grad and not buf.logprobs.requires_grad
     assert buf.values[0, 2:].tolist() == [20.0, 20.5]
 
@@ -162,8 +167,11 @@ def test_values_with_autograd_history_are_stored_without_it():
 def test_fresh_storage_its_types_and_what_it_refuses():
     buf = RolloutBuffer(T, B, SHAPES, device="cpu")
     assert buf.device == torch.device("cpu") and (buf.num_steps, buf.num_envs) == (T, B)
-    ints, floats, flags = ("actions", "answer_targets"), ("logprobs", "values", "rewards", "advantages", "returns"), (
-        "dones", "episode_starts")
+    ints, floats, flags = (
+        ("actions", "answer_targets"),
+        ("logprobs", "values", "rewards", "advantages", "returns"),
+        ("dones", "episode_starts"),
+    )
     for name in ints + floats + flags:
         tensor = getattr(buf, name)
         assert tensor.shape == (T, B), name
@@ -197,8 +205,13 @@ def test_returns_take_the_last_value_as_floats_without_its_history():
 
 @pytest.mark.parametrize(
     "field, half",
-    [("answer_target", "policy"), ("logprob", "policy"), ("episode_start", "policy"), ("action", "policy"),
-     ("reward", "outcome")],
+    [
+        ("answer_target", "policy"),
+        ("logprob", "policy"),
+        ("episode_start", "policy"),
+        ("action", "policy"),
+        ("reward", "outcome"),
+    ],
 )
 def test_a_wrong_shape_names_the_field_it_came_in(field, half):
     buf = RolloutBuffer(T, B, SHAPES)
@@ -206,8 +219,16 @@ def test_a_wrong_shape_names_the_field_it_came_in(field, half):
     if half == "policy":
         p[field] = torch.zeros(5, dtype=p[field].dtype)
         with pytest.raises(ValueError, match=re.escape(f"{field}: expected shape (2,), got (5,)")):
-            buf.insert_policy(0, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"],
-                              p["episode_start"], envs=GROUPS[0])
+            buf.insert_policy(
+                0,
+                p["obs"],
+                p["action"],
+                p["answer_target"],
+                p["logprob"],
+                p["value"],
+                p["episode_start"],
+                envs=GROUPS[0],
+            )
     else:
         with pytest.raises(ValueError, match=re.escape(f"{field}: expected shape (2,), got (5,)")):
             buf.insert_outcome(0, torch.zeros(5), o["done"], envs=GROUPS[0])
@@ -218,8 +239,18 @@ def test_the_smallest_rollout_and_a_whole_step_for_some_actors():
     assert buf.values.shape == (1, 1)
     buf = RolloutBuffer(T, B, SHAPES)
     p, o = _policy(2, 1), _outcome(2, 1)
-    buf.insert(2, p["obs"], p["action"], p["answer_target"], p["logprob"], p["value"], o["reward"], o["done"],
-               p["episode_start"], envs=GROUPS[1])
+    buf.insert(
+        2,
+        p["obs"],
+        p["action"],
+        p["answer_target"],
+        p["logprob"],
+        p["value"],
+        o["reward"],
+        o["done"],
+        p["episode_start"],
+        envs=GROUPS[1],
+    )
     assert buf.values[2].tolist() == [0.0, 0.0, 210.0, 210.25] and buf.rewards[2].tolist() == [0.0, 0.0, 2.5, -3.0]
 
 
@@ -227,9 +258,20 @@ def test_every_storage_lives_on_the_buffers_device():
     """On the 'meta' device (shapes without data, on any machine): a tensor created without the buffer's device
     would land on the CPU. The GPU path keeps the rollout on the device the same way (docs/throughput.md)."""
     buf = RolloutBuffer(T, B, SHAPES, device="meta")
-    tensors = dict(buf.obs) | {n: getattr(buf, n) for n in ("actions", "answer_targets", "logprobs", "values",
-                                                             "rewards", "dones", "episode_starts", "advantages",
-                                                             "returns")}
+    tensors = dict(buf.obs) | {
+        n: getattr(buf, n)
+        for n in (
+            "actions",
+            "answer_targets",
+            "logprobs",
+            "values",
+            "rewards",
+            "dones",
+            "episode_starts",
+            "advantages",
+            "returns",
+        )
+    }
     assert {k: v.device.type for k, v in tensors.items()} == dict.fromkeys(tensors, "meta")
     buf.set_initial_state({"h": torch.zeros(B, 3)})
     assert buf.initial_state["h"].device.type == "meta"
