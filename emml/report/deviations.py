@@ -190,7 +190,8 @@ def summarise(runs: list[ShownRun], schedule: list[tuple[str, str]] | None = Non
 
 def markdown(d: Deviations) -> str:
     """The deviations as Markdown lists (under a table's caption)."""
-    out = ["**Deviations from the paper** (each run's config against the paper's values, `emml/fidelity.py`):", ""]
+    paper = "each run's config against the paper's values, `emml/experiments/fidelity.py`"
+    out = [f"**Deviations from the paper** ({paper}):", ""]
     out += [f"- {line}: {holders}" for line, holders in d.deviations] or ["- none"]
     out += ["", "**Where the paper is silent**, our choices in force:", ""]
     out += [f"- {line}: {holders}" for line, holders in d.choices] or ["- none"]

@@ -183,7 +183,7 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
         t = table.transfer
         parts.append(
             f"Each run: trained with {t.overrides}, then detectors ({t.detector}) for {', '.join(t.words)} appended, "
-            "no fine-tuning (emml/transfer.py); a cell is the mean over the row's test instructions."
+            "no fine-tuning (emml/eval/transfer.py); a cell is the mean over the row's test instructions."
         )
         if any(r.extra for r in table.rows):
             parts.append(f"Rows marked {EXTRA_MARK}: the test instructions the paper's rows do not name.")
