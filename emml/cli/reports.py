@@ -7,7 +7,20 @@ from pathlib import Path
 
 import typer
 
-from emml.cli.common import JSON_HELP, Task, _check_store, _echo, _fail, _models, _out, _own_engines, profile_option
+from emml.cli.common import (
+    JSON_HELP,
+    Task,
+    _check_store,
+    _echo,
+    _fail,
+    _models,
+    _out,
+    _own_engines,
+    profile_option,
+)
+
+READ_RUN_ROOT_HELP = "Folder of the run dirs the report reads (default: the profile's, the checkout's runs/)."
+READ_RESULTS_ROOT_HELP = "Folder of the results CSVs the report reads (default: the profile's, results/)."
 
 
 def report(
@@ -15,12 +28,15 @@ def report(
     profile: str = profile_option(help="Whose results are reported."),
     curves: bool = typer.Option(True, "--curves/--no-curves", help="Also plot training curves (needs MLflow)."),
     out: Path = typer.Option(None, help="Output folder (default: reports/; smoke: scratch/reports/)."),
+    run_root: str = typer.Option(None, help=READ_RUN_ROOT_HELP),
+    results_root: str = typer.Option(None, help=READ_RESULTS_ROOT_HELP),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """One table, ours beside the paper's numbers.
 
     Writes reports/TABLE-PROFILE.md and .tex (the mean over seeds with each seed's value beside the paper's, the
     runs' deviations from the paper, an rliable aggregate) and TABLE-PROFILE-curves.png/.pdf."""
+    from emml.models.plugins import configured
     from emml.report.tables import report_table
     from emml.runs.diskspace import NoSpaceError
 
@@ -31,21 +47,27 @@ def report(
             from emml.experiments.tables import own_table
 
             table = own_table(table)
-        data = report_table(table, profile, out=_out(out) if out else None)
+        roots = {"results_root": results_root, "run_root": run_root}
+        # a table of one's own may need its plugin: the page's "Made by" line carries it (issue 64)
+        data = report_table(table, profile, out=_out(out) if out else None, plugins=configured(), **roots)
     except (ValueError, NoSpaceError) as e:  # NoSpaceError: a full disk, the folder named, each file old or new
         _fail(str(e))
     data["notes"] = []
     if curves:
         from emml.report.curves import plot_table
 
-        paths, notes = plot_table(table, profile, out=_out(out) if out else None)
+        paths, notes = plot_table(table, profile, out=_out(out) if out else None, **roots)
         data["paths"] += [str(p) for p in paths]
         data["notes"] = notes
     text = "\n".join([data["caption"], *[f"note: {n}" for n in data["notes"]], *[f"wrote {p}" for p in data["paths"]]])
     _echo(data, as_json, text)
 
 
-def reports(out: Path = typer.Option(None, help="Output folder (default: reports/).")):
+def reports(
+    out: Path = typer.Option(None, help="Output folder (default: reports/)."),
+    run_root: str = typer.Option(None, help=READ_RUN_ROOT_HELP),
+    results_root: str = typer.Option(None, help=READ_RESULTS_ROOT_HELP),
+):
     """Every table, curve and figure, and reports/index.md linking them.
 
     For every profile with results but smoke."""
@@ -56,7 +78,8 @@ def reports(out: Path = typer.Option(None, help="Output folder (default: reports
     from emml.runs.diskspace import NoSpaceError
 
     try:  # a damaged run dir is named and skipped inside; what is left (a results CSV, the claims) fails in one line
-        index = write_reports(_out(out) if out else None, log=typer.echo)
+        roots = {k: v for k, v in (("results_root", results_root), ("run_root", run_root)) if v is not None}
+        index = write_reports(_out(out) if out else None, log=typer.echo, **roots)
     except (ValueError, NoSpaceError) as e:  # a full disk: the folder named, each file written old or new
         _fail(str(e))
     typer.echo(f"wrote {index}")

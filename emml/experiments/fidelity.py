@@ -9,6 +9,8 @@ House), "Eq. N" (the Dual-Attention unit), "'Auxiliary Task'" (the paragraph of 
 
 from __future__ import annotations
 
+import copy
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
@@ -308,17 +310,24 @@ def _flatten(d: dict, prefix: str = "") -> dict:
     return out
 
 
+@functools.cache
+def _defaults(difficulty: str) -> dict:
+    """TrainConfig's defaults for an env kind, flattened: built once per kind, not once per run a report shows
+    (issue 64); `resolve` reads a copy."""
+    from emml.config.schema import TrainConfig, env_config_class
+
+    return _flatten(TrainConfig(env=env_config_class(difficulty)()).to_dict())
+
+
 def resolve(saved: dict) -> dict:
     """A saved config (`TrainConfig.to_dict()`, possibly from an older version) flattened to dotted fields, with the
     fields it predates at today's defaults and the model's effective options under 'model.*' (its registry entry
     and overrides, emml.models.model_config). 'score_episodes': the final evaluation's episodes
     (`final_eval_episodes`, or `eval_episodes` for a run saved before that field existed)."""
-    from emml.config.schema import TrainConfig, env_config_class
     from emml.models import model_config
 
     env = saved.get("env", {})
-    defaults = TrainConfig(env=env_config_class(env.get("difficulty", "easy"))()).to_dict()
-    cfg = {**_flatten(defaults), **_flatten(saved)}
+    cfg = {**copy.deepcopy(_defaults(env.get("difficulty", "easy"))), **_flatten(saved)}
     options = dict(saved.get("model_options") or {})
     model = model_config(cfg["model"], **options)
     cfg.update({f"model.{f.name}": getattr(model, f.name) for f in fields(model) if f.name != "options"})

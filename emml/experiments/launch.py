@@ -51,12 +51,14 @@ def plan_runs(
     fields: dict | None = None,
     only: dict | None = None,
     overrides: dict | None = None,
+    table: Table | None = None,
 ) -> list[PlannedRun]:
     """Every run of table `name` under `profile`, in training order: `only` selects (`select_runs`), `overrides`
     (dotted fields of how a run runs, `with_overrides`) apply on top of each run's own; `fields` (run_root,
-    results_root, device, threads) go to every run's TrainConfig."""
+    results_root, device, threads) go to every run's TrainConfig. `table`: `name` already loaded (a report's plan,
+    emml/report/plan.py), not loaded again."""
     fields = fields or {}
-    table = load_table(name)
+    table = table if table is not None else load_table(name)
     planned: dict[str, PlannedRun] = {}
     recorded: dict[Path, set[str]] = {}  # per results CSV: a row may borrow another table's runs (from_table)
     for spec in table.runs(list(profile.seeds)):

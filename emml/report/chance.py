@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from emml.config.profiles import Profile
 from emml.experiments.claims.evidence import Chance
 
 BLIND_MODEL = "text_only"
@@ -18,16 +19,17 @@ BLIND_TABLES = ("table2", "table5")
 COLUMNS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
 
 
-def blind_prior(profile: str, results_root: str | Path | None = None) -> Chance:
+def blind_prior(profile: Profile, results_root: str | Path | None = None) -> Chance:
     """The profile's Text only runs, mean over seeds and aux settings per difficulty and column; a column with no
-    finished blind run falls back to the uniform chance (`Chance.of`)."""
-    from emml.experiments.tables import load_table
-    from emml.report.tables import table_results
+    finished blind run falls back to the uniform chance (`Chance.of`). Read from the blind tables' own results CSVs
+    (their Text only rows are their own, never borrowed): no table is loaded, no run named."""
+    from emml.report.tables import results_path
+    from emml.runs.results import read_results
 
     values: dict = {}
     seeds: dict = {}
     for name in BLIND_TABLES:
-        results = table_results(load_table(name), profile, results_root)
+        results = read_results(results_path(name, profile, results_root))
         if results.empty or "model" not in results:
             continue
         blind = results[results["model"] == BLIND_MODEL]

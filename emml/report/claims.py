@@ -32,6 +32,7 @@ from emml.experiments.claims.evidence import (
     task_of,
 )
 from emml.report.chance import BLIND_MODEL, blind_prior, paper_prior
+from emml.report.plan import ReportPlan, plan_report
 
 __all__ = [
     "BUDGET",
@@ -117,22 +118,20 @@ def _learning(row: dict, metric: str, difficulty: str, blind: bool, chance: Chan
     return value, (-math.inf if blind else chance.bar(train, difficulty))
 
 
-def gather(claim, profile: str, results_root=None, run_root=None, chance: Chance | None = None) -> Evidence:
-    """The claim's cells read from `profile`'s results (results/<table>/<profile>.csv and the tables it borrows
-    from); 'faster' and 'diagnostic' read the runs' metrics.csv under `run_root` (default: the profile's)."""
-    from emml.experiments.tables import load_table
+def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
+    """The claim's cells read from the results of ``plan`` (the claim's table planned under a profile,
+    emml/report/plan.py: results/<table>/<profile>.csv and the tables it borrows from); 'faster' and 'diagnostic'
+    read the runs' metrics.csv under the plan's run_root."""
     from emml.report.tables import build_cells, paper_numbers, table_results
 
     kind = claim.kind_of
-    table = load_table(claim.table)
-    results = table_results(table, profile, results_root)
-    cells = build_cells(table, profile, results, paper_numbers(table.name))
+    table = plan.table
+    results = table_results(table, plan.profile, plan.results_root)
+    cells = build_cells(plan, results, paper_numbers(table.name))
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    prof = resolve_profile(profile)  # once: every run name below reads it
-    runs = table.runs(list(prof.seeds))
-    specs = {spec.run_name(prof): spec for spec in runs}
-    run_root = run_root if run_root is not None else prof.config().run_root
-    chance = chance if chance is not None else blind_prior(profile, results_root)
+    planned = plan.by_name()  # every run's config and name made once
+    run_root = plan.run_root
+    chance = chance if chance is not None else blind_prior(plan.profile, plan.results_root)
     columns = set(table.metrics.values())
     blind = {r.label for r in table.rows if r.model == BLIND_MODEL}
     involved = kind.involved(claim, table)
@@ -156,7 +155,7 @@ def gather(claim, profile: str, results_root=None, run_root=None, chance: Chance
                         name, int(row["seed"]), value, int(row["eval_episodes"]) * per, int(row["frames"]), train, bar
                     )
                     if kind.curve:
-                        score = _curve_score(claim, m, specs[name], prof, run_root, score, row, chance)
+                        score = _curve_score(claim, m, planned[name], run_root, score, row, chance)
                         if score is None:
                             ev.missing.append(f"{name} (no complete metrics.csv here)")
                             continue
@@ -169,9 +168,9 @@ def gather(claim, profile: str, results_root=None, run_root=None, chance: Chance
                         shown[score.seed] = f"{value:.3f}"
                     found.append(score)
                 ev.scores[(c.row, c.difficulty, c.aux, m)] = found
-                for spec in table.cell_runs(c.row, c.difficulty, c.aux, c.metric, runs):
-                    name = spec.run_name(prof)
-                    ev.owners[name] = spec.table
+                for run in plan.cell_runs(c.row, c.difficulty, c.aux, c.metric):
+                    name = run.name
+                    ev.owners[name] = run.spec.table
                     if name not in c.runs and name not in ev.missing:
                         ev.missing.append(name)
                 ev.evidence.append(
@@ -229,8 +228,8 @@ def paper_evidence(claim, chance: Chance | None = None) -> Evidence:
     return ev
 
 
-def judge(claim, ev: Evidence, profile: str) -> Decision:
-    """The claim's status from its evidence, by its kind's comparisons."""
+def judge(claim, ev: Evidence, source: str) -> Decision:
+    """The claim's status from its evidence, by its kind's comparisons; ``source``: the profile's name, or PAPER."""
     from emml.experiments.tables import load_table
 
     kind = claim.kind_of
@@ -246,7 +245,7 @@ def judge(claim, ev: Evidence, profile: str) -> Decision:
         claim.source,
         claim.kind,
         table.name,
-        profile,
+        source,
         st,
         _phrase(checks),
         checks,
@@ -258,9 +257,21 @@ def judge(claim, ev: Evidence, profile: str) -> Decision:
     )
 
 
-def decide(claim, profile: str, results_root=None, run_root=None, chance: Chance | None = None) -> Decision:
-    """The claim decided from the results of `profile` (chance: its blind prior, `blind_prior`)."""
-    return judge(claim, gather(claim, profile, results_root, run_root, chance), profile)
+def decide(
+    claim,
+    profile: Profile | str,
+    results_root=None,
+    run_root=None,
+    chance: Chance | None = None,
+    plans: dict | None = None,
+) -> Decision:
+    """The claim decided from the results of `profile` (chance: its blind prior, `blind_prior`). ``plans``: table
+    name → its report plan, filled here: claims of one table share one plan (`decide_all`)."""
+    plans = plans if plans is not None else {}
+    if claim.table not in plans:
+        plans[claim.table] = plan_report(claim.table, profile, results_root, run_root)
+    plan = plans[claim.table]
+    return judge(claim, gather(claim, plan, chance), plan.profile.name)
 
 
 def decide_paper(claim) -> Decision:
@@ -276,7 +287,7 @@ def decide_paper(claim) -> Decision:
     return judge(claim, paper_evidence(claim), PAPER)
 
 
-def _curve_score(claim, metric: str, spec, profile: Profile, run_root, score: Score, row: dict, chance: Chance):
+def _curve_score(claim, metric: str, run, run_root, score: Score, row: dict, chance: Chance):
     """A run's number for a 'faster' claim (the frames at its first crossing of the mark, inf when it never crosses
     by its last evaluation) or a 'diagnostic' one (the key at its last evaluation), from its metrics.csv; None when
     the file is not here or stops short of the run's frames (a crossing after it cannot be ruled out)."""
@@ -284,8 +295,9 @@ def _curve_score(claim, metric: str, spec, profile: Profile, run_root, score: Sc
     from emml.runs.records import points_or_none
     from emml.runs.rundir import METRICS, path_of
 
+    spec = run.spec  # a planned run (emml/report/plan.py): its name spelled once
     if claim.kind_of.reads == "crossing":
-        eff = run_efficiency(spec, profile, run_root, chance)
+        eff = run_efficiency(spec, run.name, run_root, chance)
         if not eff.found or metric not in eff.crossings:
             return None
         crossed = eff.crossings[metric][claim.mark]
@@ -293,7 +305,7 @@ def _curve_score(claim, metric: str, spec, profile: Profile, run_root, score: Sc
             return None
         value = math.inf if crossed is None else float(crossed)
         return Score(score.run, score.seed, value, 0, eff.last, every=eff.every)
-    mirror = points_or_none(path_of(run_root, spec.table, spec.run_name(profile)) / METRICS)  # damaged: None, named
+    mirror = points_or_none(path_of(run_root, spec.table, run.name) / METRICS)  # damaged: None, named
     points = sorted((step, v) for step, key, v in mirror or [] if key == claim.key)
     if not points:
         return None
@@ -377,15 +389,18 @@ def costs_of(d: Decision, costs: dict[tuple[str, str], str]) -> list[str]:
     return out
 
 
-def decide_all(profile: str, results_root=None, costs: dict | None = None, run_root=None) -> list[Decision]:
+def decide_all(profile: Profile | str, results_root=None, costs: dict | None = None, run_root=None) -> list[Decision]:
     """Every claim of reproduce/claims.toml decided from `profile`'s results (and its runs' metrics.csv under
-    `run_root`), in the file's order; with `costs` (campaign_costs), each missing run's step."""
+    `run_root`), in the file's order; with `costs` (campaign_costs), each missing run's step. Each table is planned
+    once for all its claims."""
     from emml.experiments.claims import load_claims
 
+    profile = resolve_profile(profile)
     chance = blind_prior(profile, results_root)
+    plans: dict = {}
     out = []
     for claim in load_claims().values():
-        d = decide(claim, profile, results_root, run_root, chance)
+        d = decide(claim, profile, results_root, run_root, chance, plans)
         if costs is not None:
             d.costs = costs_of(d, costs)
         out.append(d)
@@ -396,7 +411,9 @@ def counts(decisions: list[Decision]) -> dict[str, int]:
     return {s: sum(d.status == s for d in decisions) for s in STATUSES}
 
 
-def write_claims(profile: str, out=None, results_root=None, costs: dict | None = None, run_root=None, tables=None):
+def write_claims(
+    profile: Profile | str, out=None, results_root=None, costs: dict | None = None, run_root=None, tables=None
+):
     """reports/claims-<profile>.md, the page read first, and beside it its detail and figure
     (emml/report/claims_page.py; scratch/reports for a scratch profile, as the table pages: `reports_dir`).
     ``tables``: the tables whose page `make reports` writes for the profile, which the detail links (None: those
@@ -405,6 +422,7 @@ def write_claims(profile: str, out=None, results_root=None, costs: dict | None =
     from emml.report.claims_page import write_pages
     from emml.report.tables import reports_dir
 
+    profile = resolve_profile(profile)  # once: every claim, table and page below reads it
     folder = reports_dir(profile, out)
     folder.mkdir(parents=True, exist_ok=True)
     decisions = decide_all(profile, results_root, costs, run_root)
@@ -417,10 +435,10 @@ def write_claims(profile: str, out=None, results_root=None, costs: dict | None =
     return paths[0], decisions
 
 
-def _tables_with_runs(names: set[str], profile: str, results_root) -> set[str]:
+def _tables_with_runs(names: set[str], profile: Profile, results_root) -> set[str]:
     """The tables among ``names`` that are not placeholders and have a finished run of ``profile``."""
     from emml.experiments.tables import load_table
-    from emml.report.tables import _run_names, table_results
+    from emml.report.tables import table_results
 
     out = set()
     for name in names:
@@ -428,6 +446,6 @@ def _tables_with_runs(names: set[str], profile: str, results_root) -> set[str]:
         if table.placeholder:
             continue
         df = table_results(table, profile, results_root)
-        if not df.empty and df["run_name"].isin(_run_names(table, profile)).any():
+        if not df.empty and df["run_name"].isin(plan_report(table, profile, results_root).names).any():
             out.add(name)
     return out

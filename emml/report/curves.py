@@ -11,7 +11,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from emml.config.profiles import resolve_profile  # noqa: E402
+from emml.config.profiles import Profile  # noqa: E402
 from emml.report.aggregate import reference_row  # noqa: E402
 from emml.report.savefig import PAGE_INCHES, frames_axis, save, wrap  # noqa: E402
 from emml.runs.tracking import metric_history  # noqa: E402
@@ -91,7 +91,7 @@ def _mean_band(curves: list[tuple[np.ndarray, np.ndarray]]):
 
 def plot_table(
     name: str,
-    profile: str,
+    profile: Profile | str,
     results_root: str | Path | None = None,
     out: str | Path | None = None,
     run_root: str | Path | None = None,
@@ -107,30 +107,28 @@ def plot_table(
     import matplotlib.transforms as mtransforms
     from matplotlib.lines import Line2D
 
-    from emml.config.profiles import profile_config
-    from emml.experiments.tables import load_table
     from emml.report import deviations
     from emml.report.chance import blind_prior
+    from emml.report.plan import plan_report
     from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, reports_dir, table_results
     from emml.runs.records import points_or_none
     from emml.runs.rundir import METRICS, path_of
 
-    table = load_table(name)
-    run_root = run_root if run_root is not None else profile_config(profile).run_root
-    out = reports_dir(profile, out)
+    plan = plan_report(name, profile, results_root, run_root)  # once: every run's config and name (issue 64)
+    table, prof, run_root = plan.table, plan.profile, plan.run_root
+    profile = prof.name
+    out = reports_dir(prof, out)
     notes: list[str] = []
     if table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
-    results = table_results(table, profile, results_root)  # its own rows, and those it borrows (Table 3's DA)
-    prior = blind_prior(profile, results_root)
+    results = table_results(table, prof, plan.results_root)  # its own rows, and those it borrows (Table 3's DA)
+    prior = blind_prior(prof, plan.results_root)
     run_ids = dict(zip(results["run_name"], results["run_id"]))
     paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
     metrics = list(dict.fromkeys(table.metrics.values()))
     keys = list(dict.fromkeys(curve_key(m)[0] for m in metrics))
-    prof = resolve_profile(profile)  # once: every run name below reads it
-    specs = table.runs(list(prof.seeds))
     cache: dict[str, dict] = {}
-    drawn: dict = {}  # run name → RunSpec of every run with a curve in the figure
+    drawn: dict = {}  # run name → PlannedRun of every run with a curve in the figure
     panels: dict[tuple, list] = {}  # (metric, difficulty, aux) → [(row index, row, curves)]
     for metric in metrics:
         key = curve_key(metric)[0]
@@ -138,12 +136,13 @@ def plot_table(
             for aux in table.aux:
                 for k, row in enumerate(table.curve_rows()):
                     curves = []
-                    for spec in specs:
+                    cell = {id(r) for r in plan.cell_runs(row, difficulty, aux, metric)}
+                    for run in plan.runs:
+                        spec, rname = run.spec, run.name
                         if spec.row != row or spec.difficulty != difficulty or spec.aux != aux:
                             continue
-                        if table.transfer is None and spec not in table.cell_runs(row, difficulty, aux, metric, specs):
+                        if table.transfer is None and id(run) not in cell:
                             continue  # DA Single-Task: its SGN-only run draws SGN, its EQA-only run EQA
-                        rname = spec.run_name(prof)
                         if rname not in run_ids:
                             continue
                         if rname not in cache:
@@ -162,7 +161,7 @@ def plot_table(
                         if hist:
                             steps, values = zip(*hist)
                             curves.append((np.asarray(steps, float), np.asarray(values, float)))
-                            drawn.setdefault(rname, spec)
+                            drawn.setdefault(rname, run)
                     if curves:
                         panels.setdefault((metric, difficulty, aux), []).append((k, row, curves))
     out.mkdir(parents=True, exist_ok=True)
@@ -174,7 +173,7 @@ def plot_table(
     settings = list(dict.fromkeys((d, a) for (_, d, a) in panels))
     shown_metrics = list(dict.fromkeys(m for (m, _, _) in panels))
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    shown = [deviations.shown_run(spec, profile, run_root, rows.get(r)) for r, spec in drawn.items()]
+    shown = [deviations.shown_run(run, run_root, rows.get(r)) for r, run in drawn.items()]
     footer = wrap(deviations.sentence(deviations.summarise(shown)), PAGE_INCHES - 0.1, FOOTER_POINTS) if shown else ""
     heights = [PANEL_INCHES] * len(shown_metrics)
     if footer:  # a row of its own under the panels: the layout makes room for every line of it

@@ -8,7 +8,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml.config.env_kinds import env_label
-from emml.config.profiles import Profile
 from emml.experiments import fidelity
 
 SAVED, NO_CONFIG, REFERENCE, DECLARED = "saved", "no saved config", "reference", "declared"
@@ -35,16 +34,15 @@ class ShownRun:
     (reproduce/experiments/) set what the paper does not, and their reports name it."""
 
 
-def shown_run(
-    spec, profile: Profile | str, run_root: str | Path, row: dict | None = None, declared: bool = False
-) -> ShownRun:
-    """A run of the registry with its config: from runs/<table>/<run>/results.json when there, else the config its
-    RunSpec gives under ``profile`` (saying why). ``row``: its results CSV row, whose `eval_episodes` is the size
-    of the evaluation its score came from (a re-scored run's differs from its config's)."""
+def shown_run(run, run_root: str | Path, row: dict | None = None, declared: bool = False) -> ShownRun:
+    """A planned run (`emml.experiments.pool.PlannedRun`, its config and name made once) with the config its
+    deviations are read from: runs/<table>/<run>/results.json when there, else the config its RunSpec gives under the
+    plan's profile (saying why). ``row``: its results CSV row, whose `eval_episodes` is the size of the evaluation its
+    score came from (a re-scored run's differs from its config's)."""
     from emml.runs.records import note
     from emml.runs.rundir import RunDirError, path_of, saved_config
 
-    name = spec.run_name(profile)
+    spec, name = run.spec, run.name
     run_dir = path_of(run_root, spec.table, name)
     try:
         saved = saved_config(run_dir)
@@ -55,7 +53,7 @@ def shown_run(
         source = SAVED
     else:
         source = DECLARED if declared else NO_CONFIG if run_dir.exists() else REFERENCE
-        saved = spec.to_config(profile).to_dict()
+        saved = run.cfg.to_dict()
     from emml.experiments.tables import list_tables
 
     # a paper table's row sets its overrides on purpose (Table 3's ablations); an experiment's rows are not the paper's;
@@ -127,22 +125,23 @@ class Deviations:
     """Where the configs came from, in words."""
 
 
-def noaux_schedule(table, profile: Profile | str) -> list[tuple[str, str]]:
+def noaux_schedule(plan) -> list[tuple[str, str]]:
     """The No Aux warm-up as ``table`` declares it (`ModelConfig.answer_gate_frames`, issue 61: one rule for every No
     Aux row whose answer reads the image), said once per table: (line, the rows it applies to) per schedule its No Aux
     rows declare (one, where the tables keep the rule: tests/experiments/test_tables.py); [] when no No Aux row has
     one. The line is the deviation each run's config gives (`fidelity.WARMUP`), so that `summarise` says it here
-    instead of once per group of runs."""
-    from emml.config.profiles import resolve_profile
+    instead of once per group of runs. ``plan``: the table's report plan (emml/report/plan.py), its first seed's
+    runs read."""
     from emml.experiments.fidelity import answer_reads_image
 
-    prof = resolve_profile(profile)
     rows: dict[int, list[str]] = {}
     blind: list[str] = []
-    for spec in table.runs(list(prof.seeds)[:1]):
-        if spec.aux:
+    first = plan.profile.seeds[0]
+    for run in plan.runs:
+        spec = run.spec
+        if spec.aux or spec.seed != first:
             continue
-        frames = spec.to_config(prof).model_options.get("answer_gate_frames", 0)
+        frames = run.cfg.model_options.get("answer_gate_frames", 0)
         if not frames and not answer_reads_image(spec.model):
             blind.append(spec.row)
         rows.setdefault(frames, [])
@@ -190,7 +189,8 @@ def summarise(runs: list[ShownRun], schedule: list[tuple[str, str]] | None = Non
 
 def markdown(d: Deviations) -> str:
     """The deviations as Markdown lists (under a table's caption)."""
-    out = ["**Deviations from the paper** (each run's config against the paper's values, `emml/fidelity.py`):", ""]
+    paper = "each run's config against the paper's values, `emml/experiments/fidelity.py`"
+    out = [f"**Deviations from the paper** ({paper}):", ""]
     out += [f"- {line}: {holders}" for line, holders in d.deviations] or ["- none"]
     out += ["", "**Where the paper is silent**, our choices in force:", ""]
     out += [f"- {line}: {holders}" for line, holders in d.choices] or ["- none"]

@@ -14,7 +14,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from emml.config.profiles import Profile, resolve_profile
 from emml.experiments.claims.evidence import LEAVE, Chance, frames_text
 from emml.experiments.tables import METRICS
 
@@ -82,13 +81,13 @@ def curves(path: Path) -> dict[str, list[tuple[int, float]]] | None:
     return {m: sorted(points.items()) for m, points in out.items()}
 
 
-def run_efficiency(spec, profile: Profile | str, run_root: str | Path, chance: Chance | None = None) -> RunEfficiency:
-    """The crossings of one declared run (a RunSpec) from its run dir under `run_root`; 'leaves chance' above
-    `chance` (the profile's blind prior, emml/report/chance.py; default the uniform chance) + LEAVE."""
+def run_efficiency(spec, name: str, run_root: str | Path, chance: Chance | None = None) -> RunEfficiency:
+    """The crossings of one declared run (a RunSpec, its run name ``name`` as planned) from its run dir under
+    `run_root`; 'leaves chance' above `chance` (the profile's blind prior, emml/report/chance.py; default the uniform
+    chance) + LEAVE."""
     chance = chance if chance is not None else UNIFORM_CHANCE
     from emml.runs.rundir import METRICS, path_of
 
-    name = spec.run_name(profile)
     eff = RunEfficiency(name, spec.row, spec.difficulty, spec.aux, spec.seed)
     path = path_of(run_root, spec.table, name) / METRICS
     found = curves(path)
@@ -105,18 +104,15 @@ def run_efficiency(spec, profile: Profile | str, run_root: str | Path, chance: C
     return eff
 
 
-def table_efficiency(
-    table, profile: str, names: list[str], run_root: str | Path, chance: Chance | None = None
-) -> list[RunEfficiency]:
-    """The crossings of the named runs of `table` (the runs its page shows), in the table's run order; chance: the
-    profile's blind prior (emml/report/chance.py) unless given."""
+def table_efficiency(plan, names: list[str], chance: Chance | None = None) -> list[RunEfficiency]:
+    """The crossings of the named runs of the plan's table (the runs its page shows), in the table's run order, from
+    their run dirs under the plan's run_root; chance: the profile's blind prior (emml/report/chance.py) unless
+    given."""
     from emml.report.chance import blind_prior
 
-    prof = resolve_profile(profile)  # once: every run name below reads it
-    chance = chance if chance is not None else blind_prior(profile)
+    chance = chance if chance is not None else blind_prior(plan.profile, plan.results_root)
     wanted = set(names)
-    runs = table.runs(list(prof.seeds))
-    return [run_efficiency(spec, prof, run_root, chance) for spec in runs if spec.run_name(prof) in wanted]
+    return [run_efficiency(r.spec, r.name, plan.run_root, chance) for r in plan.runs if r.name in wanted]
 
 
 def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS, chance: Chance | None = None) -> str:

@@ -28,6 +28,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
+from emml.config.profiles import Profile  # noqa: E402
 from emml.report.aggregate import REPS, SEED, iqm, probability_of_improvement, reference_row  # noqa: E402
 from emml.report.savefig import PAGE_INCHES, save, wrap  # noqa: E402
 
@@ -111,7 +112,7 @@ def _estimate(ax, y: float, e, color: str, name: str, several: bool) -> None:
         ax.plot([e.value], [y], "o", color=color, mfc="white", mew=1.5, ms=6, zorder=3, label=f"_single {name}")
 
 
-def field_figure(table, profile: str, cells):
+def field_figure(table, profile: Profile, cells):
     """The figure (one row of three panels per setting and metric where two rows or more have runs: one row alone
     compares with nothing); None for a transfer table (every row reads the same runs) or when no such cell. The
     reference row (Dual-Attention) in bold and drawn over the others."""
@@ -190,8 +191,9 @@ def field_figure(table, profile: str, cells):
     longest = max(len(t) for t in handles)
     ncol = max(1, min(len(handles), int(PAGE_INCHES * 72 / (0.6 * plt.rcParams["legend.fontsize"] * longest + 30))))
     fig.legend(list(handles.values()), list(handles), loc="outside lower center", ncol=ncol)
+    name = profile.name
     title = (
-        f"{table.name} [{profile}]: rliable per setting and metric where two rows or more have runs; (n) = runs in "
+        f"{table.name} [{name}]: rliable per setting and metric where two rows or more have runs; (n) = runs in "
         f"the cell; 95% CIs from resampling each cell's runs ({REPS:,} resamples, seed {SEED}; {PROFILE_REPS:,} for "
         "the profiles' bands)"
     )
@@ -215,13 +217,13 @@ def _bold(ax, names: list[str], ref: str | None) -> None:
             label.set_fontweight("bold")
 
 
-def plot_field(table, profile: str, cells, out: Path) -> list[Path]:
+def plot_field(table, profile: Profile, cells, out: Path) -> list[Path]:
     """`field_figure` written as reports/<table>-<profile>-rliable.png and .pdf; [] for a transfer table or when no
     row has runs."""
     fig = field_figure(table, profile, cells)
     if fig is None:
         return []
-    paths = [out / f"{table.name}-{profile}-rliable.png", out / f"{table.name}-{profile}-rliable.pdf"]
+    paths = [out / f"{table.name}-{profile.name}-rliable.png", out / f"{table.name}-{profile.name}-rliable.pdf"]
     for p in paths:
         save(fig, p)
     plt.close(fig)

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from emml.config.paths import project_path, project_root
+from emml.config.profiles import Profile, resolve_profile
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
 from emml.runs.rundir import CHECKPOINT, RunDirError, config_of, finished_run, path_of, variant_dir
@@ -37,24 +38,27 @@ def profiles_with_results(results_root: str | Path = "results") -> dict[str, lis
         for name in list_tables():
             table = load_table(name)
             borrowed = {row.from_table for row in table.rows if row.from_table}
-            if name not in tables and borrowed & set(tables) and _has_runs(table, profile, results_root):
+            if name in tables or not borrowed & set(tables):
+                continue
+            if _has_runs(table, resolve_profile(profile), results_root):
                 tables.append(name)
         tables.sort(key=lambda t: (t in experiments, t))
     rank = {p: i for i, p in enumerate(READING_ORDER)}
     return dict(sorted(out.items(), key=lambda kv: (rank.get(kv[0], len(rank)), kv[0])))
 
 
-def _has_runs(table, profile: str, results_root: str | Path) -> bool:
+def _has_runs(table, profile: Profile, results_root: str | Path) -> bool:
     """Whether any run the table declares under ``profile`` has a results row (its own or a borrowed table's)."""
-    from emml.report.tables import _run_names, table_results
+    from emml.report.plan import plan_report
+    from emml.report.tables import table_results
 
     df = table_results(table, profile, results_root)
-    return not df.empty and bool(df["run_name"].isin(_run_names(table, profile)).any())
+    return not df.empty and bool(df["run_name"].isin(plan_report(table, profile, results_root).names).any())
 
 
 def best_checkpoint(
     table: str,
-    profile: str,
+    profile: Profile,
     model: str = "dual_attention",
     aux: bool = True,
     results_root: str | Path = "results",
@@ -64,7 +68,7 @@ def best_checkpoint(
     dir here; None if there is none (results committed without their run dirs)."""
     from emml.runs.results import read_results
 
-    df = read_results(project_path(results_root) / table / f"{profile}.csv")
+    df = read_results(project_path(results_root) / table / f"{profile.name}.csv")
     if df.empty:
         return None
     rows = df[(df["model"] == model) & (df["aux"] == aux)].copy()
@@ -194,11 +198,12 @@ def write_reports(
     drawn: set[tuple[str, str]] = set()  # the best runs (table, run) whose figures are drawn: each once
     for profile, tables in profiles_with_results(results_root).items():
         lines += [f"## Profile `{profile}`", ""]
+        prof = resolve_profile(profile)  # once per profile: every table, curve and figure below reads it
         for table in tables:
             if load_table(table).placeholder:
                 continue
             try:
-                lines += _table_lines(table, profile, out, results_root, run_root, drawn, log)
+                lines += _table_lines(table, prof, out, results_root, run_root, drawn, log)
             except (RunDirError, CheckpointError, RecordError, ResultsError) as e:  # one bad file: named; on
                 log(f"{table} [{profile}]: not reported: {e}")
                 lines.append(f"- **{table}**: not reported here: {e}")
@@ -212,24 +217,26 @@ def write_reports(
 
 
 def _table_lines(
-    table: str, profile: str, out: Path, results_root, run_root, drawn: set[tuple[str, str]], log
+    table: str, prof: Profile, out: Path, results_root, run_root, drawn: set[tuple[str, str]], log
 ) -> list[str]:
     """Write one table's report, curves and best run's figures; returns its lines of the index. A run dir whose
     files cannot be read is named and its figures left out, never the table's report."""
     import matplotlib.pyplot as plt
 
-    from emml.experiments.tables import load_table
     from emml.report.curves import plot_table
-    from emml.report.tables import _run_names, report_table, table_results
+    from emml.report.plan import plan_report
+    from emml.report.tables import report_table, table_results
     from emml.runs.checkpoint import CheckpointError
 
     lines: list[str] = []
-    df = table_results(load_table(table), profile, results_root)
-    df = df[df["run_name"].isin(_run_names(load_table(table), profile))] if not df.empty else df
+    profile = prof.name
+    plan = plan_report(table, prof, results_root, run_root)
+    df = table_results(plan.table, prof, results_root)
+    df = df[df["run_name"].isin(plan.names)] if not df.empty else df
     frames = sorted(set(df["frames"])) if "frames" in df else []
-    curve_paths, notes = plot_table(table, profile, results_root, out, run_root)  # first: the page embeds it
+    curve_paths, notes = plot_table(table, prof, results_root, out, run_root)  # first: the page embeds it
     plt.close("all")
-    data = report_table(table, profile, results_root, out, run_root)
+    data = report_table(table, prof, results_root, out, run_root)
     plt.close("all")
     paths = [Path(p) for p in data["paths"]] + [Path(p) for p in curve_paths]
     runs = f"{len(df)} run{'s' if len(df) != 1 else ''}, frames {', '.join(f'{f:,}' for f in frames)}"
@@ -242,7 +249,7 @@ def _table_lines(
         )
     lines += [f"  - note: {n}" for n in notes if n not in missing]
     log(f"{table} [{profile}]: {len(paths)} files")
-    best = best_checkpoint(table, profile, results_root=results_root, run_root=run_root)
+    best = best_checkpoint(table, prof, results_root=results_root, run_root=run_root)
     if best is not None and (table, best[1]) not in drawn:
         ckpt, name = best
         drawn.add((table, name))

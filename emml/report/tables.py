@@ -19,8 +19,10 @@ import pandas as pd
 
 from emml.config.env_kinds import ENV_KINDS, env_label
 from emml.config.paths import REPRODUCE_DIR, project_path, project_root
-from emml.config.profiles import resolve_profile
-from emml.experiments.tables import METRIC_LABELS, Table, list_tables, load_table, table_ref
+from emml.config.profiles import Profile
+from emml.config.schema import TrainConfig
+from emml.experiments.tables import METRIC_LABELS, Table, list_tables, table_ref
+from emml.report.plan import ReportPlan, plan_report
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
 from emml.runs.results import read_results
@@ -81,8 +83,10 @@ def paper_numbers(name: str, directory: Path = REPRODUCE_DIR / "paper") -> pd.Da
     return df
 
 
-def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.DataFrame) -> list[Cell]:
-    """Every cell of the table (the paper's cells for a placeholder table, with no runs of ours)."""
+def build_cells(plan: ReportPlan, results: pd.DataFrame, paper: pd.DataFrame) -> list[Cell]:
+    """Every cell of the table (the paper's cells for a placeholder table, with no runs of ours); each run's name
+    as the plan spelled it."""
+    table = plan.table
 
     lookup = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper.itertuples()}
     by_name = results.set_index("run_name") if not results.empty else pd.DataFrame()
@@ -91,17 +95,14 @@ def build_cells(table: Table, profile: str, results: pd.DataFrame, paper: pd.Dat
         for r in paper.itertuples():
             cells.append(Cell(r.row, r.difficulty, r.aux, r.metric, 0, paper=r.value))
         return cells
-    prof = resolve_profile(profile)  # once: every run name below reads it
-    runs = table.runs(list(prof.seeds))
     for row in table.rows:
         for difficulty, aux, metric in table.columns():
-            specs = table.cell_runs(row.label, difficulty, aux, metric, runs)
+            runs = plan.cell_runs(row.label, difficulty, aux, metric)
             cell = Cell(
-                row.label, difficulty, aux, metric, len(specs), paper=lookup.get((row.label, difficulty, aux, metric))
+                row.label, difficulty, aux, metric, len(runs), paper=lookup.get((row.label, difficulty, aux, metric))
             )
             columns = table.cell_columns(row.label, metric)  # [metric], or a transfer row's instructions
-            for spec in specs:
-                name = spec.run_name(prof)
+            for name in (run.name for run in runs):
                 if name in by_name.index and set(columns) <= set(by_name.columns):
                     found = [by_name.at[name, c] for c in columns]
                     if all(pd.notna(v) for v in found):
@@ -155,10 +156,12 @@ def _label(level: str, value) -> str:
     return METRIC_LABELS.get(value, value)
 
 
-def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame, constant: list[str]) -> str:
-    """What the table shows, under which profile, frames and seeds, and how it was made."""
-    from emml.config.profiles import profile_seeds
-
+def caption(
+    plan: ReportPlan, cells: list[Cell], results: pd.DataFrame, constant: list[str], plugins: tuple[str, ...] = ()
+) -> str:
+    """What the table shows, under which profile, frames and seeds, and how it was made (``plugins``: the
+    `--plugin`s the table's models need, which the commands that made it name)."""
+    table, profile = plan.table, plan.profile.name
     paper = table.name in list_tables()  # one of reproduce/table*.toml (as emml/report/deviations.py decides)
     if paper:
         parts = [f"Ours vs the paper's Table {table.name.removeprefix('table')} ({table.paper_label}): {table.title}."]
@@ -173,8 +176,8 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
             f"numbers are shown, ours are {MISSING}."
         )
         return " ".join(parts)
-    used = results[results["run_name"].isin(_run_names(table, profile))] if not results.empty else results
-    seeds = profile_seeds(profile)
+    used = results[results["run_name"].isin(plan.names)] if not results.empty else results
+    seeds = list(plan.profile.seeds)
     parts.append(
         "Each cell: ours, the mean over seeds (each seed's value, in seed order) | paper; n=k/N: k of the N "
         f"declared seeds finished; {MISSING} = run missing (not finished), never zero."
@@ -183,7 +186,7 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
         t = table.transfer
         parts.append(
             f"Each run: trained with {t.overrides}, then detectors ({t.detector}) for {', '.join(t.words)} appended, "
-            "no fine-tuning (emml/transfer.py); a cell is the mean over the row's test instructions."
+            "no fine-tuning (emml/eval/transfer.py); a cell is the mean over the row's test instructions."
         )
         if any(r.extra for r in table.rows):
             parts.append(f"Rows marked {EXTRA_MARK}: the test instructions the paper's rows do not name.")
@@ -196,51 +199,48 @@ def caption(table: Table, profile: str, cells: list[Cell], results: pd.DataFrame
         parts.append(
             f"Profile '{profile}': {frames} frames trained per run; seeds {', '.join(map(str, found))} "
             f"of {len(seeds)} declared ({', '.join(map(str, seeds))}); {len(used)} of "
-            f"{len(_run_names(table, profile))} runs finished."
+            f"{len(plan.names)} runs finished."
         )
     if profile != "paper":
         parts.append(
             f"The '{profile}' profile is not the paper's protocol (its deviations from the paper, read from the runs' "
             "configs, are listed here): compare orderings, not absolute numbers."
         )
-    parts.append(f"Made by `emml run {ref} --profile {profile}` and `emml report {ref} --profile {profile}`.")
+    emml = " ".join(["emml", *(f"--plugin {_shown_path(p)}" for p in plugins)])  # a model of one's own needs its plugin
+    parts.append(f"Made by `{emml} run {ref} --profile {profile}` and `{emml} report {ref} --profile {profile}`.")
     return " ".join(parts)
 
 
-def shown_runs(
-    table: Table, profile: str, cells: list[Cell], results: pd.DataFrame, run_root: str | Path | None = None
-) -> list:
+def _shown_path(plugin: str) -> str:
+    """A plugin as a reader types it: a path under the checkout relative to it (`EMML_PLUGINS` holds it absolute)."""
+    path = Path(plugin)
+    inside = path.is_absolute() and path.is_relative_to(project_root())
+    return str(path.relative_to(project_root())) if inside else plugin
+
+
+def shown_runs(plan: ReportPlan, cells: list[Cell], results: pd.DataFrame) -> list:
     """The runs behind the table's cells with their configs (emml/report/deviations.py); every declared run when none
     has finished (its deviations as declared); [] for a placeholder."""
     from emml.report.deviations import shown_run
 
-    if table.placeholder:
+    if plan.table.placeholder:
         return []
-    prof = resolve_profile(profile)  # once: every run name and declared config below reads it
-    run_root = run_root if run_root is not None else prof.config().run_root
-    specs = {spec.run_name(prof): spec for spec in table.runs(list(prof.seeds))}
+    planned = plan.by_name()
     names = list(dict.fromkeys(name for c in cells for name in c.runs))
     if not names:
-        return [shown_run(spec, prof, run_root, declared=True) for spec in specs.values()]
+        return [shown_run(run, plan.run_root, declared=True) for run in planned.values()]
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    return [shown_run(specs[name], prof, run_root, rows.get(name)) for name in names]
+    return [shown_run(planned[name], plan.run_root, rows.get(name)) for name in names]
 
 
-def _run_names(table: Table, profile: str) -> set[str]:
-    prof = resolve_profile(profile)
-    return {spec.run_name(prof) for spec in table.runs(list(prof.seeds))}
-
-
-def results_path(name: str, profile: str, results_root: str | Path | None = None) -> Path:
+def results_path(name: str, profile: Profile, results_root: str | Path | None = None) -> Path:
     """results/<name>/<profile>.csv under ``results_root`` (default: the profile's, `results` but for smoke)."""
     if results_root is None:
-        from emml.config.profiles import profile_config
-
-        results_root = profile_config(profile).results_root
-    return project_path(results_root) / name / f"{profile}.csv"
+        results_root = profile.values.get("results_root", TrainConfig.results_root)
+    return project_path(results_root) / name / f"{profile.name}.csv"
 
 
-def reports_dir(profile: str, out: str | Path | None = None) -> Path:
+def reports_dir(profile: Profile, out: str | Path | None = None) -> Path:
     """Where a profile's reports go: ``out``, else the committed reports/, or scratch/reports for a profile whose
     numbers are not results (smoke); a smoke report is refused under the committed reports/."""
     from emml.config.profiles import SCRATCH, is_scratch, refuse_committed
@@ -251,12 +251,10 @@ def reports_dir(profile: str, out: str | Path | None = None) -> Path:
     return Path(out)
 
 
-def table_results(table: Table, profile: str, results_root: str | Path | None = None) -> pd.DataFrame:
+def table_results(table: Table, profile: Profile, results_root: str | Path | None = None) -> pd.DataFrame:
     """The results rows of the table's runs under ``profile``: its own CSV, and the CSVs of the tables some of its
     rows borrow runs from (`from_table`: Table 3's "DA Multi-Task" is Table 2's Dual-Attention)."""
-    from emml.config.profiles import profile_seeds
-
-    owners = dict.fromkeys([table.name, *(spec.table for spec in table.runs(profile_seeds(profile)))])
+    owners = dict.fromkeys([table.name, *(spec.table for spec in table.runs(list(profile.seeds)))])
     frames = [read_results(results_path(owner, profile, results_root)) for owner in owners]
     frames = [f for f in frames if not f.empty]
     if not frames:
@@ -266,29 +264,35 @@ def table_results(table: Table, profile: str, results_root: str | Path | None = 
 
 def report_table(
     name: str,
-    profile: str,
+    profile: Profile | str,
     results_root: str | Path | None = None,
     out: str | Path | None = None,
     run_root: str | Path | None = None,
+    plugins: list[str] | tuple[str, ...] = (),
 ) -> dict:
     """Write reports/<name>-<profile>.md and .tex; returns the cells, caption, deviations, aggregate and paths (the
-    --json output). Runs' configs are read from their run dirs under ``run_root`` (default: the profile's)."""
+    --json output). Runs' configs are read from their run dirs under ``run_root`` (default: the profile's).
+    ``plugins``: the `--plugin`s the report was made with (a table of one's own), named in its "Made by" line.
+
+    Planned once (issue 64): the profile resolved and every run's config and name made once (`plan_report`, the
+    launch's own `plan_runs`); every part of the page reads that plan."""
     from emml.report import deviations, efficiency
     from emml.report.aggregate import summary
     from emml.report.field import plot_field
     from emml.report.tex import tex_table
     from emml.runs.segments import commits_note
 
-    table = load_table(name)
-    name = table.name  # a table file's path (a table of one's own, an experiment) reports under its stem
-    out = reports_dir(profile, out)
-    path = results_path(name, profile, results_root)
-    results = table_results(table, profile, results_root)
-    cells = build_cells(table, profile, results, paper_numbers(name))
+    plan = plan_report(name, profile, results_root, run_root)
+    table, prof = plan.table, plan.profile
+    name, profile = table.name, prof.name  # a table file's path (one's own, an experiment) reports under its stem
+    out = reports_dir(prof, out)
+    path = results_path(name, prof, plan.results_root)
+    results = table_results(table, prof, plan.results_root)
+    cells = build_cells(plan, results, paper_numbers(name))
     md_df, constant = layout(table, cells)
-    text = caption(table, profile, cells, results, constant)
-    runs = shown_runs(table, profile, cells, results, run_root)
-    devs = deviations.summarise(runs, deviations.noaux_schedule(table, profile)) if runs else None
+    text = caption(plan, cells, results, constant, tuple(plugins))
+    runs = shown_runs(plan, cells, results)
+    devs = deviations.summarise(runs, deviations.noaux_schedule(plan)) if runs else None
     agg = summary(table, cells)
     out.mkdir(parents=True, exist_ok=True)
     md_path, tex_path = out / f"{name}-{profile}.md", out / f"{name}-{profile}.tex"
@@ -296,30 +300,26 @@ def report_table(
     if isinstance(flat.columns, pd.MultiIndex):
         flat.columns = [" · ".join(c) for c in flat.columns]
     shown = path.relative_to(project_root()) if path.is_relative_to(project_root()) else path
-    field = plot_field(table, profile, cells, out)
+    field = plot_field(table, prof, cells, out)
     figures = [p for p in (out / f"{name}-{profile}-curves.png",) if p.exists()] + field[:1]
-    md = [f"# {name} ({profile})", "", headline(table, profile, cells), ""]
+    md = [f"# {name} ({profile})", "", headline(table, prof, cells), ""]
     md += [f"![{p.stem}]({p.name})" for p in figures] + ([""] if figures else [])
     md += [text, ""]
     if devs is not None:
         md += [deviations.markdown(devs), ""]
     md += [flat.to_markdown(), ""]
-    root = run_root if run_root is not None else resolve_profile(profile).config().run_root
-    md += commits_note(results, list(dict.fromkeys(n for c in cells for n in c.runs)), root)  # the runs' commits
+    md += commits_note(results, list(dict.fromkeys(n for c in cells for n in c.runs)), plan.run_root)  # their commits
     if agg is not None:
         md += [pd.DataFrame(agg[0]).to_markdown(index=False), "", agg[1], ""]
     names = list(dict.fromkeys(n for c in cells for n in c.runs))
     if names:
-        from emml.config.profiles import profile_config
-
-        root = run_root if run_root is not None else profile_config(profile).run_root
         from emml.report.chance import blind_prior
 
-        prior = blind_prior(profile, results_root)  # 'leaves chance': above what a blind model scores here
-        md += [efficiency.markdown(efficiency.table_efficiency(table, profile, names, root, prior), chance=prior)]
+        prior = blind_prior(prof, plan.results_root)  # 'leaves chance': above what a blind model scores here
+        md += [efficiency.markdown(efficiency.table_efficiency(plan, names, prior), chance=prior)]
     md += [f"Results: `{shown}`", ""]
     write_text(md_path, "\n".join(md), then=RERUN)  # whole or not at all (emml/runs/atomic.py)
-    write_text(tex_path, tex_table(table, profile, cells, results, devs), then=RERUN)
+    write_text(tex_path, tex_table(plan, cells, results, devs), then=RERUN)
     return {
         "table": name,
         "profile": profile,
@@ -332,7 +332,7 @@ def report_table(
     }
 
 
-def headline(table: Table, profile: str, cells: list[Cell]) -> str:
+def headline(table: Table, profile: Profile, cells: list[Cell]) -> str:
     """The page's first line: per setting and metric with runs, where the reference row (Dual-Attention) stands and
     the row that leads; the seeds it rests on; where the claims are decided."""
     from emml.report.aggregate import reference_row
@@ -364,11 +364,12 @@ def headline(table: Table, profile: str, cells: list[Cell]) -> str:
         parts.append(f"{_label('difficulty', difficulty)} · {_label('aux', aux)}: " + ", ".join(per))
     seeds = sorted({c.n for c in cells if c.values})
     if not parts:
-        return f"**In one line**: no run of {table.name} has finished under '{profile}' yet."
+        return f"**In one line**: no run of {table.name} has finished under '{profile.name}' yet."
     rest = (
         f"; {seeds[0]}–{seeds[-1]} seeds per cell"
         if len(seeds) > 1
         else f"; {seeds[0]} seed{'s' if seeds[0] != 1 else ''} per cell"
     )
-    claims = f" Claims decided on [claims-{profile}.md](claims-{profile}.md)." if table.name in list_tables() else ""
-    return f"**In one line** ({profile}{rest}): " + "; ".join(parts) + "." + claims
+    page = f"claims-{profile.name}.md"
+    claims = f" Claims decided on [{page}]({page})." if table.name in list_tables() else ""
+    return f"**In one line** ({profile.name}{rest}): " + "; ".join(parts) + "." + claims

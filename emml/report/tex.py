@@ -215,15 +215,15 @@ def _float(caption: str, label: str, body: str, notes: str = "") -> list[str]:
     return [*lines, r"\end{table*}", ""]
 
 
-def tex_table(table, profile: str, cells, results: pd.DataFrame, devs) -> str:
+def tex_table(plan, cells, results: pd.DataFrame, devs) -> str:
     """reports/<table>-<profile>.tex: the table and its aggregate as `table*` floats that compile unscaled in a
     minimal two-column document with the packages of the first line; a short caption, the deviations as notes."""
     from emml.experiments.tables import list_tables
     from emml.report.aggregate import reference_row
-    from emml.report.tables import _run_names
 
+    table, profile = plan.table, plan.profile.name  # the report's plan (emml/report/plan.py)
     parts, constant = panels(table, cells)
-    used = results[results["run_name"].isin(_run_names(table, profile))] if not results.empty else results
+    used = results[results["run_name"].isin(plan.names)] if not results.empty else results
     paper = table.name in list_tables()
     what = f"Ours vs the paper's Table {table.name.removeprefix('table')}" if paper else table.title
     if used.empty:
@@ -232,7 +232,7 @@ def tex_table(table, profile: str, cells, results: pd.DataFrame, devs) -> str:
         lo, hi = int(used["frames"].min()), int(used["frames"].max())
         frames = f"{lo:,}" if lo == hi else f"{lo:,}--{hi:,}"
         seeds = ", ".join(str(s) for s in sorted(int(x) for x in used["seed"].unique()))
-        runs = f"{frames} frames, seeds {seeds}, {len(used)} of {len(_run_names(table, profile))} runs"
+        runs = f"{frames} frames, seeds {seeds}, {len(used)} of {len(plan.names)} runs"
     setting = f" {', '.join(constant)}." if constant else ""
     cap = f"{tex_text(what)} ({tex_text(profile)} profile: {runs}).{tex_text(setting)} Ours: the mean over seeds"
     cap += r" (\textsuperscript{k/N}: k of N seeds finished); --- = not run."

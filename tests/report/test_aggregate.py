@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from rliable import metrics
 
+from emml.config.profiles import resolve_profile
 from emml.experiments.tables import load_table
 from emml.report.aggregate import improvement, interquartile_mean, iqm, probability_of_improvement, reference_row
 
@@ -91,7 +92,7 @@ def _field(values: dict, paper: dict | None = None, table: str = "table2"):
         Cell(row, d, a, m, 3, values=list(v), paper=(paper or {}).get((row, d, a, m)))
         for (row, d, a, m), v in values.items()
     ]
-    return field_figure(t, "quick", cells)
+    return field_figure(t, resolve_profile("quick"), cells)
 
 
 FIELD = {

@@ -3,6 +3,7 @@
 import pandas as pd
 import pytest
 
+from emml.config.profiles import resolve_profile
 from emml.experiments.claims.evidence import Chance
 from emml.report.chance import blind_prior, chance_text, paper_prior
 from tests.report.test_tables import PROFILE, fake_results
@@ -13,7 +14,7 @@ def test_the_blind_prior_is_the_text_only_rows_mean_per_difficulty_and_column(tm
         return (0.45 if spec.difficulty == "easy" else 0.5) if spec.model == "text_only" else 0.9
 
     fake_results("table2", tmp_path, value=value)
-    chance = blind_prior(PROFILE, tmp_path)
+    chance = blind_prior(resolve_profile(PROFILE), tmp_path)
     assert chance.of("eqa_test", "easy") == pytest.approx(0.45)
     assert chance.of("eqa_train", "hard") == pytest.approx(0.5)
     assert chance.of("sgn_test", "house") == pytest.approx(0.2)  # no Table 5 run: the uniform chance
@@ -22,7 +23,7 @@ def test_the_blind_prior_is_the_text_only_rows_mean_per_difficulty_and_column(tm
 
 
 def test_no_blind_run_is_the_uniform_chance(tmp_path):
-    chance = blind_prior(PROFILE, tmp_path)
+    chance = blind_prior(resolve_profile(PROFILE), tmp_path)
     assert chance.of("eqa_test", "easy") == pytest.approx(1 / 3) and chance.of("sgn_train", "hard") == 0.2
     assert chance.source == "the mean score of this profile's Text only runs (none yet)"
 
@@ -31,12 +32,12 @@ def test_the_blind_prior_averages_seeds_and_aux_settings_and_counts_the_runs(tmp
     """The fixture's default scores 0.1 × (seed + 1): seeds 0-2 in both aux settings average 0.2 in every column;
     with one Easy run left (seed 2, No Aux) Easy's prior is that run's 0.3."""
     fake_results("table2", tmp_path / "all")
-    chance = blind_prior(PROFILE, tmp_path / "all")
+    chance = blind_prior(resolve_profile(PROFILE), tmp_path / "all")
     assert chance.values[("hard", "eqa_train")] == pytest.approx(0.2)
     keep = "text_only-easy-noaux-s2-quick"
     drop = tuple(f"text_only-easy-{a}-s{s}-quick" for a in ("aux", "noaux") for s in (0, 1, 2))
     fake_results("table2", tmp_path / "one", drop=tuple(d for d in drop if d != keep))
-    chance = blind_prior(PROFILE, tmp_path / "one")
+    chance = blind_prior(resolve_profile(PROFILE), tmp_path / "one")
     assert chance.values[("easy", "sgn_test")] == pytest.approx(0.3)
     assert chance.source == "the mean score of this profile's Text only runs (easy: 1 run, hard: 6 runs)"
 
@@ -65,7 +66,7 @@ def test_the_chance_text_names_each_column_and_which_are_uniform():
 def test_the_house_prior_is_read_without_doom_results(tmp_path):
     """Only Table 5 (the House) has results: its Text only runs (0.1 × (seed + 1), seeds 0-2) give 0.2."""
     fake_results("table5", tmp_path)
-    chance = blind_prior(PROFILE, tmp_path)
+    chance = blind_prior(resolve_profile(PROFILE), tmp_path)
     assert chance.measured("sgn_test", "house") and chance.values[("house", "eqa_test")] == pytest.approx(0.2)
     assert not chance.measured("sgn_test", "easy")
 
@@ -77,6 +78,6 @@ def test_a_results_file_without_a_column_leaves_that_column_uniform(tmp_path):
         fake_results("table2", root)
         path = root / "table2" / f"{PROFILE}.csv"
         pd.read_csv(path).drop(columns=[column]).to_csv(path, index=False)
-    chance = blind_prior(PROFILE, tmp_path / "a")
+    chance = blind_prior(resolve_profile(PROFILE), tmp_path / "a")
     assert chance.measured("sgn_test", "easy") and not chance.measured("eqa_train", "easy")
-    assert blind_prior(PROFILE, tmp_path / "b").values == {}
+    assert blind_prior(resolve_profile(PROFILE), tmp_path / "b").values == {}

@@ -4,6 +4,7 @@ mutation testing): the label with its seeds, the phrase per setting, the missing
 import math
 from dataclasses import replace
 
+from emml.config.profiles import resolve_profile
 from emml.experiments.claims import load_claims
 from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, STATUSES, UNCLEAR, Chance, Check, Score
 from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, counts, paper_evidence
@@ -76,10 +77,10 @@ def test_every_claim_is_decided_with_the_one_blind_prior_of_the_results_read(mon
     import emml.report.claims as claims
 
     prior, asked, decided = Chance({("easy", "eqa_test"): 0.4}), [], []
-    monkeypatch.setattr(claims, "blind_prior", lambda profile, root=None: asked.append((profile, root)) or prior)
+    monkeypatch.setattr(claims, "blind_prior", lambda profile, root=None: asked.append((profile.name, root)) or prior)
 
-    def decide(claim, profile, results_root=None, run_root=None, chance=None):
-        decided.append((claim.id, profile, results_root, run_root, chance))
+    def decide(claim, profile, results_root=None, run_root=None, chance=None, plans=None):
+        decided.append((claim.id, profile.name, results_root, run_root, chance))  # the profile resolved once
         return decision(UNTESTABLE, missing=[f"{claim.id}-s0-quick"])
 
     monkeypatch.setattr(claims, "decide", decide)
@@ -116,10 +117,10 @@ def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, m
     out = tmp_path / "a" / "b"
     path, decisions = claims.write_claims("quick", out, "RESULTS", {"k": "v"}, "RUNS")
     assert path == out / "claims-quick.md" and path.read_text() == "PAGE\n" and decisions == ["decided"]
-    assert got["decide_all"] == ("quick", "RESULTS", {"k": "v"}, "RUNS")
+    assert got["decide_all"] == (resolve_profile("quick"), "RESULTS", {"k": "v"}, "RUNS")
     ids = list(load_claims())
     folder, decided, profile, paper, loaded, chance, tables = got["pages"]
-    assert (folder, decided, profile, paper) == (out, ["decided"], "quick", {i: f"paper {i}" for i in ids})
+    assert (folder, decided, profile.name, paper) == (out, ["decided"], "quick", {i: f"paper {i}" for i in ids})
     assert list(loaded) == ids and chance == prior and tables == {"table2"}
 
 

@@ -6,6 +6,7 @@ from emml.experiments.claims.evidence import Chance
 from emml.experiments.tables import load_table
 from emml.report.claims import BUDGET, CONTRADICTED, INCONCLUSIVE, SUPPORTED, UNTESTABLE, decide
 from emml.report.efficiency import curves, first_crossing, level, markdown, run_efficiency, table_efficiency
+from emml.report.plan import plan_report
 from tests.report.test_claims_page import CLAIMS
 from tests.report.test_tables import PROFILE, fake_results
 
@@ -82,15 +83,15 @@ def test_the_table_page_lists_each_run_crossings(tmp_path):
     runs = tmp_path / "runs"
     write_curves(runs, "table3", lambda s: 0.3)
     spec = next(s for s in load_table("table3").runs([0]) if s.row == "w/o SA" and s.aux)
-    eff = run_efficiency(spec, PROFILE, runs)
+    eff = run_efficiency(spec, spec.run_name(PROFILE), runs)
     at = eff.last * 3 // 10
     assert eff.crossings["sgn_test"] == {"chance": at, "0.5": at, "0.9": at}
-    text = markdown([eff, run_efficiency(spec, PROFILE, tmp_path / "nowhere")])
+    text = markdown([eff, run_efficiency(spec, spec.run_name(PROFILE), tmp_path / "nowhere")])
     assert f"| w/o SA | Easy · Aux | 0 | {at / 1e6:.2f}M / {at / 1e6:.2f}M / {at / 1e6:.2f}M |" in text
     assert "no metrics.csv here" in text
     mirror = runs / spec.table / spec.run_name(PROFILE) / "metrics.csv"  # issue 65: a garbage line costs this run
     mirror.write_text(mirror.read_text().replace("\n", "\ngarbage\n", 2))
-    damaged = run_efficiency(spec, PROFILE, runs)
+    damaged = run_efficiency(spec, spec.run_name(PROFILE), runs)
     assert not damaged.found and damaged.damaged and "| metrics.csv damaged |" in markdown([eff, damaged])
 
 
@@ -133,7 +134,7 @@ def test_a_runs_crossings_its_last_evaluation_and_its_largest_gap(tmp_path):
     points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
     write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points] + ["50000,eval/sgn_train,0.1"])
     chance = Chance({(W_O_SA.difficulty, "sgn_test"): 0.5})
-    eff = run_efficiency(W_O_SA, PROFILE, tmp_path, chance)
+    eff = run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path, chance)
     assert (eff.run, eff.row, eff.difficulty, eff.aux, eff.seed) == (
         W_O_SA.run_name(PROFILE),
         "w/o SA",
@@ -147,20 +148,20 @@ def test_a_runs_crossings_its_last_evaluation_and_its_largest_gap(tmp_path):
         "sgn_train": {"chance": None, "0.5": None, "0.9": None},
     }
     # the uniform chance by default: SGN 0.2, its bar 0.3: left at 99,328
-    assert run_efficiency(W_O_SA, PROFILE, tmp_path).crossings["sgn_test"]["chance"] == 99_328
-    gone = run_efficiency(W_O_SA, PROFILE, tmp_path / "nowhere")
+    assert run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path).crossings["sgn_test"]["chance"] == 99_328
+    gone = run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path / "nowhere")
     assert (gone.found, gone.crossings, gone.last, gone.every) == (False, {}, 0, 0)
     one = tmp_path / "one"
     write_points(one, W_O_SA, ["1000,eval/sgn_test,0.5"])
-    assert run_efficiency(W_O_SA, PROFILE, one).every == 0
-    assert table_efficiency(load_table("table3"), PROFILE, [eff.run], tmp_path, chance) == [eff]
+    assert run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), one).every == 0
+    assert table_efficiency(plan_report("table3", PROFILE, run_root=tmp_path), [eff.run], chance) == [eff]
 
 
 def test_the_section_lists_each_run_and_its_cadence(tmp_path):
     points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
     write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points])
-    eff = run_efficiency(W_O_SA, PROFILE, tmp_path, Chance({("easy", "sgn_test"): 0.5}))
-    gone = run_efficiency(W_O_SA, PROFILE, tmp_path / "nowhere")
+    eff = run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path, Chance({("easy", "sgn_test"): 0.5}))
+    gone = run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path / "nowhere")
     text = markdown([eff, gone], ("sgn_test", "eqa_test"))
     lines = text.splitlines()
     assert lines[:2] == ["### Sample efficiency", ""] and text.endswith(" |\n")
@@ -178,7 +179,7 @@ def test_the_section_lists_each_run_and_its_cadence(tmp_path):
     ]
     assert markdown([]) == ""
     assert "at most — frames apart" in markdown([gone])
-    eqa = run_efficiency(W_O_SA, PROFILE, tmp_path)
+    eqa = run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path)
     eqa.crossings["eqa_test"] = {"chance": None, "0.5": None, "0.9": None}
     del eqa.crossings["sgn_test"]
     assert markdown([eff, eqa], ("sgn_test", "eqa_test")).splitlines()[-1] == (
@@ -193,7 +194,7 @@ def test_the_section_states_the_chance_it_reads_and_each_cadence(tmp_path):
     write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,0.9" for s in (99_328, 199_680)])
     write_points(tmp_path, no_aux, [f"{s},eval/sgn_test,0.9" for s in (50_000, 100_000)])
     chance = Chance({("easy", "sgn_test"): 0.25}, "a fixture's blind runs")
-    runs = [run_efficiency(s, PROFILE, tmp_path, chance) for s in (W_O_SA, no_aux)]
+    runs = [run_efficiency(s, s.run_name(PROFILE), tmp_path, chance) for s in (W_O_SA, no_aux)]
     runs[1].crossings["sgn_x"] = {"chance": None, "0.5": None, "0.9": None}  # a metric without a label
     lines = markdown(runs, ("sgn_test", "sgn_x"), chance).splitlines()
     assert lines[2] == (
@@ -222,5 +223,6 @@ def test_a_tables_crossings_read_the_profiles_blind_prior_by_default(tmp_path, m
     monkeypatch.setattr(emml.report.chance, "blind_prior", prior)
     points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
     write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points])
-    (eff,) = table_efficiency(load_table("table3"), PROFILE, [W_O_SA.run_name(PROFILE)], tmp_path)
-    assert asked == [PROFILE] and eff.crossings["sgn_test"]["chance"] == 299_008  # above 0.6, not the uniform 0.3
+    (eff,) = table_efficiency(plan_report("table3", PROFILE, run_root=tmp_path), [W_O_SA.run_name(PROFILE)])
+    assert [p.name for p in asked] == [PROFILE]
+    assert eff.crossings["sgn_test"]["chance"] == 299_008  # above 0.6, not the uniform 0.3

@@ -7,6 +7,7 @@ import pandas as pd
 from emml.config.profiles import profile_seeds
 from emml.experiments.tables import load_table
 from emml.report.field import field_figure
+from emml.report.plan import plan_report
 from emml.report.savefig import PAGE_INCHES, outside
 from emml.report.tables import build_cells, paper_numbers, table_results
 from tests.report.test_tables import PROFILE, fake_results
@@ -20,9 +21,10 @@ def test_a_page_wide_nothing_cut_and_a_setting_with_one_row_left_out(tmp_path):
         if not spec.aux and spec.row != "DA Multi-Task"
     ]
     fake_results("table3", tmp_path / "results", drop=tuple(alone))
-    results = table_results(table, PROFILE, tmp_path / "results")
+    plan = plan_report(table, PROFILE, tmp_path / "results")
+    results = table_results(table, plan.profile, tmp_path / "results")
     assert not results[~results["aux"].astype(bool)].empty  # the No Aux DA runs are there, and not drawn
-    fig = field_figure(table, PROFILE, build_cells(table, PROFILE, results, paper_numbers("table3")))
+    fig = field_figure(table, plan.profile, build_cells(plan, results, paper_numbers("table3")))
     assert fig.get_size_inches()[0] == PAGE_INCHES
     assert outside(fig) == []
     titles = [ax.get_title() for ax in fig.axes if ax.get_title().endswith(": IQM")]
@@ -38,6 +40,7 @@ def test_no_figure_where_no_setting_has_two_rows(tmp_path):
     table = load_table("table3")
     only = [s.run_name(PROFILE) for s in table.runs(profile_seeds(PROFILE)) if s.row != "DA Multi-Task"]
     fake_results("table3", tmp_path / "results", drop=tuple(only))
-    results = table_results(table, PROFILE, tmp_path / "results")
+    plan = plan_report(table, PROFILE, tmp_path / "results")
+    results = table_results(table, plan.profile, tmp_path / "results")
     assert isinstance(results, pd.DataFrame) and not results.empty
-    assert field_figure(table, PROFILE, build_cells(table, PROFILE, results, paper_numbers("table3"))) is None
+    assert field_figure(table, plan.profile, build_cells(plan, results, paper_numbers("table3"))) is None

@@ -7,7 +7,7 @@ import re
 import pandas as pd
 import pytest
 
-from emml.config.profiles import profile_seeds
+from emml.config.profiles import profile_seeds, resolve_profile
 from emml.experiments.tables import load_table
 from emml.report.tables import MISSING, report_table, reports_dir
 from emml.runs.naming import run_name
@@ -107,11 +107,10 @@ def test_one_seed_of_three_says_so_and_one_of_one_shows_the_value(tmp_path, monk
     assert "0.10 (n=1/3)" in md
     import dataclasses
 
-    import emml.report.tables as tables_module
-    from emml.config.profiles import resolve_profile
+    import emml.report.plan as plan_module
 
     monkeypatch.setattr("emml.config.profiles.profile_seeds", lambda profile: [0])  # a profile of one seed
-    monkeypatch.setattr(tables_module, "resolve_profile", lambda p: dataclasses.replace(resolve_profile(p), seeds=(0,)))
+    monkeypatch.setattr(plan_module, "resolve_profile", lambda p: dataclasses.replace(resolve_profile(p), seeds=(0,)))
     rep = report("table3", tmp_path)
     assert all(c["n"] == 1 for c in rep["cells"])
     line = next(x for x in (tmp_path / "reports" / "table3-quick.md").read_text().splitlines() if "| w/o GA1" in x)
@@ -259,8 +258,8 @@ def test_a_report_written_twice_is_the_same_bytes(tmp_path):
 def test_smoke_reports_are_not_written_under_the_committed_reports(tmp_path):
     from emml.config.paths import project_root
 
-    assert reports_dir("smoke") == project_root() / "scratch" / "reports"
-    assert reports_dir("quick") == project_root() / "reports"
+    assert reports_dir(resolve_profile("smoke")) == project_root() / "scratch" / "reports"
+    assert reports_dir(resolve_profile("quick")) == project_root() / "reports"
     committed = project_root() / "reports" / "table2-smoke.md"
     before = committed.read_bytes() if committed.exists() else None
     with pytest.raises(ValueError, match="the 'smoke' profile's numbers are not results"):

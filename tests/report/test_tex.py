@@ -10,6 +10,7 @@ import pytest
 
 from emml.experiments.tables import load_table
 from emml.report import deviations
+from emml.report.plan import plan_report
 from emml.report.tables import build_cells, paper_numbers, shown_runs, table_results
 from emml.report.tex import TEX_PACKAGES, tabular, tex_table, tex_text
 from tests.report.test_tables import PROFILE, fake_results, fake_run_dirs
@@ -30,11 +31,12 @@ def written(table: str, tmp_path, drop: tuple[str, ...] = ()) -> str:
     results_root.mkdir()
     (tmp_path / "staged" / table).rename(results_root / t.name)
     fake_run_dirs(table, tmp_path / "runs")
-    results = table_results(t, PROFILE, results_root)
-    cells = build_cells(t, PROFILE, results, paper_numbers(t.name))
-    runs = shown_runs(t, PROFILE, cells, results, tmp_path / "runs")
-    devs = deviations.summarise(runs, deviations.noaux_schedule(t, PROFILE))
-    return tex_table(t, PROFILE, cells, results, devs)
+    plan = plan_report(t, PROFILE, results_root, tmp_path / "runs")
+    results = table_results(t, plan.profile, results_root)
+    cells = build_cells(plan, results, paper_numbers(t.name))
+    runs = shown_runs(plan, cells, results)
+    devs = deviations.summarise(runs, deviations.noaux_schedule(plan))
+    return tex_table(plan, cells, results, devs)
 
 
 def test_table2_is_set_as_the_paper_sets_it_easy_and_hard_as_two_panels(tmp_path):

@@ -1,0 +1,55 @@
+"""The report planned once (issue 64): a table's report resolves its profile and builds each run's config and name
+once, by the launch's own plan (`emml.experiments.launch.plan_runs`), and every part of the page reads that plan."""
+
+from emml.config.profiles import resolve_profile
+from emml.config.schema import TrainConfig
+from emml.experiments.tables import load_table
+from emml.report.plan import plan_report
+from tests.report.test_tables import PROFILE, fake_results, report
+
+
+def built(monkeypatch) -> list[int]:
+    """A counter of the TrainConfigs built from here on (each `__post_init__`)."""
+    count = [0]
+    post_init = TrainConfig.__post_init__
+
+    def counted(self):
+        count[0] += 1
+        post_init(self)
+
+    monkeypatch.setattr(TrainConfig, "__post_init__", counted)
+    return count
+
+
+def test_a_table2_report_builds_at_most_two_configs_per_run(tmp_path, monkeypatch):
+    """Table 2's report built 1,448 TrainConfigs for its 84 runs (issue 64: each part of the page, the caption, the
+    LaTeX, the deviations, the sample efficiency, rebuilt every run's config to spell its name); planned once, it
+    builds two per run: the run's config and the profile's baseline its name is compared with (`swept`). Counted
+    apart: what a process reads once whatever it reports (the profiles file, TrainConfig's defaults per env kind) and
+    loading and checking the table file (which every command that reads it pays)."""
+    import emml.report.field
+    from emml.experiments import fidelity
+
+    monkeypatch.setattr(emml.report.field, "plot_field", lambda *a: [])  # the rliable figure reads the cells only
+    fake_results("table2", tmp_path / "results")  # finished runs, no run dirs here: no saved config to read
+    runs = len(load_table("table2").runs(list(resolve_profile(PROFILE).seeds)))
+    for difficulty in ("easy", "hard"):
+        fidelity.resolve({"env": {"difficulty": difficulty}})
+    count = built(monkeypatch)
+    load_table("table2")
+    table_file, count[0] = count[0], 0
+    rep = report("table2", tmp_path)
+    assert runs == 84 and all(c["n"] == 3 for c in rep["cells"])
+    assert count[0] - table_file <= 2 * runs, f"{count[0] - table_file} TrainConfigs for {runs} runs"
+
+
+def test_the_plan_holds_every_run_once_named_as_the_launch_names_it(tmp_path):
+    plan = plan_report("table3", PROFILE, tmp_path / "results", tmp_path / "runs")
+    specs = load_table("table3").runs(list(resolve_profile(PROFILE).seeds))
+    assert [r.spec for r in plan.runs] == specs
+    assert [r.name for r in plan.runs] == [s.run_name(PROFILE) for s in specs]
+    assert plan.run_root == tmp_path / "runs" and all(r.cfg.run_root == str(tmp_path / "runs") for r in plan.runs)
+    (run,) = [r for r in plan.cell_runs("w/o SA", "easy", True, "sgn_test") if r.spec.seed == 0]
+    assert run.name == "da_no_sa-easy-aux-s0-quick"
+    defaults = plan_report("table3", PROFILE)  # the profile's roots
+    assert (defaults.run_root, defaults.results_root) == ("runs", "results")
