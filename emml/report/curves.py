@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from emml.config.profiles import Profile  # noqa: E402
 from emml.report.aggregate import reference_row  # noqa: E402
 from emml.report.savefig import PAGE_INCHES, frames_axis, save, wrap  # noqa: E402
-from emml.runs.tracking import metric_history  # noqa: E402
+from emml.runs.store import metric_history  # noqa: E402
 
 SERIES = (
     ("train/success_sgn", "SGN, training episodes", "C0", "-"),

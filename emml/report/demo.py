@@ -11,7 +11,8 @@ from emml.report.curves import plot_run
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
 from emml.runs.naming import run_name
-from emml.runs.tracking import metric_history, portable, portable_uri, tracking_uri
+from emml.runs.portable import portable, portable_uri
+from emml.runs.store import metric_history, tracking_uri
 
 LABELS = {
     "attention_on_target": "attention on target",

@@ -27,12 +27,11 @@ from typing import Any
 from emml.config.paths import checkout_root
 from emml.runs import store
 from emml.runs.mirror import append_mirror, export_mirror, read_mirror
-from emml.runs.portable import ROOTS, portable, portable_uri, root_name
+from emml.runs.portable import ROOTS, portable, root_name
 from emml.runs.provenance import NOTE, experiment_note, source_tags
-from emml.runs.store import MAX_PARAM_LEN, MAX_TAG_LEN, metric_history, retry, tracking_uri
+from emml.runs.store import MAX_PARAM_LEN, MAX_TAG_LEN, retry
 
 __all__ = ["Tracker", "display_name", "flatten", "parent_run", "set_run_status", "stored_run", "tag_strings"]
-__all__ += ["metric_history", "portable", "portable_uri", "tracking_uri"]  # read here by emml/report and campaign.py
 
 STATUSES = ("FINISHED", "FAILED", "KILLED")
 IMPORTED_RUN_ID = "emml.imported_run_id"

@@ -69,7 +69,7 @@ def test_a_damaged_run_dir_is_named_and_the_reports_go_on(tmp_path, monkeypatch,
 def test_no_committed_report_names_a_folder_of_the_machine_that_wrote_it():
     """Committed reports are read on other machines: no absolute path of this checkout, a home or a temp folder."""
     from emml.config.paths import checkout_root
-    from emml.runs.tracking import portable, portable_uri
+    from emml.runs.portable import portable, portable_uri
 
     here = str(checkout_root())
     for path in sorted((checkout_root() / "reports").glob("*.*")):

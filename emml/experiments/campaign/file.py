@@ -35,7 +35,7 @@ class Step:
     note: str = ""
     """Why the step is there (free text)."""
     claims: tuple[str, ...] = ()
-    """The claims its runs decide (ids of reproduce/claims.toml, emml/experiments/claims.py); none for a step that
+    """The claims its runs decide (ids of reproduce/claims.toml, emml/experiments/claims/); none for a step that
     measures something of ours (an experiment of an issue)."""
     settings: dict = field(default_factory=dict)
     """The step's `set`: TrainConfig.RUNTIME field → value for its runs, over the profile's (how a run is measured

@@ -102,7 +102,7 @@ def run_pinned(
     no git one is a ValueError."""
     import sys
 
-    from emml.runs.tracking import tracking_uri
+    from emml.runs.store import tracking_uri
 
     root = project_root()
     tree = pin_worktree(root, log=log, need=CAMPAIGNS_DIR / f"{name}.toml")
