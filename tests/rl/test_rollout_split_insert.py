@@ -290,3 +290,16 @@ def test_the_shape_refusals_name_both_shapes():
     buf = RolloutBuffer(T, B, SHAPES)
     with pytest.raises(ValueError, match=re.escape(f"state['h'] leading dim {B + 1} != num_envs {B}")):
         buf.set_initial_state({"h": torch.zeros(B + 1, 7)})
+
+
+def test_the_float_storage_is_float32_whatever_torchs_default_dtype():
+    """A caller that runs under float64 defaults (a notebook's `torch.set_default_dtype`) still gets the rollout's
+    float32 storage: the update's losses and the stored log-probs then agree in precision with the paper's run."""
+    before = torch.get_default_dtype()
+    torch.set_default_dtype(torch.float64)
+    try:
+        buf = RolloutBuffer(T, B, SHAPES)
+    finally:
+        torch.set_default_dtype(before)
+    for name in ("logprobs", "values", "rewards", "advantages", "returns"):
+        assert getattr(buf, name).dtype == torch.float32, name
