@@ -19,23 +19,12 @@ from emml.config.env_kinds import ENV_KINDS
 from emml.config.paths import REPRODUCE_DIR
 from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides
+from emml.experiments.metrics import METRICS, TRANSFER_METRICS
 from emml.runs.naming import run_name
 
 STATUSES = ("active", "placeholder")
 DIFFICULTIES = tuple(ENV_KINDS)
 """Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C): emml/config/env_kinds.py."""
-METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
-"""Results columns a cell may read (written by the trainer's greedy evaluation)."""
-TRANSFER_METRICS = ("sgn_transfer",)
-"""What a transfer table's cells read: the mean of their instructions' `sgn_transfer:<instruction>` columns."""
-METRIC_LABELS = {
-    "sgn_test": "SGN test",
-    "eqa_test": "EQA test",
-    "sgn_train": "SGN train",
-    "eqa_train": "EQA train",
-    "sgn_transfer": "SGN",
-}
-"""How the reports head each metric's column (the paper's Tables 2-5: 'SGN', 'EQA'; train and test apart)."""
 TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows", "transfer")
 COLUMN_KEYS = ("difficulties", "aux", "metrics")
 ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "noaux_overrides", "from_table")
