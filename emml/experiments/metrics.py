@@ -53,6 +53,10 @@ class Metric:
         """Whether its greedy evaluation is logged periodically as `eval/<name>` (a sample-efficiency curve)."""
         return self.key == f"eval/{self.name}"
 
+    def column(self, instruction: str) -> str:
+        """A transfer metric's results column for one instruction: `<name>:<instruction>`."""
+        return f"{self.name}:{instruction}"
+
     @property
     def curve(self) -> str:
         return self.curve_label or self.label

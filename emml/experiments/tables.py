@@ -19,7 +19,7 @@ from emml.config.env_kinds import ENV_KINDS
 from emml.config.paths import REPRODUCE_DIR
 from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides
-from emml.experiments.metrics import METRICS, TRANSFER_METRICS
+from emml.experiments.metrics import BY_NAME, METRICS, TRANSFER_METRICS
 from emml.runs.naming import run_name
 
 STATUSES = ("active", "placeholder")
@@ -229,12 +229,12 @@ class Table:
 
     def cell_columns(self, row: str, metric: str) -> list[str]:
         """The results columns whose mean is a run's value for the cell: [metric], or for a transfer table one
-        `sgn_transfer:<instruction>` column per instruction of the row."""
+        `<metric>:<instruction>` column per instruction of the row (`Metric.column`: Table 4's sgn_transfer, as
+        emml/eval/transfer.py writes it)."""
         if self.transfer is None:
             return [metric]
-        from emml.eval.transfer import metric_column
-
-        return [metric_column(x) for r in self.rows if r.label == row for x in r.instructions]
+        declared = BY_NAME[metric]
+        return [declared.column(x) for r in self.rows if r.label == row for x in r.instructions]
 
 
 def table_path(name: str) -> Path:

@@ -48,3 +48,10 @@ def test_no_reader_spells_a_metric_key_or_label():
         if text in spelled
     ]
     assert not found, "read these from emml/experiments/metrics.py:\n" + "\n".join(found)
+
+
+def test_a_transfer_metrics_column_is_the_one_the_transfer_writes():
+    from emml.eval.transfer import METRIC, metric_column
+
+    assert METRIC in metrics.TRANSFER_METRICS
+    assert BY_NAME[METRIC].column("go to the torch") == metric_column("go to the torch")
