@@ -54,3 +54,10 @@ def test_a_runs_curves_are_drawn_in_the_declared_colours():
         if m.periodic:
             assert drawn[m.key] == (f"{m.label}, greedy eval", m.colour)
     assert drawn["train/success_sgn"][1] == metrics.train_of("sgn").colour
+
+
+def test_a_claims_colour_is_its_tasks_declared_one():
+    from emml.report.claims_page import TASK_COLOURS
+
+    for task in metrics.TASKS:
+        assert TASK_COLOURS[task] == metrics.train_of(task).colour
