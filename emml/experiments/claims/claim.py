@@ -1,9 +1,9 @@
 """The paper's claims as data (reproduce/claims.toml): each one the comparison of table cells that decides it.
 Each claim's `kind` is an object of emml/experiments/claims/kinds.py (the fields it needs, its rule, its decision).
 
-The campaign's steps name the claims their runs decide (emml/experiments/campaign.py, `--status`); the reports state
-each claim beside the cells that decide it. Loading checks every claim against its table (rows, metrics, columns) before
-any compute, with errors that name the file, the claim and the allowed values.
+The campaign's steps name the claims their runs decide (emml/experiments/campaign/progress.py, `--status`); the
+reports state each claim beside the cells that decide it. Loading checks every claim against its table (rows, metrics,
+columns) before any compute, with errors that name the file, the claim and the allowed values.
 """
 
 from __future__ import annotations
