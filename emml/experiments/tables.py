@@ -19,23 +19,12 @@ from emml.config.env_kinds import ENV_KINDS
 from emml.config.paths import REPRODUCE_DIR
 from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides
+from emml.experiments.metrics import BY_NAME, METRICS, TRANSFER_METRICS
 from emml.runs.naming import run_name
 
 STATUSES = ("active", "placeholder")
 DIFFICULTIES = tuple(ENV_KINDS)
 """Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C): emml/config/env_kinds.py."""
-METRICS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
-"""Results columns a cell may read (written by the trainer's greedy evaluation)."""
-TRANSFER_METRICS = ("sgn_transfer",)
-"""What a transfer table's cells read: the mean of their instructions' `sgn_transfer:<instruction>` columns."""
-METRIC_LABELS = {
-    "sgn_test": "SGN test",
-    "eqa_test": "EQA test",
-    "sgn_train": "SGN train",
-    "eqa_train": "EQA train",
-    "sgn_transfer": "SGN",
-}
-"""How the reports head each metric's column (the paper's Tables 2-5: 'SGN', 'EQA'; train and test apart)."""
 TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows", "transfer")
 COLUMN_KEYS = ("difficulties", "aux", "metrics")
 ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "noaux_overrides", "from_table")
@@ -240,12 +229,12 @@ class Table:
 
     def cell_columns(self, row: str, metric: str) -> list[str]:
         """The results columns whose mean is a run's value for the cell: [metric], or for a transfer table one
-        `sgn_transfer:<instruction>` column per instruction of the row."""
+        `<metric>:<instruction>` column per instruction of the row (`Metric.column`: Table 4's sgn_transfer, as
+        emml/eval/transfer.py writes it)."""
         if self.transfer is None:
             return [metric]
-        from emml.eval.transfer import metric_column
-
-        return [metric_column(x) for r in self.rows if r.label == row for x in r.instructions]
+        declared = BY_NAME[metric]
+        return [declared.column(x) for r in self.rows if r.label == row for x in r.instructions]
 
 
 def table_path(name: str) -> Path:

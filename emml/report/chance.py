@@ -11,12 +11,14 @@ import numpy as np
 
 from emml.config.profiles import Profile
 from emml.experiments.claims.evidence import Chance
+from emml.experiments.metrics import CHANCE_COLUMNS, label
 
 BLIND_MODEL = "text_only"
 """The model that sees no frame: its score is the answer and target prior a blind agent can learn here."""
 BLIND_TABLES = ("table2", "table5")
 """The tables that hold a blind row (Doom Easy and Hard; the House)."""
-COLUMNS = ("sgn_test", "eqa_test", "sgn_train", "eqa_train")
+COLUMNS = CHANCE_COLUMNS
+"""The columns a blind prior is measured on: each metric's declared `chance` (emml/experiments/metrics.py)."""
 
 
 def blind_prior(profile: Profile, results_root: str | Path | None = None) -> Chance:
@@ -64,9 +66,6 @@ def chance_text(chance: Chance, difficulties: tuple[str, ...] = ("easy", "hard",
         cells = []
         for metric in COLUMNS:
             how = "" if chance.measured(metric, d) else " (uniform)"
-            cells.append(
-                f"{metric.replace('_', ' ').upper().replace(' TEST', ' test').replace(' TRAIN', ' train')} "
-                f"{chance.of(metric, d):.2f}{how}"
-            )
+            cells.append(f"{label(metric)} {chance.of(metric, d):.2f}{how}")
         parts.append(f"{env_label(d)}: " + ", ".join(cells))
     return "; ".join(parts)

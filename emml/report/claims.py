@@ -31,6 +31,7 @@ from emml.experiments.claims.evidence import (
     status,
     task_of,
 )
+from emml.experiments.metrics import TRAIN_COLUMNS, train_of
 from emml.report.chance import BLIND_MODEL, blind_prior, paper_prior
 from emml.report.plan import ReportPlan, plan_report
 
@@ -113,7 +114,7 @@ def _wanted(claim, where: dict, cell_metric: str, c) -> bool:
 def _learning(row: dict, metric: str, difficulty: str, blind: bool, chance: Chance) -> tuple[float | None, float]:
     """A run's training score on the task of `metric` and the bar it must pass to have learned (-inf: the blind
     row, whose score is the chance line itself)."""
-    train = f"{task_of(metric)}_train"
+    train = train_of(task_of(metric)).name
     value = None if _isnan(row.get(train)) else float(row[train])
     return value, (-math.inf if blind else chance.bar(train, difficulty))
 
@@ -310,9 +311,7 @@ def _curve_score(claim, metric: str, run, run_root, score: Score, row: dict, cha
     if not points:
         return None
     # learned: either training split above its bar (the figure is about the conv both tasks read)
-    margins = [
-        float(row[m]) - chance.bar(m, spec.difficulty) for m in ("sgn_train", "eqa_train") if not _isnan(row.get(m))
-    ]
+    margins = [float(row[m]) - chance.bar(m, spec.difficulty) for m in TRAIN_COLUMNS if not _isnan(row.get(m))]
     return Score(score.run, score.seed, points[-1][1], 0, points[-1][0], max(margins, default=-1.0), 0.0)
 
 

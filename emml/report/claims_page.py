@@ -20,6 +20,7 @@ from emml.experiments.claims.evidence import (
     Z,
 )
 from emml.experiments.claims.kinds import KINDS
+from emml.experiments.metrics import TASKS, train_of
 from emml.report.chance import chance_text
 
 GENERAL_RULES = [
@@ -95,7 +96,9 @@ STATUS_COLOURS = {
     UNTESTABLE: "#8c959f",
 }
 """The figure's colour for each status (its tick label)."""
-TASK_COLOURS = {"sgn": "C0", "eqa": "C1", "diag": "C2"}
+TASK_COLOURS = {**{task: train_of(task).colour for task in TASKS}, "diag": "C2"}
+"""A claim's colour: its task's, as its training split's curve is drawn (emml/experiments/metrics.py); a diag/* figure
+C2."""
 FIGURE_WIDTH = 7.0
 """Inches: the figure prints across a two-column page (or a one-column one) at its own size."""
 
@@ -332,8 +335,8 @@ def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:
         Line2D([], [], ls="none", marker="x", color="0.2", label="paper"),
         Line2D([], [], ls="none", marker="o", color="0.2", label="ours (mean)"),
         Line2D([], [], ls="none", marker="o", mfc="none", color="0.2", label="ours (a seed)"),
-        *(Line2D([], [], ls="none", marker="s", color=c, label=t) for t, c in (("SGN", "C0"), ("EQA", "C1"))),
-        Line2D([], [], ls="none", marker="s", color="C2", label="diag/*"),
+        *(Line2D([], [], ls="none", marker="s", color=TASK_COLOURS[t], label=t.upper()) for t in TASKS),
+        Line2D([], [], ls="none", marker="s", color=TASK_COLOURS["diag"], label="diag/*"),
     ]
     ax.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=6, fontsize=6)
     ax.set_title("Ours against the paper per claim (label: status, seeds)", pad=14)

@@ -12,18 +12,23 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from emml.config.profiles import Profile  # noqa: E402
+from emml.experiments.metrics import BY_NAME, DECLARED, train_of  # noqa: E402
 from emml.report.aggregate import reference_row  # noqa: E402
 from emml.report.savefig import PAGE_INCHES, frames_axis, save, wrap  # noqa: E402
 from emml.runs.store import metric_history  # noqa: E402
 
+TRAIN_KEYS = (("train/success_sgn", "SGN"), ("train/success_eqa", "EQA"))
+"""The training-episode success curves (the paper's figures plot them); the table pages draw the greedy evaluation
+of the tables' own metric instead (`curve_key`)."""
 SERIES = (
-    ("train/success_sgn", "SGN, training episodes", "C0", "-"),
-    ("train/success_eqa", "EQA, training episodes", "C1", "-"),
-    ("eval/sgn_train", "SGN train, greedy eval", "C0", "o"),
-    ("eval/eqa_train", "EQA train, greedy eval", "C1", "o"),
-    ("eval/sgn_test", "SGN test, greedy eval", "C2", "s"),
-    ("eval/eqa_test", "EQA test, greedy eval", "C3", "s"),
+    *((key, f"{task}, training episodes", train_of(task.lower()).colour, "-") for key, task in TRAIN_KEYS),
+    *(
+        (m.key, f"{m.label}, greedy eval", m.colour, "o" if m.train_column else "s")
+        for m in sorted((m for m in DECLARED if m.periodic), key=lambda m: not m.train_column)
+    ),
 )
+"""A run's curves (`plot_run`): its training episodes' success per task in the colour of the task's training split,
+then every periodically evaluated metric as declared (emml/experiments/metrics.py), the training splits first."""
 
 
 def plot_run(run_id: str, path: Path, title: str) -> Path:
@@ -37,7 +42,8 @@ def plot_run(run_id: str, path: Path, title: str) -> Path:
             ax.plot(steps, values, style, color=color, label=label)
         else:
             ax.plot(steps, values, style, color=color, label=label, linestyle="--", alpha=0.8)
-    ax.axhline(0.2, color="grey", lw=0.8, ls=":", label="SGN chance (1 of 5)")
+    sgn = train_of("sgn")
+    ax.axhline(sgn.uniform, color="grey", lw=0.8, ls=":", label=f"SGN chance (1 of {round(1 / sgn.uniform)})")
     frames_axis(ax)
     ax.set_ylabel("accuracy")
     ax.set_ylim(-0.02, 1.02)
@@ -52,9 +58,6 @@ def plot_run(run_id: str, path: Path, title: str) -> Path:
 
 # --- a table's curves of its own metric (the paper's Figures 7, 8: Table 2; Figure 9: Table 3) -------------------
 
-TRAIN_KEYS = (("train/success_sgn", "SGN"), ("train/success_eqa", "EQA"))
-"""The training-episode success curves (the paper's figures plot them); the table pages draw the greedy evaluation
-of the tables' own metric instead (`curve_key`)."""
 GRID_POINTS = 300
 """Curves are resampled on at most this many frame values before averaging seeds (keeps the bootstrap cheap)."""
 
@@ -62,11 +65,8 @@ GRID_POINTS = 300
 def curve_key(metric: str) -> tuple[str, str]:
     """The metrics-mirror key of a table column's greedy evaluation and its label: eval/sgn_test for sgn_test; a
     transfer table's sgn_transfer (scored once, after training) draws its runs' training instructions."""
-    from emml.report.tables import METRIC_LABELS
-
-    if metric == "sgn_transfer":
-        return "eval/sgn_train", "SGN train (before the transfer)"
-    return f"eval/{metric}", METRIC_LABELS.get(metric, metric)
+    declared = BY_NAME[metric]
+    return declared.key, declared.curve
 
 
 def _mean_band(curves: list[tuple[np.ndarray, np.ndarray]]):

@@ -28,12 +28,15 @@ each row had two cells more than it)."""
 
 def _diagnostics_table(run_id: str) -> list[str]:
     """One row per evaluation: frames, greedy SGN accuracy and the diag/* figures logged with it."""
-    keys = ["eval/sgn_train", "eval/sgn_test", *(f"diag/{k}" for k in SCALARS)]
+    from emml.experiments.metrics import BY_NAME
+
+    sgn = [BY_NAME[m] for m in ("sgn_train", "sgn_test")]  # the SGN splits, as declared (emml/experiments/metrics.py)
+    keys = [*(m.key for m in sgn), *(f"diag/{k}" for k in SCALARS)]
     curves = {k: dict(metric_history(run_id, k)) for k in keys}
     steps = sorted(set().union(*(c.keys() for c in curves.values())))
     if not steps:
         return []
-    head = ["frames", "SGN train", "SGN test", *(LABELS[k] for k in SCALARS)]  # one column per key (issue 66)
+    head = ["frames", *(m.label for m in sgn), *(LABELS[k] for k in SCALARS)]  # one column per key (issue 66)
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     digits = {"diag/x_image_spatial_std": 3}  # a collapsed map's spread is below 0.01 (as `summary_line` prints it)
     for s in steps:

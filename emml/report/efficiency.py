@@ -15,13 +15,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml.experiments.claims.evidence import LEAVE, Chance, frames_text
-from emml.experiments.tables import METRICS
+from emml.experiments.metrics import BY_NAME, CURVE_METRICS, label
 
 __all__ = ["LEAVE", "frames_text", "first_crossing", "run_efficiency", "table_efficiency", "markdown"]
 UNIFORM_CHANCE = Chance()
 """Chance without a blind run to read: the uniform floor (SGN 0.2, EQA 1/3; emml/experiments/claims/evidence.py)."""
-CURVE_METRICS = METRICS
-"""The results columns whose greedy evaluation is logged periodically as `eval/<metric>`."""
 MARKS = ("chance", "0.5", "0.9")
 """The crossings per metric: leaving chance (above chance + LEAVE), reaching 0.5, reaching 0.9."""
 
@@ -73,7 +71,7 @@ def curves(path: Path) -> dict[str, list[tuple[int, float]]] | None:
     points = points_or_none(path)
     if points is None:
         return None
-    keys = {f"eval/{m}": m for m in CURVE_METRICS}
+    keys = {BY_NAME[m].key: m for m in CURVE_METRICS}
     out: dict[str, dict[int, float]] = {}
     for step, key, value in points:
         if key in keys:
@@ -118,7 +116,6 @@ def table_efficiency(plan, names: list[str], chance: Chance | None = None) -> li
 def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS, chance: Chance | None = None) -> str:
     """The page's sample-efficiency section: one line per run, per metric its three crossings."""
     from emml.config.env_kinds import env_label
-    from emml.experiments.tables import METRIC_LABELS
 
     runs = [r for r in runs]
     if not runs:
@@ -140,7 +137,7 @@ def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS
         "resolution.",
         "",
     ]
-    header = ["Run", "Setting", "seed"] + [METRIC_LABELS.get(m, m) for m in shown]
+    header = ["Run", "Setting", "seed"] + [label(m) for m in shown]
     lines += ["| " + " | ".join(header) + " |", "|:--|:--|--:|" + ":--|" * len(shown)]
     for r in runs:
         setting = f"{env_label(r.difficulty)} · {'Aux' if r.aux else 'No Aux'}"

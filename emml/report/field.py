@@ -76,7 +76,7 @@ def panel_data(table, cells) -> list[dict]:
     and per row with runs there (in the table's row order) its index in the table, its runs' values (seed order) and
     the paper's number (None where the paper has none)."""
     from emml.config.env_kinds import env_label
-    from emml.experiments.tables import METRIC_LABELS
+    from emml.experiments.metrics import BY_NAME
 
     by = {(c.row, c.difficulty, c.aux, c.metric): c for c in cells}
     labels = {v: k for k, v in table.metrics.items()}
@@ -92,7 +92,7 @@ def panel_data(table, cells) -> list[dict]:
                 {
                     "setting": f"{env_label(difficulty)} · {'Aux' if aux else 'No Aux'}",
                     "metric": metric,
-                    "label": METRIC_LABELS.get(metric, labels.get(metric, metric)),
+                    "label": BY_NAME[metric].label if metric in BY_NAME else labels.get(metric, metric),
                     "rows": rows,
                 }
             )

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from emml.config.paths import project_path, project_root
 from emml.config.profiles import Profile, resolve_profile
+from emml.experiments.metrics import TRAIN_COLUMNS
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
 from emml.runs.rundir import CHECKPOINT, RunDirError, config_of, finished_run, path_of, variant_dir
@@ -72,7 +73,7 @@ def best_checkpoint(
     if df.empty:
         return None
     rows = df[(df["model"] == model) & (df["aux"] == aux)].copy()
-    train_cols = [c for c in ("sgn_train", "eqa_train") if c in rows]
+    train_cols = [c for c in TRAIN_COLUMNS if c in rows]
     rows["score"] = rows[train_cols].mean(axis=1)
     for _, row in rows.sort_values("score", ascending=False).iterrows():
         path = path_of(run_root, table, row["run_name"]) / CHECKPOINT

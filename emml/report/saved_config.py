@@ -12,9 +12,9 @@ from emml.runs.rundir import write_json as _write
 
 
 def _is_metric(column: str) -> bool:
-    from emml.experiments.tables import METRICS, TRANSFER_METRICS
+    from emml.experiments.metrics import is_metric
 
-    return column in METRICS or column.split(":")[0] in TRANSFER_METRICS
+    return is_metric(column)
 
 
 def _payload_from_row(row: dict) -> dict:

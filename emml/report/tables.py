@@ -21,7 +21,8 @@ from emml.config.env_kinds import ENV_KINDS, env_label
 from emml.config.paths import REPRODUCE_DIR, project_path, project_root
 from emml.config.profiles import Profile
 from emml.config.schema import TrainConfig
-from emml.experiments.tables import METRIC_LABELS, Table, list_tables, table_ref
+from emml.experiments.metrics import label as metric_label
+from emml.experiments.tables import Table, list_tables, table_ref
 from emml.report.plan import ReportPlan, plan_report
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
@@ -153,7 +154,7 @@ def _label(level: str, value) -> str:
         return env_label(value)
     if level == "aux":
         return AUX_LABELS[bool(value)]
-    return METRIC_LABELS.get(value, value)
+    return metric_label(value)
 
 
 def caption(

@@ -1,9 +1,9 @@
 """The paper's claims as data (reproduce/claims.toml): each one the comparison of table cells that decides it.
 Each claim's `kind` is an object of emml/experiments/claims/kinds.py (the fields it needs, its rule, its decision).
 
-The campaign's steps name the claims their runs decide (emml/experiments/campaign.py, `--status`); the reports state
-each claim beside the cells that decide it. Loading checks every claim against its table (rows, metrics, columns) before
-any compute, with errors that name the file, the claim and the allowed values.
+The campaign's steps name the claims their runs decide (emml/experiments/campaign/progress.py, `--status`); the
+reports state each claim beside the cells that decide it. Loading checks every claim against its table (rows, metrics,
+columns) before any compute, with errors that name the file, the claim and the allowed values.
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ import tomllib
 
 from emml.config.paths import REPRODUCE_DIR
 from emml.experiments.claims.kinds import KINDS
-from emml.experiments.tables import METRICS, load_table
+from emml.experiments.metrics import CURVE_METRICS, metric, train_of
+from emml.experiments.tables import load_table
 
 CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"
 KEYS = (
@@ -38,9 +39,6 @@ KEYS = (
     "on_paper",
 )
 WHERE_KEYS = ("difficulty", "aux")
-CURVE_METRICS = METRICS
-"""What a 'faster' claim may read: the results columns whose greedy evaluation the trainer logs periodically
-(`eval/<metric>` in metrics.csv), whatever the table's own columns."""
 MARKS = ("chance", "0.5", "0.9")
 """A 'faster' claim's crossing: leaving chance, reaching 0.5, reaching 0.9 (emml/report/efficiency.py)."""
 
@@ -149,7 +147,8 @@ def _claim(where: str, raw: dict) -> Claim:
             raise ValueError(f"{where}: row {label!r} is not a row of {raw['table']}; allowed: {', '.join(labels)}")
     metrics = tuple(raw.get("metrics", list(table.metrics.values())[:1]))  # diagnostic: the cell whose runs it reads
     columns = table.metrics.values()
-    trains = [m.replace("_test", "_train") for m in columns if m.endswith("_test")]  # read from the same runs' rows
+    # a test column's train twin, read from the same runs' rows
+    trains = [train_of(metric(m).task).name for m in columns if metric(m).split == "test"]
     allowed = tuple(dict.fromkeys([*columns, *trains, *(CURVE_METRICS if k.reads == "crossing" else ())]))
     for m in metrics:
         if m not in allowed:

@@ -6,7 +6,8 @@ STATUSES. The rules are pure functions of the numbers: the same code decides our
 the paper's own tables (its numbers as one seed each), so a rule the paper's own table fails is seen to fail.
 
 - Chance is what a blind model scores here (`Chance`): the Text only row of the same source, per difficulty, task
-  and split (the paper's Table 2 row for the paper; ours for our runs), never below the uniform chance (`UNIFORM`).
+  and split (the paper's Table 2 row for the paper; ours for our runs), never below the uniform chance (each metric's
+  declared `uniform`: emml/experiments/metrics.py).
 - A row has learned when its training split is above chance + LEAVE (`learned`: the mean over every seed the row
   has); a row with no training score (the paper's tables) is read on the cell itself. A row that learned and loses
   is contradicted; a row that did not learn says nothing against the paper (not supported at this budget).
@@ -22,6 +23,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from emml.experiments.metrics import BY_NAME
+from emml.experiments.metrics import metric as _metric
 
 SUPPORTED, CONTRADICTED, INCONCLUSIVE, BUDGET, UNTESTABLE = (
     "supported",
@@ -42,19 +46,16 @@ episodes)."""
 LEAVE = 0.1
 """A score has left chance when it is above chance + LEAVE: the binomial noise of a 500 episode evaluation is about
 0.02, of a 100 episode one about 0.045."""
-UNIFORM = {"sgn": 0.2, "eqa": 1 / 3}
-"""The floor of chance per task: SGN, walking to one of the 5 objects; EQA, one of the answers a question allows, as
-the paper's Text only row scores (0.33 in every column of its Table 2)."""
 
 
 def task_of(metric: str) -> str:
     """'sgn' or 'eqa' for a results column (sgn_test, eqa_train, sgn_transfer, ...)."""
-    return "eqa" if metric.startswith("eqa") else "sgn"
+    return _metric(metric).task
 
 
 def split_of(metric: str) -> str:
     """'train' for a training-split column, else 'test' (a transfer instruction is unseen: a test split)."""
-    return "train" if metric.endswith("_train") else "test"
+    return BY_NAME[_metric(metric).chance].split
 
 
 @dataclass(frozen=True)
@@ -62,14 +63,17 @@ class Chance:
     """What a model that sees no frame scores, per (difficulty, task_split) ('sgn_test', 'eqa_train', ...)."""
 
     values: dict = field(default_factory=dict)
-    """(difficulty, 'eqa_test') → the blind row's mean over its seeds and aux settings; absent: UNIFORM."""
+    """(difficulty, 'eqa_test') → the blind row's mean over its seeds and aux settings; absent: the metric's declared
+    uniform floor."""
     source: str = "the uniform chance"
     """Where the values come from, for the page ('Table 2's Text only row, quick profile')."""
 
     def of(self, metric: str, difficulty: str) -> float:
-        """Chance for a results column in a difficulty: the blind row's score, never below UNIFORM."""
-        floor = UNIFORM[task_of(metric)]
-        value = self.values.get((difficulty, f"{task_of(metric)}_{split_of(metric)}"))
+        """Chance for a results column in a difficulty: the blind row's score on the column its declaration names,
+        never below its declared uniform floor."""
+        declared = _metric(metric)
+        value = self.values.get((difficulty, declared.chance))
+        floor = declared.uniform
         return floor if value is None else max(floor, float(value))
 
     def bar(self, metric: str, difficulty: str) -> float:
@@ -78,7 +82,7 @@ class Chance:
 
     def measured(self, metric: str, difficulty: str) -> bool:
         """Whether chance there is the blind row's measured score (not the uniform floor alone)."""
-        return (difficulty, f"{task_of(metric)}_{split_of(metric)}") in self.values
+        return (difficulty, _metric(metric).chance) in self.values
 
 
 @dataclass

@@ -33,9 +33,9 @@ def setting_text(difficulty: str, aux: bool | None) -> str:
 
 
 def metric_text(metric: str) -> str:
-    from emml.experiments.tables import METRIC_LABELS
+    from emml.experiments.metrics import label
 
-    return METRIC_LABELS.get(metric, metric)
+    return label(metric)
 
 
 class Kind:

@@ -1,0 +1,117 @@
+"""The metrics, each declared once (issue 64 item 1): its results column, the label the paper's tables head it with,
+its task and split, whether it is an accuracy, which chance it is held against, its curve's colour, the metrics-mirror
+(MLflow) key its curve is read from, and whether it is a training-split column.
+
+Every reader reads this: the table files' allowed columns (emml/experiments/tables.py), the claims
+(emml/experiments/claims/), the chance (emml/report/chance.py, emml/experiments/claims/evidence.py), the pages'
+labels (emml/report/tables.py, field.py, efficiency.py), the curves and their colours (emml/report/curves.py), the
+train columns (emml/report/index.py, claims.py) and the results payload (emml/report/saved_config.py). The trainer's
+greedy evaluation writes the values (emml/eval/evaluate.py: `eval/<task>_<split>`, `final/...`; Table 4's
+`sgn_transfer:<instruction>`, emml/eval/transfer.py), a wing below this one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+TASKS = ("sgn", "eqa")
+SPLITS = ("train", "test", "transfer")
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One results column and how every page shows it."""
+
+    name: str
+    """The results column (results/<table>/<profile>.csv, results.json "metrics"): sgn_test, eqa_train, ..."""
+    label: str
+    """How the reports head its column (the paper's Tables 2-5: 'SGN', 'EQA'; train and test apart)."""
+    task: str
+    """'sgn' or 'eqa'."""
+    split: str
+    """'train', 'test', or 'transfer' (Table 4: one column `<name>:<instruction>` per new instruction)."""
+    key: str
+    """The metrics-mirror (MLflow) key its curve is read from: `eval/<name>`, logged every `eval_every` frames; a
+    transfer metric, scored once after training, draws its runs' training split."""
+    colour: str
+    """The matplotlib colour of its greedy-evaluation curve (emml/report/curves.py)."""
+    uniform: float
+    """The floor of its chance: SGN walks to one of the 5 objects; EQA gives one of the answers a question allows, as
+    the paper's Text only row scores (0.33 in every column of its Table 2)."""
+    chance: str
+    """The column whose measured blind prior (the Text only row, emml/report/chance.py) it is held against, never
+    below `uniform`: itself, or for a transfer instruction (unseen) the task's test column."""
+    accuracy: bool = True
+    """A success rate in [0, 1] (an accuracy axis, a chance line)."""
+    train_column: bool = False
+    """A training-split column: whether a run has learned its task is read on it."""
+    curve_label: str = ""
+    """The label of its curve's panels, when it is not `label`."""
+
+    @property
+    def periodic(self) -> bool:
+        """Whether its greedy evaluation is logged periodically as `eval/<name>` (a sample-efficiency curve)."""
+        return self.key == f"eval/{self.name}"
+
+    def column(self, instruction: str) -> str:
+        """A transfer metric's results column for one instruction: `<name>:<instruction>`."""
+        return f"{self.name}:{instruction}"
+
+    @property
+    def curve(self) -> str:
+        return self.curve_label or self.label
+
+
+DECLARED = (
+    Metric("sgn_test", "SGN test", "sgn", "test", "eval/sgn_test", "C2", 0.2, "sgn_test"),
+    Metric("eqa_test", "EQA test", "eqa", "test", "eval/eqa_test", "C3", 1 / 3, "eqa_test"),
+    Metric("sgn_train", "SGN train", "sgn", "train", "eval/sgn_train", "C0", 0.2, "sgn_train", train_column=True),
+    Metric("eqa_train", "EQA train", "eqa", "train", "eval/eqa_train", "C1", 1 / 3, "eqa_train", train_column=True),
+    Metric(
+        "sgn_transfer",
+        "SGN",
+        "sgn",
+        "transfer",
+        "eval/sgn_train",
+        "C0",
+        0.2,
+        "sgn_test",
+        curve_label="SGN train (before the transfer)",
+    ),
+)
+"""Every metric, in the order the pages list them."""
+BY_NAME = {m.name: m for m in DECLARED}
+
+
+def metric(name: str) -> Metric:
+    """The declaration of a results column; a transfer table's `sgn_transfer:<instruction>` is its metric's."""
+    return BY_NAME[name.split(":")[0]]
+
+
+def is_metric(column: str) -> bool:
+    """Whether a results column holds a metric (a transfer instruction's column included)."""
+    return column.split(":")[0] in BY_NAME
+
+
+def label(name: str) -> str:
+    """The column head of a metric; anything else as it is."""
+    return BY_NAME[name].label if name in BY_NAME else name
+
+
+def train_of(task: str) -> Metric:
+    """The training-split column of a task (whether a run has learned it)."""
+    return next(m for m in DECLARED if m.train_column and m.task == task)
+
+
+METRICS = tuple(m.name for m in DECLARED if m.split != "transfer")
+"""Results columns a cell of a table may read (written by the trainer's greedy evaluation)."""
+TRANSFER_METRICS = tuple(m.name for m in DECLARED if m.split == "transfer")
+"""What a transfer table's cells read: the mean of their instructions' `<name>:<instruction>` columns."""
+CURVE_METRICS = tuple(m.name for m in DECLARED if m.periodic)
+"""The results columns whose greedy evaluation is logged periodically as `eval/<metric>`."""
+TRAIN_COLUMNS = tuple(m.name for m in DECLARED if m.train_column)
+"""The training-split columns, one per task."""
+CHANCE_COLUMNS = tuple(dict.fromkeys(m.chance for m in DECLARED))
+"""The columns a blind prior is measured on (emml/report/chance.py)."""
+UNIFORM = {m.task: m.uniform for m in DECLARED}
+"""The floor of chance per task."""
