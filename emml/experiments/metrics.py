@@ -43,10 +43,13 @@ class Metric:
     below `uniform`: itself, or for a transfer instruction (unseen) the task's test column."""
     accuracy: bool = True
     """A success rate in [0, 1] (an accuracy axis, a chance line)."""
-    train_column: bool = False
-    """A training-split column: whether a run has learned its task is read on it."""
     curve_label: str = ""
     """The label of its curve's panels, when it is not `label`."""
+
+    @property
+    def train_column(self) -> bool:
+        """A training-split column: whether a run has learned its task is read on it."""
+        return self.split == "train"
 
     @property
     def periodic(self) -> bool:
@@ -65,8 +68,8 @@ class Metric:
 DECLARED = (
     Metric("sgn_test", "SGN test", "sgn", "test", "eval/sgn_test", "C2", 0.2, "sgn_test"),
     Metric("eqa_test", "EQA test", "eqa", "test", "eval/eqa_test", "C3", 1 / 3, "eqa_test"),
-    Metric("sgn_train", "SGN train", "sgn", "train", "eval/sgn_train", "C0", 0.2, "sgn_train", train_column=True),
-    Metric("eqa_train", "EQA train", "eqa", "train", "eval/eqa_train", "C1", 1 / 3, "eqa_train", train_column=True),
+    Metric("sgn_train", "SGN train", "sgn", "train", "eval/sgn_train", "C0", 0.2, "sgn_train"),
+    Metric("eqa_train", "EQA train", "eqa", "train", "eval/eqa_train", "C1", 1 / 3, "eqa_train"),
     Metric(
         "sgn_transfer",
         "SGN",

@@ -14,7 +14,7 @@ def command_line(
     flag when True, repeated per value when a list or tuple, else ``--option VALUE``."""
     args = ["emml", *[a for p in plugins for a in ("--plugin", p)], *words]
     for option, value in options:
-        if value is None or value is False or value == 0 or value == "" or value == () or value == []:
+        if not value:  # None, False, 0, "", an empty list or tuple
             continue
         if value is True:
             args.append(option)
