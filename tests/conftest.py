@@ -201,8 +201,8 @@ def placeholder_table(tmp_path, monkeypatch):
     paper's numbers only), made from Table 5's paper numbers; returns its name."""
     import shutil
 
-    import emml.experiments.tables
-    import emml.report.tables
+    import emml.experiments.table_files
+    import emml.report.cells
     from emml.config.paths import REPRODUCE_DIR
 
     folder = tmp_path / "reproduce"
@@ -211,14 +211,12 @@ def placeholder_table(tmp_path, monkeypatch):
         'title = "A table still to build"\npaper_label = "tab:results_h3d"\nstatus = "placeholder"\n'
         'row_header = "Model"\n'
     )
+    for csv in (REPRODUCE_DIR / "paper").glob("*.csv"):  # the paper's numbers as they are, and table9's
+        shutil.copy(csv, folder / "paper" / csv.name)
     shutil.copy(REPRODUCE_DIR / "paper" / "table5.csv", folder / "paper" / "table9.csv")
-    real_path, real_numbers = emml.experiments.tables.table_path, emml.report.tables.paper_numbers
+    real_path = emml.experiments.table_files.table_path
     monkeypatch.setattr(
-        emml.experiments.tables, "table_path", lambda n: folder / f"{n}.toml" if n == "table9" else real_path(n)
+        emml.experiments.table_files, "table_path", lambda n: folder / f"{n}.toml" if n == "table9" else real_path(n)
     )
-    monkeypatch.setattr(
-        emml.report.tables,
-        "paper_numbers",
-        lambda n, directory=None: real_numbers(n, folder / "paper") if n == "table9" else real_numbers(n),
-    )
+    monkeypatch.setattr(emml.report.cells, "PAPER_DIR", folder / "paper")
     return "table9"

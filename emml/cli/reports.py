@@ -44,7 +44,7 @@ def report(
         _check_store()
     try:
         if table.endswith(".toml"):  # a table of one's own: reported by its name, the file's stem
-            from emml.experiments.tables import own_table
+            from emml.experiments.table_files import own_table
 
             table = own_table(table)
         roots = {"results_root": results_root, "run_root": run_root}

@@ -28,7 +28,8 @@ def list_experiments(
 ):
     """Every table with its runs, and which are finished under the profile."""
     from emml.experiments.launch import run_states
-    from emml.experiments.tables import list_tables, load_table
+    from emml.experiments.table_files import list_tables
+    from emml.experiments.tables import load_table
 
     data, lines = [], []
     for name in list_tables():
@@ -101,7 +102,7 @@ def run_table(
             _fail(f"--only {item!r}: expected FIELD=VALUE, e.g. --only difficulty=easy")
         selection[key.strip()] = value.strip()
     try:
-        loaded = load_table(table)  # a .toml path: its name is the file's stem (emml.experiments.tables.own_table)
+        loaded = load_table(table)  # a .toml path: its name is the file's stem (emml.experiments.table_files.own_table)
     except ValueError as e:
         _fail(str(e))
     if backend == "local" and not loaded.placeholder:

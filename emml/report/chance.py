@@ -25,7 +25,7 @@ def blind_prior(profile: Profile, results_root: str | Path | None = None) -> Cha
     """The profile's Text only runs, mean over seeds and aux settings per difficulty and column; a column with no
     finished blind run falls back to the uniform chance (`Chance.of`). Read from the blind tables' own results CSVs
     (their Text only rows are their own, never borrowed): no table is loaded, no run named."""
-    from emml.report.tables import results_path
+    from emml.report.cells import results_path
     from emml.runs.results import read_results
 
     values: dict = {}
@@ -47,7 +47,7 @@ def blind_prior(profile: Profile, results_root: str | Path | None = None) -> Cha
 
 def paper_prior() -> Chance:
     """The paper's own Text only rows (its Tables 2 and 5), mean over aux settings per difficulty and column."""
-    from emml.report.tables import paper_numbers
+    from emml.report.cells import paper_numbers
 
     pooled: dict = {}
     for name in BLIND_TABLES:

@@ -20,7 +20,6 @@ from emml.experiments.claims.evidence import (
     INCONCLUSIVE,
     MISSING,
     REVERSED,
-    STATUSES,
     SUPPORTED,
     UNTESTABLE,
     Chance,
@@ -123,7 +122,7 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
     """The claim's cells read from the results of ``plan`` (the claim's table planned under a profile,
     emml/report/plan.py: results/<table>/<profile>.csv and the tables it borrows from); 'faster' and 'diagnostic'
     read the runs' metrics.csv under the plan's run_root."""
-    from emml.report.tables import build_cells, paper_numbers, table_results
+    from emml.report.cells import build_cells, paper_numbers, table_results
 
     kind = claim.kind_of
     table = plan.table
@@ -192,7 +191,7 @@ def paper_evidence(claim, chance: Chance | None = None) -> Evidence:
     PAPER_EPISODES episodes, 'learned' read on the cell itself (the paper gives no training accuracy per cell). A
     cell the paper has no number for (a training column, a curve, a diagnostic) is missing."""
     from emml.experiments.tables import load_table
-    from emml.report.tables import paper_numbers
+    from emml.report.cells import paper_numbers
 
     kind = claim.kind_of
     table = load_table(claim.table)
@@ -280,7 +279,7 @@ def decide_paper(claim) -> Decision:
     of ours the paper's table does not print (Table 4's extra instruction kinds) are not its claim's."""
     from dataclasses import replace
 
-    from emml.report.tables import paper_numbers
+    from emml.report.cells import paper_numbers
 
     printed = set(paper_numbers(claim.table)["row"])
     if not claim.kind_of.one_row and printed:
@@ -406,10 +405,6 @@ def decide_all(profile: Profile | str, results_root=None, costs: dict | None = N
     return out
 
 
-def counts(decisions: list[Decision]) -> dict[str, int]:
-    return {s: sum(d.status == s for d in decisions) for s in STATUSES}
-
-
 def write_claims(
     profile: Profile | str, out=None, results_root=None, costs: dict | None = None, run_root=None, tables=None
 ):
@@ -437,7 +432,7 @@ def write_claims(
 def _tables_with_runs(names: set[str], profile: Profile, results_root) -> set[str]:
     """The tables among ``names`` that are not placeholders and have a finished run of ``profile``."""
     from emml.experiments.tables import load_table
-    from emml.report.tables import table_results
+    from emml.report.cells import table_results
 
     out = set()
     for name in names:

@@ -14,6 +14,7 @@ from emml.experiments.claims.evidence import (
     CONTRADICTED,
     INCONCLUSIVE,
     LEAVE,
+    STATUSES,
     SUPPORTED,
     UNTESTABLE,
     Chance,
@@ -167,12 +168,15 @@ def _lines(values: list[str]) -> str:
     return "<br>".join(shown) or "—"
 
 
+def counts(decisions: list) -> dict[str, int]:
+    """How many of ``decisions`` have each status, every status named (0 where none has it)."""
+    return {s: sum(d.status == s for d in decisions) for s in STATUSES}
+
+
 def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict) -> str:
     """The page a reviewer reads first: a line of counts, the status table (each claim's status, seeds, the paper's
     numbers and ours on its focus rows, its status on the paper's own table), the figure, and the way to the
     detail."""
-    from emml.report.claims import counts
-
     names = page_names(profile.name)
     n = counts(decisions)
     frames = sorted({f for d in decisions for f in d.frames})
@@ -229,8 +233,6 @@ def detail_page(decisions: list, profile: Profile, paper: dict, claims: dict, ch
     """The detail: one line per claim, the rules, then a section per claim. ``tables``: the tables whose page
     (<table>-<profile>.md) lies beside this one; a claim of another table names its table without a link (None:
     every claim's table is linked)."""
-    from emml.report.claims import counts
-
     names = page_names(profile.name)
     n = counts(decisions)
     lines = [

@@ -108,9 +108,10 @@ def plot_table(
     from matplotlib.lines import Line2D
 
     from emml.report import deviations
+    from emml.report.cells import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, table_results
     from emml.report.chance import blind_prior
     from emml.report.plan import plan_report
-    from emml.report.tables import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, reports_dir, table_results
+    from emml.report.tables import reports_dir
     from emml.runs.records import points_or_none
     from emml.runs.rundir import METRICS, path_of
 

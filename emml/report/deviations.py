@@ -54,7 +54,7 @@ def shown_run(run, run_root: str | Path, row: dict | None = None, declared: bool
     else:
         source = DECLARED if declared else NO_CONFIG if run_dir.exists() else REFERENCE
         saved = run.cfg.to_dict()
-    from emml.experiments.tables import list_tables
+    from emml.experiments.table_files import list_tables
 
     # a paper table's row sets its overrides on purpose (Table 3's ablations); an experiment's rows are not the paper's;
     # a row's departures (its No Aux overrides, issue 48) are deviations all the same

@@ -23,7 +23,8 @@ def profiles_with_results(results_root: str | Path = "results") -> dict[str, lis
     even if a CSV of it lies here. The experiments beyond the paper's tables (reproduce/experiments/<name>.toml, e.g.
     issue 34's eqa_readout) with results are listed after the paper's tables, by name, loadable by it."""
     from emml.config.profiles import is_scratch, load_profiles
-    from emml.experiments.tables import EXPERIMENTS_DIR, list_experiments, list_tables, load_table, own_table
+    from emml.experiments.table_files import EXPERIMENTS_DIR, list_experiments, list_tables, own_table
+    from emml.experiments.tables import load_table
 
     known = load_profiles()
     experiments = set(list_experiments())
@@ -50,8 +51,8 @@ def profiles_with_results(results_root: str | Path = "results") -> dict[str, lis
 
 def _has_runs(table, profile: Profile, results_root: str | Path) -> bool:
     """Whether any run the table declares under ``profile`` has a results row (its own or a borrowed table's)."""
+    from emml.report.cells import table_results
     from emml.report.plan import plan_report
-    from emml.report.tables import table_results
 
     df = table_results(table, profile, results_root)
     return not df.empty and bool(df["run_name"].isin(plan_report(table, profile, results_root).names).any())
@@ -95,7 +96,8 @@ def finished_no_aux(checkpoint: Path, run_root: str | Path) -> Path | None:
 def declared_no_aux(cfg, run_root: str | Path) -> Path | None:
     """The run dir of the No-Aux run that ``cfg``'s table declares in the same row, difficulty and seed as ``cfg``'s
     run; None where that table is not a declared one or ``cfg``'s run is not one of its runs."""
-    from emml.experiments.tables import load_table, table_names
+    from emml.experiments.table_files import table_names
+    from emml.experiments.tables import load_table
     from emml.runs.naming import run_name
 
     if cfg.table not in table_names():
@@ -153,7 +155,8 @@ def claims_lines(profiles: dict, out: Path, results_root: str | Path, run_root: 
     its status counts."""
     from emml.experiments.claims import load_claims
     from emml.experiments.tables import load_table
-    from emml.report.claims import campaign_costs, counts, write_claims
+    from emml.report.claims import campaign_costs, write_claims
+    from emml.report.claims_page import counts
 
     costs = campaign_costs() if profiles else {}
     inferred = sum(c.inferred for c in load_claims().values())
@@ -224,9 +227,10 @@ def _table_lines(
     files cannot be read is named and its figures left out, never the table's report."""
     import matplotlib.pyplot as plt
 
+    from emml.report.cells import table_results
     from emml.report.curves import plot_table
     from emml.report.plan import plan_report
-    from emml.report.tables import report_table, table_results
+    from emml.report.tables import report_table
     from emml.runs.checkpoint import CheckpointError
 
     lines: list[str] = []

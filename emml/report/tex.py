@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import pandas as pd
 
+from emml.report.cells import EXTRA_MARK, level_label, levels
+
 TEX_PACKAGES = ("booktabs",)
 """What the .tex tables need in the preamble (stated in each file's first line)."""
 TEX_CHARS = {
@@ -124,17 +126,15 @@ def panels(table, cells) -> tuple[list[tuple[str | None, pd.DataFrame]], list[st
     metric) levels with more than one value (metric always), then ours and paper (ours alone for a table the paper
     does not have). The reference row (Dual-Attention as the paper proposes it) in bold, as the paper sets it."""
     from emml.report.aggregate import reference_row
-    from emml.report.tables import EXTRA_MARK, _label, _levels
 
-    levels = _levels(cells)
-    per = len(levels["aux"]) * len(levels["metric"])
-    split = len(levels["difficulty"]) > 1 and per > 1
-    keep = [k for k in ("aux", "metric") if len(levels[k]) > 1 or k == "metric"]
-    if len(levels["difficulty"]) > 1 and not split:
+    column_levels = levels(cells)
+    per = len(column_levels["aux"]) * len(column_levels["metric"])
+    split = len(column_levels["difficulty"]) > 1 and per > 1
+    keep = [k for k in ("aux", "metric") if len(column_levels[k]) > 1 or k == "metric"]
+    if len(column_levels["difficulty"]) > 1 and not split:
         keep.insert(0, "difficulty")
-    constant = [
-        _label(k, levels[k][0]) for k in ("difficulty", "aux") if k not in keep and not (split and k == "difficulty")
-    ]
+    held = [k for k in ("difficulty", "aux") if k not in keep and not (split and k == "difficulty")]
+    constant = [level_label(k, column_levels[k][0]) for k in held]
     paper = any(c.paper is not None for c in cells)
     metric_labels = {v: k for k, v in table.metrics.items()}
     ref = reference_row(table)
@@ -142,14 +142,14 @@ def panels(table, cells) -> tuple[list[tuple[str | None, pd.DataFrame]], list[st
 
     def head(c, k: str) -> str:
         if k == "metric":
-            return tex_text(metric_labels.get(c.metric) or _label("metric", c.metric))
-        return tex_text(_label(k, getattr(c, k)))
+            return tex_text(metric_labels.get(c.metric) or level_label("metric", c.metric))
+        return tex_text(level_label(k, getattr(c, k)))
 
     def row(label: str) -> str:
         text = tex_text(f"{label} {EXTRA_MARK}" if label in extra else label)
         return f"\\textbf{{{text}}}" if label == ref else text
 
-    groups = levels["difficulty"] if split else [None]
+    groups = column_levels["difficulty"] if split else [None]
     out = []
     for difficulty in groups:
         data: dict[tuple, dict[str, str]] = {}
@@ -163,7 +163,7 @@ def panels(table, cells) -> tuple[list[tuple[str | None, pd.DataFrame]], list[st
         rows = [row(r) for r in dict.fromkeys(c.row for c in cells)]
         df = pd.DataFrame(data, index=rows)
         df.columns = pd.MultiIndex.from_tuples(df.columns) if df.columns.nlevels > 1 else df.columns
-        title = tex_text(_label("difficulty", difficulty)) if difficulty is not None else None
+        title = tex_text(level_label("difficulty", difficulty)) if difficulty is not None else None
         out.append((title, df))
     return out, constant
 
@@ -182,7 +182,6 @@ def aggregate_panels(table, cells) -> dict[str, list[tuple[str | None, pd.DataFr
     its IQM, the reference row minus the row and P(reference > row), each with its 95% interval (a number alone: no
     interval)."""
     from emml.report.aggregate import compare
-    from emml.report.tables import _label
 
     stats = ("IQM", r"$\Delta$", "P")
     out: dict[str, list] = {}
@@ -195,7 +194,7 @@ def aggregate_panels(table, cells) -> dict[str, list[tuple[str | None, pd.DataFr
                 data["IQM"][label] = _estimate(c.iqm)
                 data[stats[1]][label] = _estimate(c.difference, signed=True) if c.difference else ""
                 data["P"][label] = _estimate(c.improvement) if c.improvement else ""
-        title = tex_text(f"{_label('difficulty', key[1])} · {_label('aux', key[2])}")
+        title = tex_text(f"{level_label('difficulty', key[1])} · {level_label('aux', key[2])}")
         out.setdefault(key[0], []).append((title, pd.DataFrame(data).fillna("")))
     return out
 
@@ -218,7 +217,7 @@ def _float(caption: str, label: str, body: str, notes: str = "") -> list[str]:
 def tex_table(plan, cells, results: pd.DataFrame, devs) -> str:
     """reports/<table>-<profile>.tex: the table and its aggregate as `table*` floats that compile unscaled in a
     minimal two-column document with the packages of the first line; a short caption, the deviations as notes."""
-    from emml.experiments.tables import list_tables
+    from emml.experiments.table_files import list_tables
     from emml.report.aggregate import reference_row
 
     table, profile = plan.table, plan.profile.name  # the report's plan (emml/report/plan.py)

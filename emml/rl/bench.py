@@ -256,7 +256,7 @@ def _end_to_end(cfg, updates: int, stack: int = 1) -> tuple[float, dict]:
 
 def time_split(metrics: list[dict]) -> dict[str, float]:
     """Each part's share of the time over these updates' metrics (the trainer's ``perf/<part>_s``)."""
-    from emml.rl.trainer import TIME_SPLIT, time_shares
+    from emml.rl.progress import TIME_SPLIT, time_shares
 
     seconds = {part: sum(m[f"perf/{part}_s"] for m in metrics) for part in TIME_SPLIT}
     return {part: round(share, 3) for part, share in time_shares(seconds).items()}

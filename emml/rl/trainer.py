@@ -32,6 +32,7 @@ from emml.rl.graphs import Graphs, Kept, captures, mean_stats
 from emml.rl.ppo import explained_variance, make_optimizer, model_forward, ppo_step, ppo_update
 from emml.rl.precision import conv_precision
 from emml.rl.prepare import prepare
+from emml.rl.progress import TASKS, TIME_SPLIT, eta_text, log_line, say, success_text, update_metrics
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
@@ -192,9 +193,9 @@ class Trainer:
         if not self.quiet:  # what it starts, before minutes of it (a bare `emml train` trains 1.5M frames)
             total = cfg.num_updates * cfg.frames_per_update
             if saved is not None:
-                _say(f"resuming {self.name} from frame {frames:,} (update {update}) to {total:,}, MLflow run {run_id}")
+                say(f"resuming {self.name} from frame {frames:,} (update {update}) to {total:,}, MLflow run {run_id}")
             else:
-                _say(f"training {self.name}: {total:,} frames ({cfg.profile} profile, {cfg.device}) in {self.dir}")
+                say(f"training {self.name}: {total:,} frames ({cfg.profile} profile, {cfg.device}) in {self.dir}")
         if saved is None:  # at once, so that a run killed before its first update resumes this MLflow run, not a second
             try:
                 first = optimizer or make_optimizer(model.parameters(), cfg.ppo, captures(cfg))
@@ -390,21 +391,21 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
             first = logged[0]
             bar.update(B * T)
             if not bar.disable:
-                bar.set_postfix({task: _success(first, task) for task in tasks})  # as the lines write them
+                bar.set_postfix({task: success_text(first, task) for task in tasks})  # as the lines write them
             if update % cfg.log_every == 0 and not quiet:
                 now, since = time.perf_counter(), log_mark
                 log_mark = (now, frames)
                 line_fps = (frames - since[1]) / max(now - since[0], 1e-9)  # since the last line, evaluations included
-                eta = _eta(total - frames, (frames - start_mark[1]) / max(now - start_mark[0], 1e-9))
+                eta = eta_text(total - frames, (frames - start_mark[1]) / max(now - start_mark[0], 1e-9))
                 if n == 1:
-                    _say(_log_line(update, frames, line_fps, first, since_line, tasks=tasks, eta=eta))
+                    say(log_line(update, frames, line_fps, first, since_line, tasks=tasks, eta=eta))
                 else:
                     seeds = " ".join(
                         f"s{t.cfg.seed} sgn {np.mean(sampler.recent_by_run[r][0] or [np.nan]):.2f}"
                         for r, t in enumerate(trainers)
                     )
                     head = f"update {update:>5} frames {frames:>9,} x {n} runs, {fps:6.0f} frames/s all"
-                    _say(f"{head} | {seeds} | eta {eta}")
+                    say(f"{head} | {seeds} | eta {eta}")
                 since_line = dict.fromkeys(TIME_SPLIT, 0.0)
             if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
                 for r, t in enumerate(trainers):
@@ -427,84 +428,8 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
     return finals
 
 
-def update_metrics(
-    stats: dict, fps: float, recent: dict, update: int, dropped: int, seconds: dict | None = None
-) -> dict:
-    """What a run logs after each update: its losses, frames/s, training success per task (last 100 episodes),
-    the update count, the episodes dropped to engine deaths, and the update's seconds waiting on the envs, acting
-    and learning (``perf/simulate_s``, ``perf/infer_s``, ``perf/learn_s``)."""
-    metrics = {f"losses/{k}": v for k, v in stats.items()}
-    metrics["charts/fps"] = fps
-    for task_id, name in ((0, "sgn"), (1, "eqa")):
-        if recent[task_id]:
-            metrics[f"train/success_{name}"] = float(np.mean(recent[task_id]))
-    metrics["charts/update"] = update
-    metrics["charts/dropped_episodes"] = dropped
-    for part, value in (seconds or {}).items():
-        metrics[f"perf/{part}_s"] = value
-    return metrics
-
-
-TIME_SPLIT = ("simulate", "infer", "learn")
-"""Where an update's time goes: waiting on the envs, acting, learning (the metrics ``perf/<part>_s``)."""
-
-
-def time_shares(seconds: dict[str, float]) -> dict[str, float]:
-    """Each part's share of the seconds given."""
-    total = sum(seconds.values()) or 1.0
-    return {part: v / total for part, v in seconds.items()}
-
-
 def _dtype(space) -> torch.dtype:
     return {np.uint8: torch.uint8}.get(space.dtype.type, torch.int64)
-
-
-def _say(line: str) -> None:
-    """A log line on stdout, above the progress bar when there is one, flushed: piped to a file, each line is there
-    when written (and before a failure's line on stderr)."""
-    tqdm.write(line)
-    sys.stdout.flush()
-
-
-TASKS = ("sgn", "eqa")
-"""The tasks by id (0 SGN, 1 EQA), as metrics and log lines name them."""
-
-
-def _success(m: dict, task: str) -> str:
-    """A task's training success (last 100 episodes) as the log lines and the bar write it: 'nan' before its first
-    episode ends."""
-    return f"{m.get(f'train/success_{task}', float('nan')):.2f}"
-
-
-def _eta(frames_left: int, fps: float) -> str:
-    """The time left at ``fps`` frames/s, H:MM:SS."""
-    seconds = round(frames_left / fps) if fps > 0 else 0
-    return f"{seconds // 3600}:{seconds % 3600 // 60:02d}:{seconds % 60:02d}"
-
-
-def _log_line(
-    update: int,
-    frames: int,
-    fps: float,
-    m: dict,
-    seconds: dict,
-    tasks: tuple[str, ...] = TASKS,
-    eta: str | None = None,
-) -> str:
-    """One line per `log_every` updates, space-separated 'name value' pairs (a file or a pipe reads it as well
-    as a terminal): frames, frames/s since the previous line, training success of each task the run plays, the
-    losses, then the time split and the time left."""
-    split = "/".join(f"{100 * share:.0f}" for share in time_shares(seconds).values())
-    return (
-        f"update {update:>5} frames {frames:>9,} fps {fps:6.0f} "
-        + "".join(f"{task} {_success(m, task)} " for task in tasks)
-        + f"pg {m['losses/policy']:+.3f} v {m['losses/value']:.3f} ent {m['losses/entropy']:.3f} "
-        f"ans {m['losses/answer']:.3f}"
-        + (f" aux {m['losses/aux']:.3f}" if "losses/aux" in m else "")
-        + (f" dropped {m['charts/dropped_episodes']}" if m.get("charts/dropped_episodes") else "")
-        + f" | sim/infer/learn % {split}"
-        + (f" | eta {eta}" if eta is not None else "")
-    )
 
 
 def train(cfg: TrainConfig, quiet: bool = False, parent_run_id: str | None = None) -> RunResult:

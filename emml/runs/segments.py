@@ -9,7 +9,7 @@ trained. The results row names one commit (`git_sha`: the one that finished the 
   the next began and the last at the run's final frames (`run_segments`, read by `emml.runs.rundir.results_payload`).
 - Run dirs from before (no ``segments`` in results.json) read as one segment of their single ``git_sha``
   (`read_run_segments`): nothing is guessed, and the table page says which runs record only their last commit
-  (`commits_note`).
+  (emml/report/commits.py).
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ from __future__ import annotations
 import json
 from datetime import datetime, timezone
 from pathlib import Path
+
+from emml.runs.atomic import write_text
 
 SEGMENTS = "segments.json"
 """The run dir's file of the sessions that trained it (`begin_segment`)."""
@@ -40,8 +42,6 @@ def begin_segment(directory: str | Path, git_sha: str, frames: int, now: str | N
     checkpoint it resumes). Sessions noted from ``frames`` on are dropped (their updates past that checkpoint are
     gone); frames before the first noted session (a run begun before segments were noted) are `UNKNOWN`'s. Returns
     the sessions noted."""
-    from emml.runs.rundir import write_json
-
     directory = Path(directory)
     kept = [s for s in _noted(directory) if s["from_frame"] < frames]
     if frames > 0 and not kept:
@@ -49,7 +49,7 @@ def begin_segment(directory: str | Path, git_sha: str, frames: int, now: str | N
     now = now or datetime.now(timezone.utc).isoformat(timespec="seconds")
     kept.append({"git_sha": git_sha, "from_frame": int(frames), "started_at": now})
     directory.mkdir(parents=True, exist_ok=True)
-    write_json(directory / SEGMENTS, {"segments": kept})
+    write_text(directory / SEGMENTS, json.dumps({"segments": kept}, indent=2))  # whole or not at all
     return kept
 
 
@@ -93,38 +93,3 @@ def commits(segments: list[dict]) -> list[tuple[str, int, int]]:
 def describe(segments: list[dict]) -> str:
     """'9aa2a54 frames 0–400,384, 55cec5d frames 400,384–5,000,448'."""
     return ", ".join(f"{sha} frames {lo:,}–{hi:,}" for sha, lo, hi in commits(segments))
-
-
-def commits_note(results, names: list[str], run_root: str | Path) -> list[str]:
-    """The table page's footnote on the commits its runs trained under: each run of ``names`` trained under more than
-    one commit, with each commit's frames (its results.json under ``run_root``, its table the results row's), and how
-    many runs record only the commit that finished them (run dirs from before segments, or absent here); [] when
-    ``names`` is empty."""
-    from emml.runs.rundir import RESULTS, path_of
-
-    if not names:
-        return []
-    rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    several, last_only = [], 0
-    for name in names:
-        row = rows.get(name, {})
-        path = path_of(run_root, str(row.get("table") or ""), name) / RESULTS
-        try:
-            payload = json.loads(path.read_text()) if row.get("table") and path.exists() else row
-        except (OSError, ValueError):  # a damaged results.json is named by the readers of the config; here: the row
-            payload = row
-        segments, recorded = read_run_segments(payload if isinstance(payload, dict) else row)
-        last_only += not recorded
-        if len(commits(segments)) > 1:
-            several.append(f"`{name}`: {describe(segments)}")
-    parts = []
-    if several:
-        parts.append(f"trained under several commits (each commit's frames): {'; '.join(several)}.")
-    if last_only:
-        parts.append(
-            f"{last_only} of {len(names)} runs record only the commit that finished them (the results CSV's "
-            "`git_sha`): they were trained before each session's commit was recorded."
-        )
-    elif not several:
-        parts.append("each run trained under one commit (its results.json `segments`; the results CSV's `git_sha`).")
-    return [f"**Commits**: {' '.join(parts)}", ""]

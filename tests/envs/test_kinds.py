@@ -11,7 +11,7 @@ from emml.envs.house import HouseEnv
 from emml.envs.vector import env_class, make_env
 from emml.experiments import fidelity
 from emml.experiments.tables import DIFFICULTIES
-from emml.report.tables import DIFFICULTY_LABELS
+from emml.report.cells import DIFFICULTY_LABELS
 from tests.conftest import SMOKE
 
 

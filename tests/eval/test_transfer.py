@@ -190,7 +190,8 @@ def test_make_transfer_smoke_fills_every_row(tracking, monkeypatch, tmp_path, no
     _short_episodes(monkeypatch, tmp_path)
     from emml.eval import transfer
     from emml.experiments.launch import run_table
-    from emml.report.tables import EXTRA_MARK, report_table
+    from emml.report.cells import EXTRA_MARK
+    from emml.report.tables import report_table
     from emml.runs.results import read_results
 
     roots = {"run_root": tracking["run_root"], "results_root": tracking["results_root"]}

@@ -7,8 +7,9 @@ import pandas as pd
 import pytest
 
 from emml.config.paths import REPRODUCE_DIR
-from emml.experiments.tables import list_tables, load_table, table_names, table_ref
-from emml.report.tables import paper_numbers
+from emml.experiments.table_files import list_tables, table_names, table_ref
+from emml.experiments.tables import load_table
+from emml.report.cells import paper_numbers
 from emml.runs.naming import run_name
 
 SEEDS = [0, 1, 2]

@@ -326,7 +326,7 @@ def test_run_a_table_of_ones_own_in_child_processes(sandbox, toy, tracking, monk
     assert (run / "checkpoint.pt").exists() and (run / "results.json").exists()
     without = subprocess.run(command[:3] + command[5:], cwd=toy.parent, env=env, capture_output=True, text=True)
     assert without.returncode == 2 and "unknown model 'toy'" in without.stderr + without.stdout
-    from emml.experiments.tables import own_table
+    from emml.experiments.table_files import own_table
     from emml.report.tables import report_table
 
     monkeypatch.setenv(plugins.ENV_VAR, str(toy))  # its report, in this process

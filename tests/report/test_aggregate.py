@@ -84,8 +84,8 @@ def test_the_interquartile_mean_is_rliables_to_the_bit(cells):
 # --- the rliable figure (emml/report/field.py): read from the figure's artists, never its file size -------------------
 def _field(values: dict, paper: dict | None = None, table: str = "table2"):
     """FIXTURE: the figure of made-up cells: ``values`` {(row, difficulty, aux, metric): runs' scores}."""
+    from emml.report.cells import Cell
     from emml.report.field import field_figure
-    from emml.report.tables import Cell
 
     t = load_table(table)
     cells = [

@@ -16,7 +16,7 @@ import scipy.stats
 
 from emml.experiments.tables import load_table
 from emml.report.aggregate import REPS, iqm, mean_difference, summary
-from emml.report.tables import Cell
+from emml.report.cells import Cell
 
 TOLERANCE = 0.0125
 """How far the share of the exact distribution below an interval's end may sit from α/2: the interval reads REPS (2,000)

@@ -6,8 +6,8 @@ from dataclasses import replace
 
 from emml.config.profiles import resolve_profile
 from emml.experiments.claims import load_claims
-from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, STATUSES, UNCLEAR, Chance, Check, Score
-from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, counts, paper_evidence
+from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, UNCLEAR, Chance, Check, Score
+from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, paper_evidence
 from emml.report.claims import _phrase as phrase
 
 
@@ -30,12 +30,6 @@ def test_each_missing_run_is_costed_under_its_own_table():
         "`table3/a-s0-quick`: campaign step `t3`, pending: ~2.0 h here",
         "`table2/b-s1-quick`: in no step of the campaign",
     ]
-
-
-def test_the_counts_cover_every_status():
-    assert counts([decision(SUPPORTED), decision(BUDGET), decision(SUPPORTED)]) == {
-        s: {SUPPORTED: 2, BUDGET: 1}.get(s, 0) for s in STATUSES
-    }
 
 
 def check(setting, outcome, what="SGN test, Easy · Aux: DA > GA", numbers="0.30 vs 0.50", chance=False, high=()):

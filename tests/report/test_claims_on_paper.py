@@ -36,9 +36,9 @@ def test_aux_helps_fails_on_the_paper_own_table_at_its_hard_dual_attention_row()
 
 
 def test_a_made_up_paper_table_where_dual_attention_loses_fails(monkeypatch):
-    import emml.report.tables as tables
+    import emml.report.cells as cells
 
-    real = tables.paper_numbers
+    real = cells.paper_numbers
 
     def swapped(name, *args):
         df = real(name, *args)
@@ -47,7 +47,7 @@ def test_a_made_up_paper_table_where_dual_attention_loses_fails(monkeypatch):
             df = df.assign(row=rows)
         return df
 
-    monkeypatch.setattr(tables, "paper_numbers", swapped)
+    monkeypatch.setattr(cells, "paper_numbers", swapped)
     assert decide_paper(CLAIMS["da-best-easy-aux"]).status == CONTRADICTED
     assert decide_paper(CLAIMS["da-best-hard-noaux"]).status != SUPPORTED
 

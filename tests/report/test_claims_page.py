@@ -6,6 +6,7 @@ import pandas as pd
 
 from emml.config.profiles import profile_seeds
 from emml.experiments.claims import load_claims
+from emml.experiments.claims.evidence import STATUSES
 from emml.experiments.tables import load_table
 from emml.report.claims import (
     BUDGET,
@@ -16,6 +17,8 @@ from emml.report.claims import (
     decide,
     write_claims,
 )
+from emml.report.claims_page import counts
+from tests.report.test_claims import decision
 from tests.report.test_tables import PROFILE, fake_results
 
 CLAIMS = load_claims()
@@ -235,3 +238,9 @@ def test_the_blind_row_is_never_excused_as_unlearned(tmp_path):
             edit(root, "table2", spec.run_name(PROFILE), eqa_train=0.38)
     d = decide(CLAIMS["baselines-below-text-only-eqa"], PROFILE, root)
     assert d.status == CONTRADICTED, d.phrase
+
+
+def test_the_counts_cover_every_status():
+    assert counts([decision(SUPPORTED), decision(BUDGET), decision(SUPPORTED)]) == {
+        s: {SUPPORTED: 2, BUDGET: 1}.get(s, 0) for s in STATUSES
+    }

@@ -6,10 +6,10 @@ import pandas as pd
 
 from emml.config.profiles import profile_seeds
 from emml.experiments.tables import load_table
+from emml.report.cells import build_cells, paper_numbers, table_results
 from emml.report.field import field_figure
 from emml.report.plan import plan_report
 from emml.report.savefig import PAGE_INCHES, outside
-from emml.report.tables import build_cells, paper_numbers, table_results
 from tests.report.test_tables import PROFILE, fake_results
 
 

@@ -8,7 +8,7 @@ import pytest
 from emml.experiments import metrics
 from emml.experiments.claims.evidence import Chance
 from emml.experiments.claims.kinds import metric_text
-from emml.report import curves, efficiency, tables
+from emml.report import cells, curves, efficiency
 from emml.report.chance import chance_text
 
 
@@ -23,7 +23,7 @@ def renamed(monkeypatch):
 
 def test_every_label_a_page_prints_is_the_declared_one(renamed):
     for name in metrics.BY_NAME:
-        assert tables._label("metric", name) == f"Label of {name}"
+        assert cells.level_label("metric", name) == f"Label of {name}"
         assert metric_text(name) == f"Label of {name}"
         expect = f"Curve of {name}" if name in metrics.TRANSFER_METRICS else f"Label of {name}"
         assert curves.curve_key(name) == (renamed[name].key, expect)

@@ -9,7 +9,8 @@ import pytest
 
 from emml.config.profiles import profile_seeds, resolve_profile
 from emml.experiments.tables import load_table
-from emml.report.tables import MISSING, report_table, reports_dir
+from emml.report.cells import MISSING
+from emml.report.tables import report_table, reports_dir
 from emml.runs.naming import run_name
 
 PROFILE = "quick"  # three seeds
@@ -280,7 +281,7 @@ def test_placeholder_shows_the_papers_numbers(tmp_path, placeholder_table):
 def test_an_experiments_caption_names_its_file_not_a_table_of_the_paper(tmp_path):
     """Issue 34's experiment is no table of the paper: its caption says what it is and how to run it, by the name
     `emml run` and a campaign step give it."""
-    from emml.experiments.tables import EXPERIMENTS_DIR
+    from emml.experiments.table_files import EXPERIMENTS_DIR
 
     none = tmp_path / "none"
     caption = report(str(EXPERIMENTS_DIR / "eqa_readout.toml"), tmp_path, results_root=none)["caption"]

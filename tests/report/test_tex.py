@@ -10,8 +10,9 @@ import pytest
 
 from emml.experiments.tables import load_table
 from emml.report import deviations
+from emml.report.cells import build_cells, paper_numbers, table_results
 from emml.report.plan import plan_report
-from emml.report.tables import build_cells, paper_numbers, shown_runs, table_results
+from emml.report.tables import shown_runs
 from emml.report.tex import TEX_PACKAGES, tabular, tex_table, tex_text
 from tests.report.test_tables import PROFILE, fake_results, fake_run_dirs
 

@@ -83,8 +83,8 @@ def test_a_log_line_splits_the_time_since_the_previous_line(tracking, monkeypatc
     import emml.rl.trainer as trainer
 
     lines = []
-    real = trainer._log_line
-    monkeypatch.setattr(trainer, "_log_line", lambda *a, **k: lines.append(dict(a[-1])) or real(*a, **k))
+    real = trainer.log_line
+    monkeypatch.setattr(trainer, "log_line", lambda *a, **k: lines.append(dict(a[-1])) or real(*a, **k))
     result = train(smoke(tracking, frames=192, eval_every=0, log_every=1), quiet=False)
     logged = {p: [v for _, v in metric_history(result.run_id, f"perf/{p}_s")] for p in ("simulate", "infer", "learn")}
     assert len(lines) == 3  # one line per update: each splits that update's seconds, not all since the start

@@ -77,7 +77,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     from emml.config.profiles import load_profiles
     from emml.experiments.claims import load_claims
     from emml.experiments.launch import ONLY_FIELDS, select_runs
-    from emml.experiments.tables import table_names
+    from emml.experiments.table_files import table_names
 
     path = directory / f"{name}.toml"
     if not path.is_file():
