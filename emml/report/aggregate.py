@@ -8,7 +8,10 @@ runs only); runs and cells are counted apart; a row with one run in a cell has n
 
 Statistics and intervals are rliable's (`rliable.metrics.aggregate_iqm`, `rliable.metrics.probability_of_improvement`,
 `rliable.library.get_interval_estimates`: runs resampled with replacement within each cell, rliable's strata; a
-percentile interval), seeded: rliable draws from NumPy's global generator, seeded for the call, then restored.
+percentile interval), seeded, and computed here over every resample at once (`stratified_bootstrap`): the same draws
+from the same seeded generator in the same order, the same statistic per resample, the same percentiles, so the same
+floats as rliable's loop (tests/report/test_aggregate.py), which called the statistic in Python once per resample and
+took most of a report's time (a Table 2 page: 137 of 165 s).
 rliable reads a (runs × cells) matrix: a row whose cells hold different numbers of seeds is read on the first k
 seeds of every cell, k the fewest any of its cells has. (rliable.library needs `arch`, whose 7.x imports only
 under pandas < 3: pyproject.toml pins pandas below 3.)
@@ -16,7 +19,6 @@ under pandas < 3: pyproject.toml pins pandas below 3.)
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,40 +55,66 @@ def _matrix(cells: list) -> np.ndarray:
     return np.array([np.asarray(c, dtype=float)[:k] for c in cells]).T
 
 
-def _estimate(scores: dict, func, runs: int, cells: int, spread: bool, reps: int, seed: int) -> Estimate:
-    from rliable import library
+def stratified_bootstrap(arrays: list[np.ndarray], statistic, reps: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """rliable's stratified bootstrap (`rliable.library.StratifiedBootstrap` for one array,
+    `StratifiedIndependentBootstrap` for several) of the (runs × cells) ``arrays``, every resample at once: the
+    statistic on the arrays as they are, and on each of ``reps`` resamples. Per resample and per array, rliable draws
+    each cell's runs with replacement, `np.random.choice(runs, shape)`, from NumPy's legacy generator seeded with
+    ``seed`` (it seeds the global one; here a `RandomState` of that seed, the same stream, and the global generator is
+    left alone). Where every array has one shape, the draws of all resamples are one call (the legacy generator draws
+    element by element, so the stream is the same). ``statistic`` takes the arrays with a leading resample axis
+    (resamples × runs × cells) and returns a value per resample, or (resamples × k) values."""
+    rng = np.random.RandomState(seed)
+    shapes = [a.shape for a in arrays]
+    if len(set(shapes)) == 1:
+        draws = rng.choice(shapes[0][0], (reps, len(arrays), *shapes[0]), replace=True)
+        indices = [draws[:, j] for j in range(len(arrays))]
+    else:  # rows with different run counts: each resample's draws in rliable's order (cheap: indices only)
+        indices = [np.empty((reps, *shape), dtype=np.int64) for shape in shapes]
+        for r in range(reps):
+            for j, shape in enumerate(shapes):
+                indices[j][r] = rng.choice(shape[0], shape, replace=True)
+    resampled = [a[i, np.arange(a.shape[1])] for a, i in zip(arrays, indices)]
+    return np.asarray(statistic(*(a[None] for a in arrays)))[0], np.asarray(statistic(*resampled))
 
-    saved = np.random.get_state()
-    np.random.seed(seed)  # rliable draws its resampling indices from the global generator: seeded, then restored
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FutureWarning)  # arch on rliable's random_state argument
-            points, intervals = library.get_interval_estimates(
-                scores, func, reps=reps, confidence_interval_size=CONFIDENCE, random_state=np.random.RandomState(seed)
-            )
-    finally:
-        np.random.set_state(saved)
-    (key,) = scores
-    lo, hi = intervals[key][:, 0]
-    return Estimate(float(points[key][0]), float(lo), float(hi), runs, cells, spread)
+
+def percentile_interval(values: np.ndarray) -> tuple[float, float]:
+    """The `CONFIDENCE` percentile interval of bootstrap ``values`` (one column), as arch's `conf_int` computes it for
+    rliable (method 'percentile', two-sided)."""
+    alpha = (1.0 - CONFIDENCE) / 2
+    lo, hi = np.percentile(values, [100 * alpha, 100 * (1.0 - alpha)])
+    return float(lo), float(hi)
+
+
+def _estimate(
+    arrays: list[np.ndarray], statistic, runs: int, cells: int, spread: bool, reps: int, seed: int
+) -> Estimate:
+    point, values = stratified_bootstrap(arrays, statistic, reps, seed)
+    lo, hi = percentile_interval(values)
+    return Estimate(float(point), lo, hi, runs, cells, spread)
 
 
 def iqm(cells: list[list[float]], reps: int = REPS, seed: int = SEED) -> Estimate:
     """IQM over every run of every cell (rliable.metrics.aggregate_iqm: the 25%-trimmed mean), with its 95%
     stratified-bootstrap interval (runs resampled within each cell)."""
     m = _matrix([c for c in cells if len(c)])
-    func = lambda x: np.array([interquartile_mean(x)])  # noqa: E731 - rliable's idiom
-    return _estimate({"row": m}, func, m.size, m.shape[1], m.shape[0] > 1, reps, seed)
+    return _estimate([m], interquartile_means, m.size, m.shape[1], m.shape[0] > 1, reps, seed)
 
 
 def interquartile_mean(scores: np.ndarray) -> float:
     """rliable.metrics.aggregate_iqm, the same float (tests/report/test_aggregate.py): scipy's 25%-trimmed mean over
     every score, computed with the same partition and mean, without scipy's dispatch: 16 µs a call where rliable's
     takes 195 (a 3-run cell), which over a table's bootstrap resamples was more than half of `make reports`."""
-    a = np.ravel(np.asarray(scores))
-    low = int(0.25 * a.size)
-    high = a.size - low
-    return np.mean(np.partition(a, (low, high - 1))[low:high])
+    return float(interquartile_means(np.asarray(scores)[None])[0])
+
+
+def interquartile_means(scores: np.ndarray) -> np.ndarray:
+    """`interquartile_mean` of each (runs × cells) matrix of ``scores`` (resamples × runs × cells): each partitioned
+    and averaged along its own row, as the one-matrix computation does."""
+    a = np.asarray(scores).reshape(len(scores), -1)
+    low = int(0.25 * a.shape[1])
+    high = a.shape[1] - low
+    return np.mean(np.partition(a, (low, high - 1), axis=1)[:, low:high], axis=1)
 
 
 def probability_of_improvement(
@@ -99,8 +127,7 @@ def probability_of_improvement(
     if not pairs:
         return None
     x, y = _matrix([p[0] for p in pairs]), _matrix([p[1] for p in pairs])
-    func = lambda a, b: np.array([improvement(a, b)])  # noqa: E731 - rliable's idiom
-    return _estimate({"pair": (x, y)}, func, x.size + y.size, len(pairs), x.shape[0] > 1 or y.shape[0] > 1, reps, seed)
+    return _estimate([x, y], improvements, x.size + y.size, len(pairs), x.shape[0] > 1 or y.shape[0] > 1, reps, seed)
 
 
 def improvement(x: np.ndarray, y: np.ndarray) -> float:
@@ -108,10 +135,15 @@ def improvement(x: np.ndarray, y: np.ndarray) -> float:
     every cell: per cell the Mann-Whitney U of x over y (pairs where x is higher, ties half) over the pairs, then the
     mean over cells (tests/report/test_aggregate.py: equal to rliable's). rliable's calls scipy once per cell and
     resample: 86 of the 98 s a Table 2 report took."""
-    higher = (x[:, None, :] > y[None, :, :]).sum(axis=(0, 1))
-    ties = (x[:, None, :] == y[None, :, :]).sum(axis=(0, 1))
-    per_cell = (higher + 0.5 * ties) / (x.shape[0] * y.shape[0])
-    return np.mean(list(per_cell))  # the mean of a list of numpy floats, as rliable takes it: the same float
+    return float(improvements(np.asarray(x)[None], np.asarray(y)[None])[0])
+
+
+def improvements(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """`improvement` of each resample: ``x`` (resamples × runs × cells) over ``y`` (resamples × runs' × cells)."""
+    higher = (x[:, :, None, :] > y[:, None, :, :]).sum(axis=(1, 2))
+    ties = (x[:, :, None, :] == y[:, None, :, :]).sum(axis=(1, 2))
+    per_cell = (higher + 0.5 * ties) / (x.shape[1] * y.shape[1])
+    return per_cell.mean(axis=1)
 
 
 def reference_row(table) -> str | None:
