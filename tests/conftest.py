@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import glob
 import os
+import sys
 
 import pytest
 
@@ -185,6 +186,18 @@ def mlflow_schema_from_a_template(tmp_path_factory):
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(db_utils, "_initialize_tables", from_template)
         yield
+
+
+@pytest.fixture(autouse=True)
+def no_global_tracking_uri():
+    """A test that sets MLflow's process-wide tracking URI (`mlflow.set_tracking_uri`) fails, and the URI is unset: the
+    next tests of its xdist worker would read that store instead of their own `MLFLOW_TRACKING_URI` (tests/report/
+    test_demo.py's fixture did, and which rl tests then found no run depended on the order xdist gave them)."""
+    yield
+    utils = sys.modules.get("mlflow.tracking._tracking_service.utils")
+    if utils is not None and utils._tracking_uri is not None:
+        utils._tracking_uri = None
+        pytest.fail("the test set mlflow.set_tracking_uri: use the `tracking` fixture (MLFLOW_TRACKING_URI) instead")
 
 
 @pytest.fixture

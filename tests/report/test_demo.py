@@ -39,7 +39,6 @@ def demo_run(tracking, tmp_path):
     """A finished demo run as `emml demo` hands it to the report: its config, and an MLflow run holding its greedy
     evaluations and diagnostics at three evaluations and a training-episode curve."""
     cfg = profile_config("demo", "easy", {"env.tasks": "sgn", "run_root": tracking["run_root"]}, aux=True, seed=0)
-    mlflow.set_tracking_uri(tracking["uri"])
     client = mlflow.MlflowClient(tracking["uri"])
     run_id = client.create_run(client.create_experiment("demo")).info.run_id
     for s in STEPS:
