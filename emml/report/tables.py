@@ -31,6 +31,7 @@ from emml.report.cells import (
     results_path,
     table_results,
 )
+from emml.report.chance import blind_prior
 from emml.report.plan import ReportPlan, plan_report
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
@@ -170,13 +171,11 @@ def report_table(
     if devs is not None:
         md += [deviations.markdown(devs), ""]
     md += [flat.to_markdown(), ""]
-    md += commits_note(results, list(dict.fromkeys(n for c in cells for n in c.runs)), plan.run_root)  # their commits
+    names = list(dict.fromkeys(n for c in cells for n in c.runs))  # the runs behind the cells, once
+    md += commits_note(results, names, plan.run_root)  # their commits
     if agg is not None:
         md += [pd.DataFrame(agg[0]).to_markdown(index=False), "", agg[1], ""]
-    names = list(dict.fromkeys(n for c in cells for n in c.runs))
     if names:
-        from emml.report.chance import blind_prior
-
         prior = blind_prior(prof, plan.results_root)  # 'leaves chance': above what a blind model scores here
         md += [efficiency.markdown(efficiency.table_efficiency(plan, names, prior), chance=prior)]
     md += [f"Results: `{shown}`", ""]
