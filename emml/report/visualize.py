@@ -3,13 +3,14 @@
 and the action taken (the attention figure); plus a captioned GIF per episode.
 
 Every plotted array is the model's own output, recorded while the episode is played (`record_episode`); nothing
-is recomputed for the figure.
+is recomputed for the figure. Both figures are made at a page's text width (7 in, emml/report/savefig.py's
+`PAGE_INCHES`) in the reports' style (7-9 pt text), their long titles wrapped to it: printed at that width, nothing is
+scaled down or cut off (issue 63).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,7 +27,7 @@ import torch  # noqa: E402
 from emml.config.schema import DoomConfig  # noqa: E402
 from emml.envs.doom import MOVES  # noqa: E402
 from emml.eval.evaluate import obs_to_torch, playing  # noqa: E402
-from emml.report.savefig import save  # noqa: E402
+from emml.report.savefig import PAGE_INCHES, save, wrap  # noqa: E402
 
 CHANNEL_WORDS = ("red", "green", "torch", "pillar", "smallest", "tall", "armor")
 """The rows of the channel figure: colours, objects, a size word and a superlative (no aux label exists for it)."""
@@ -107,22 +108,27 @@ def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure
     sentence's words in purple); then ``rows`` steps spread over the episode, each with the frame, the frame under
     x_spat, the top answers of x_Ans, and the action taken."""
     steps = np.unique(np.linspace(0, len(ep.frames) - 1, min(rows, len(ep.frames))).round().astype(int))
-    fig = plt.figure(figsize=(11, 1.9 * (len(steps) + 1)))
-    grid = fig.add_gridspec(len(steps) + 1, 3, width_ratios=[1.6, 1.6, 1.2])
+    frame_h, frame_w = ep.frames[0].shape[:2]
+    step_inches = 0.45 + PAGE_INCHES * 0.36 * frame_h / frame_w  # a frame panel's height at its share of the width
+    fig = plt.figure(figsize=(PAGE_INCHES, 1.6 + step_inches * len(steps)), layout="constrained")
+    grid = fig.add_gridspec(
+        len(steps) + 1, 3, width_ratios=[1.6, 1.6, 1.2], height_ratios=[1.6] + [step_inches] * len(steps)
+    )
     top = fig.add_subplot(grid[0, :])
     in_sentence = set(ep.sentence.split())
     colours = ["tab:purple" if w in in_sentence else "tab:gray" for w in ep.words]
     top.bar(range(len(ep.words)), ep.x_sent, color=colours)  # every channel: a ReLU zeroes many of them
-    top.set_xticks(range(len(ep.words)), ep.words, rotation=60, fontsize=8)
+    top.set_xticks(range(len(ep.words)), ep.words, rotation=60)
     outcome = "success" if ep.success else "failure"
     shown = {"x_sent": "x_sent per channel", "type_gate": "the type_gate control's gate per channel (x_sent's place)"}
     what = shown.get(ep.x_sent_source, "no x_sent in this model")
-    top.set_title(f"{ep.task.upper()} '{ep.sentence}' ({outcome}, {len(ep.frames)} steps): {what}", fontsize=10)
+    title = f"{ep.task.upper()} '{ep.sentence}' ({outcome}, {len(ep.frames)} steps): {what}"
+    top.set_title(wrap(title, PAGE_INCHES - 0.2, plt.rcParams["axes.titlesize"]))
     for r, t in enumerate(steps, start=1):
         frame = ep.frames[t]
         ax = fig.add_subplot(grid[r, 0])
         ax.imshow(frame)
-        ax.set_title(f"t={t}: {MOVES[ep.moves[t]]}", fontsize=9)
+        ax.set_title(f"t={t}: {MOVES[ep.moves[t]]}")
         ax.axis("off")
         ax = fig.add_subplot(grid[r, 1])
         ax.imshow(frame)
@@ -132,25 +138,18 @@ def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure
                 ep.attention[t], cmap="inferno", alpha=0.6, extent=(0, w, h, 0), interpolation="nearest", vmin=0
             )
             fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02, label="x_spat")
-            ax.set_title(f"x_spat (max {ep.attention[t].max():.2f})", fontsize=9)
+            ax.set_title(f"x_spat (max {ep.attention[t].max():.2f})")
         else:
-            ax.set_title("no spatial attention in this model", fontsize=9)
+            ax.set_title("no spatial attention in this model")
         ax.axis("off")
         ax = fig.add_subplot(grid[r, 2])
         best = np.argsort(ep.answers[t])[::-1][:5]
         ax.barh(range(len(best))[::-1], ep.answers[t][best], color="tab:green")
-        ax.set_yticks(range(len(best))[::-1], [ep.words[i] for i in best], fontsize=8)
+        ax.set_yticks(range(len(best))[::-1], [ep.words[i] for i in best])
         ax.set_xlim(0, 1)
-        ax.set_title("x_Ans (top 5)", fontsize=9)
-    fig.tight_layout()
-    save(fig, path, dpi=100)
+        ax.set_title("x_Ans (top 5)")
+    save(fig, path)
     return fig
-
-
-def _wrapped(title: str, width: int = 30) -> str:
-    """A panel title over lines of ``width``: a model's label names its run ('no aux (dual_attention-easy-noaux-…)'),
-    which on one line runs into the next column's title."""
-    return "\n".join(textwrap.wrap(title, width)) or title
 
 
 def channels_figure(
@@ -170,26 +169,30 @@ def channels_figure(
     channels = {name: ep.channels[0] for name, ep in episodes.items()}
     words = tuple(w for w in words if w in first.words)  # a run on the training vocabulary (Table 4) lacks some
     cols = 2 + len(models)
-    fig, axes = plt.subplots(len(words), cols, figsize=(2.6 * cols, 1.5 * len(words)), squeeze=False)
     h, w = frame.shape[:2]
+    panel = (PAGE_INCHES - 1.2) / cols  # a panel's width: the page's, less the words' column and the colour scale
+    fig, axes = plt.subplots(
+        len(words), cols, figsize=(PAGE_INCHES, 0.7 + len(words) * (0.15 + panel * h / w)), squeeze=False,
+        layout="constrained",
+    )  # fmt: skip
     for r, word in enumerate(words):
         v = first.words.index(word)
         panels = [("aux label", labels[v])] + [(name, channels[name][v]) for name in channels]
         for c, (title, arr) in enumerate(panels):
             ax = axes[r, c]
             im = ax.imshow(arr, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
-            ax.set_title(_wrapped(title) if r == 0 else "", fontsize=9)
+            # a model's label names its run ('no aux (dual_attention-easy-noaux-…)'): wrapped to its panel
+            ax.set_title(wrap(title, panel, plt.rcParams["axes.titlesize"]) if r == 0 else "")
             ax.set_xticks([]), ax.set_yticks([])
             ax.spines[:].set_visible(True)  # a frame round every map: a white (all 1) channel is not a blank
-        axes[r, 0].set_ylabel(word, fontsize=10)
+        axes[r, 0].set_ylabel(word)
         axes[r, -1].imshow(frame)
-        axes[r, -1].set_title("frame" if r == 0 else "", fontsize=9)
+        axes[r, -1].set_title("frame" if r == 0 else "")
         axes[r, -1].axis("off")
-    fig.suptitle(f"conv3 channels and aux labels, '{first.sentence}' (first frame)", fontsize=10)
-    fig.tight_layout(rect=(0, 0, 0.92, 1))
-    bar = fig.add_axes((0.93, 0.15, 0.015, 0.7), label="<colorbar>")  # as matplotlib names the ones it makes
-    fig.colorbar(im, cax=bar, label="aux label / sigmoid(conv3): 0 black, 1 white")
-    save(fig, path, dpi=100)
+    title = f"conv3 channels and aux labels, '{first.sentence}' (first frame)"
+    fig.suptitle(wrap(title, PAGE_INCHES - 0.2, plt.rcParams["figure.titlesize"]))
+    fig.colorbar(im, ax=axes, shrink=0.8, label=wrap("aux label / sigmoid(conv3): 0 black, 1 white", 3, 7))
+    save(fig, path)
     return fig, labels, channels
 
 

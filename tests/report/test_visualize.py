@@ -9,6 +9,7 @@ from typer.testing import CliRunner
 from emml.cli import app
 from emml.config.profiles import profile_config
 from emml.eval.evaluate import obs_to_torch
+from emml.report.savefig import PAGE_INCHES, outside
 from emml.report.visualize import CHANNEL_WORDS, attention_figure, channels_figure, episode_gif, record_episode
 from emml.rl.trainer import train
 from emml.runs.rundir import CHECKPOINT, load_model
@@ -73,6 +74,7 @@ def test_the_attention_figure_has_a_row_per_step_with_the_models_arrays(checkpoi
     overlay = panels[2].get_images()[1].get_array()  # first step row: frame, then frame + x_spat
     np.testing.assert_array_equal(np.asarray(overlay), ep.attention[0])
     assert "EQA" in fig.axes[0].get_title()
+    assert fig.get_size_inches()[0] == PAGE_INCHES and outside(fig) == []  # at its print width, no text cut off
     # the top panel: x_sent on every vocabulary channel, labelled, with the model's values (Eq. 4's gate)
     bars = fig.axes[0].patches
     assert len(bars) == len(ep.words) == model.vocab_size
@@ -92,6 +94,7 @@ def test_the_channel_figure_compares_aux_and_no_aux_channels(checkpoints, tmp_pa
     np.testing.assert_array_equal(np.asarray(axes[0, 1].get_images()[0].get_array()), channels["aux"][v])
     np.testing.assert_array_equal(np.asarray(axes[0, 0].get_images()[0].get_array()), labels[v])
     assert not np.array_equal(channels["aux"], channels["no aux"])  # two models, two columns
+    assert fig.get_size_inches()[0] == PAGE_INCHES and outside(fig) == []  # at its print width, no text cut off
 
 
 def test_the_channel_figure_leaves_out_words_the_run_does_not_know(checkpoints, tmp_path, no_leftovers):
