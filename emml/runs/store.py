@@ -4,8 +4,8 @@ and ``import emml`` must stay fast.
 
 * Default store is ``sqlite:///<project root>/mlflow.db`` (the plain file store is deprecated); any other backend
   (a shared ``mlflow server``) is a matter of the ``MLFLOW_TRACKING_URI`` environment variable.
-* Writes go in batches of MLflow's limits (`log_batch`: 1000 metrics, 100 params or tags a call); SQLite "database
-  is locked" errors (many concurrent writers) are retried with backoff (`retry`).
+* Writes go through ``MlflowClient.log_batch``, which splits them into calls of MLflow's limits; SQLite "database is
+  locked" errors (many concurrent writers) are retried with backoff (`retry`).
 * :func:`metric_history` returns full curves (``search_runs`` only keeps the latest value per metric).
 """
 
@@ -24,8 +24,6 @@ T = TypeVar("T")
 
 MAX_PARAM_LEN = 6000  # mlflow.utils.validation.MAX_PARAM_VAL_LENGTH
 MAX_TAG_LEN = 8000  # mlflow.utils.validation.MAX_TAG_VAL_LENGTH
-BATCH_PARAMS = 100  # mlflow.utils.validation.MAX_PARAMS_TAGS_PER_BATCH
-BATCH_METRICS = 1000  # mlflow.utils.validation.MAX_METRICS_PER_BATCH
 
 
 def tracking_uri() -> str:
@@ -76,14 +74,11 @@ def retry(fn: Callable[[], T], attempts: int = 8, base_delay: float = 0.1) -> T:
 
 
 def log_batch(mlflow_client, run_id: str, metrics=(), params=(), tags=()) -> None:
-    """``MlflowClient.log_batch`` for any number of entities, in calls of MLflow's limits (`BATCH_METRICS` metrics,
-    `BATCH_PARAMS` params or tags), each retried on a lock."""
-    for items, size, name in ((metrics, BATCH_METRICS, "metrics"), (params, BATCH_PARAMS, "params"),
-                              (tags, BATCH_PARAMS, "tags")):  # fmt: skip
-        items = list(items)
-        for i in range(0, len(items), size):
-            chunk = {name: items[i : i + size]}
-            retry(lambda chunk=chunk: mlflow_client.log_batch(run_id, **chunk))
+    """``MlflowClient.log_batch`` for any number of entities (MLflow splits them into calls of its limits), retried
+    whole on a lock: a retry logs again what a first call's earlier chunks wrote, which MLflow's store keeps once (an
+    identical metric point is skipped, a param may be logged again with its value, a tag is overwritten)."""
+    metrics, params, tags = list(metrics), list(params), list(tags)
+    retry(lambda: mlflow_client.log_batch(run_id, metrics=metrics, params=params, tags=tags))
 
 
 def last_points(points: Iterable[tuple[int, str, float]], when: Callable[[int], int] | None = None):

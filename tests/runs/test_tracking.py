@@ -208,3 +208,30 @@ def test_a_run_dir_from_another_store_resumed_twice_continues_one_run(tmp_path):
     [run] = store.find_runs("exp-resumed")
     assert run["tags"][tracking.RESUMED_FROM] == "f" * 32
     assert store.metric_history(first, "loss") == [(64, 1.0), (128, 0.5), (192, 0.25)]
+
+
+def test_a_batch_retried_after_a_lock_midway_logs_each_point_once(tmp_path, monkeypatch):
+    """`store.log_batch` hands MLflow every entity at once (MLflow splits them into calls of its limits: 1,000
+    metrics, 100 params) and retries the whole call on a lock; a lock on the second of those calls makes the retry log
+    again what the first wrote, which the store must keep once: each step once in the curve, each param once."""
+    from mlflow.entities import Metric, Param
+
+    monkeypatch.setattr(store.time, "sleep", lambda s: None)
+    client = store.client(f"sqlite:///{tmp_path}/m.db")
+    run_id = client.create_run(client.create_experiment("e")).info.run_id
+    real, calls = client._tracking_client.store.log_batch, []
+
+    def locked_once(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("(sqlite3.OperationalError) database is locked")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(client._tracking_client.store, "log_batch", locked_once)
+    metrics = [Metric("a", float(step), 1000 + step, step) for step in range(2500)]
+    params = [Param(f"p{i}", str(i)) for i in range(150)]
+    store.log_batch(client, run_id, metrics=iter(metrics), params=iter(params))
+    assert len(calls) > 3  # split by MLflow, and the second call refused once
+    history = client.get_metric_history(run_id, "a")
+    assert sorted(m.step for m in history) == list(range(2500))
+    assert client.get_run(run_id).data.params == {f"p{i}": str(i) for i in range(150)}
