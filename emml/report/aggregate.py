@@ -241,7 +241,7 @@ def summary(table, cells) -> tuple[list[dict[str, str]], str] | None:
     for c in compare(table, cells):
         setting = f"{env_label(c.difficulty)} · {'Aux' if c.aux else 'No Aux'}"
         line = lines.setdefault((setting, c.row), {"Setting": setting, table.row_header: c.row})
-        label = labels.get(c.metric, c.metric)
+        label = labels[c.metric]  # a comparison reads a column of the table: its metric is one of the table's
         line[f"{label} IQM [95% CI]"] = _show(c.iqm, _runs(c.iqm.runs) + " in 1 cell")
         if ref is None:
             continue

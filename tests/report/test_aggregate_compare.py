@@ -1,0 +1,103 @@
+"""The aggregate under a table (emml/report/aggregate.py: `compare`, `summary`) on cells made by hand: which rows are
+compared, when an interval is given, and the lines as the page prints them. Written against the survivors of
+`make mutate MUTATE=report/aggregate` (docs/testing.md); every expected value below is worked out from the rule."""
+
+import dataclasses
+
+import pytest
+
+from emml.experiments.tables import load_table
+from emml.report.aggregate import Estimate, _show, compare, probability_of_improvement, summary
+from emml.report.cells import Cell
+
+DA, CONCAT, GA = "Dual-Attention", "Concat", "GA"
+SGN, EQA = "sgn_test", "eqa_test"
+
+
+def _cells(values: dict) -> list[Cell]:
+    """Only the cells given ({(row, difficulty, aux, metric): runs' scores}): a cell not listed does not exist."""
+    return [Cell(row, d, a, m, 3, values=list(v)) for (row, d, a, m), v in values.items()]
+
+
+def _by_row(found, metric: str = SGN) -> dict:
+    return {c.row: c for c in found if (c.difficulty, c.aux, c.metric) == ("easy", True, metric)}
+
+
+def test_one_run_on_either_side_gives_p_without_an_interval_and_two_on_both_sides_with_one():
+    """P(DA > row) from 2 runs against 1 (or 1 against 2) is a single number: Estimate(p, p, p, runs, 1 cell, no
+    spread); 2 against 2 keeps the resampled interval."""
+    table = load_table("table2")
+    da = [0.9, 0.7]
+    found = _by_row(compare(table, _cells({(DA, "easy", True, SGN): da, (CONCAT, "easy", True, SGN): [0.8],
+                                           (GA, "easy", True, SGN): [0.6, 0.8]})))  # fmt: skip
+    # 2 vs 1: 0.9 > 0.8, 0.7 < 0.8: P = 1/2, three scores read, in one cell, nothing to resample
+    assert found[CONCAT].improvement == Estimate(0.5, 0.5, 0.5, 3, 1, False)
+    # 2 vs 2: pairs 0.9>0.6, 0.9>0.8, 0.7>0.6, 0.7<0.8 -> 3/4, with its interval from the resampling
+    ga = found[GA].improvement
+    assert ga == probability_of_improvement([da], [[0.6, 0.8]]) and ga.value == 0.75 and ga.spread
+    assert ga.lo < ga.value and ga.hi == 1.0 and ga.runs == 4 and ga.cells == 1
+    assert found[GA].reference_runs == 2 and found[CONCAT].reference_runs == 2
+    # 1 vs 2, the other way round: still one number
+    one = _by_row(compare(table, _cells({(DA, "easy", True, SGN): [0.9], (GA, "easy", True, SGN): [0.6, 0.95]})))
+    assert one[GA].improvement == Estimate(0.5, 0.5, 0.5, 3, 1, False)
+
+
+def test_a_cell_with_no_reference_run_and_a_row_with_no_cell_are_not_compared():
+    """Where Dual-Attention has no cell in a setting, the rows there get their IQM and no comparison; a row with no
+    cell in a setting is left out of it."""
+    table = load_table("table2")
+    found = compare(table, _cells({(CONCAT, "easy", True, SGN): [0.2, 0.4], (DA, "easy", True, EQA): [0.5]}))
+    assert [(c.row, c.metric) for c in found] == [(CONCAT, SGN), (DA, EQA)]
+    concat = found[0]
+    assert concat.reference_runs == 0 and concat.difference is None and concat.improvement is None
+    assert concat.iqm.value == pytest.approx(0.3) and concat.iqm.runs == 2
+
+
+def test_an_interval_is_signed_only_when_its_value_is():
+    e = Estimate(0.5, 0.4, 0.6, 3, 1, True)
+    assert _show(e, "3 runs") == "0.50 [0.40, 0.60] (3 runs)"
+    assert _show(e, "3 runs", signed=True) == "+0.50 [+0.40, +0.60] (3 runs)"
+    assert _show(dataclasses.replace(e, spread=False), "1 run") == "0.50 (1 run: no interval)"
+
+
+def test_no_aggregate_without_a_run():
+    table = load_table("table2")
+    assert summary(table, _cells({(DA, "easy", True, SGN): [], (CONCAT, "easy", True, SGN): []})) is None
+
+
+def test_the_lines_put_each_metric_s_three_columns_together_in_the_table_s_order():
+    """SGN's IQM, difference and P, then EQA's (the table's metric order, not the alphabet's); a row where
+    Dual-Attention has no run says so in both comparison columns; Dual-Attention's own comparison cells are blank."""
+    table = load_table("table2")
+    rows, _ = summary(table, _cells({(DA, "easy", True, SGN): [0.9], (CONCAT, "easy", True, SGN): [0.3],
+                                     (CONCAT, "easy", True, EQA): [0.4]}))  # fmt: skip
+    assert list(rows[0]) == [
+        "Setting",
+        "Model",
+        "SGN IQM [95% CI]",
+        "SGN: Dual-Attention − row [95% CI]",
+        "SGN: P(Dual-Attention > row)",
+        "EQA IQM [95% CI]",
+        "EQA: Dual-Attention − row [95% CI]",
+        "EQA: P(Dual-Attention > row)",
+    ]
+    concat, da = rows  # in the table's row order
+    assert da["Model"] == DA and da["SGN: P(Dual-Attention > row)"] == "" and da["EQA IQM [95% CI]"] == ""
+    assert concat["SGN: Dual-Attention − row [95% CI]"] == "+0.60 (1 vs 1 run in 1 cell: no interval)"
+    assert concat["EQA: Dual-Attention − row [95% CI]"] == "— (Dual-Attention: no run here)"
+    assert concat["EQA: P(Dual-Attention > row)"] == "— (Dual-Attention: no run here)"
+    assert concat["EQA IQM [95% CI]"] == "0.40 (1 run in 1 cell: no interval)"
+
+
+def test_a_table_without_a_reference_row_still_lists_every_metric_of_every_row():
+    """No Dual-Attention row (a table of one's own): each row's IQM per metric, no comparison columns."""
+    table = load_table("table2")
+    table = dataclasses.replace(table, rows=tuple(r for r in table.rows if r.label != DA))
+    rows, footer = summary(table, _cells({(CONCAT, "easy", True, SGN): [0.3], (CONCAT, "easy", True, EQA): [0.4],
+                                          (GA, "easy", True, SGN): [0.5]}))  # fmt: skip
+    assert [list(r) for r in rows] == [["Setting", "Model", "SGN IQM [95% CI]", "EQA IQM [95% CI]"]] * 2
+    assert [(r["Model"], r["SGN IQM [95% CI]"][:4], r["EQA IQM [95% CI]"][:4]) for r in rows] == [
+        (CONCAT, "0.30", "0.40"),
+        (GA, "0.50", ""),
+    ]
+    assert "P(" not in footer
