@@ -254,8 +254,9 @@ def summary(table, cells) -> tuple[list[dict[str, str]], str] | None:
                 f"{MISSING} ({ref}: no run here)"
             )
     present = list(dict.fromkeys(k for line in lines.values() for k in line))  # ordered: the same bytes each time
-    order = [k for label in labels.values() for k in (f"{label} IQM", f"{label}: {ref} − row", f"{label}: P({ref} >")]
-    columns = sorted(present, key=lambda k: next((i for i, o in enumerate(order) if k.startswith(o)), -1))
+    order = ["Setting", table.row_header]  # then each metric's three columns, in the table's metric order
+    order += [k for label in labels.values() for k in (f"{label} IQM", f"{label}: {ref} − row", f"{label}: P({ref} >")]
+    columns = sorted(present, key=lambda k: next(i for i, o in enumerate(order) if k.startswith(o)))
     out = [{k: line.get(k, "") for k in columns} for line in lines.values()]
     compare_text = (
         f" {ref} − row = the difference of the two rows' means in that cell, with its 95% percentile interval from "

@@ -87,6 +87,15 @@ def test_the_lines_put_each_metric_s_three_columns_together_in_the_table_s_order
     assert concat["EQA: Dual-Attention − row [95% CI]"] == "— (Dual-Attention: no run here)"
     assert concat["EQA: P(Dual-Attention > row)"] == "— (Dual-Attention: no run here)"
     assert concat["EQA IQM [95% CI]"] == "0.40 (1 run in 1 cell: no interval)"
+    footer = summary(table, _cells({(DA, "easy", True, SGN): [0.9]}))[1]
+    for sentence in (  # what each comparison is and where its numbers come from, as the page prints it
+        "P(Dual-Attention > row) = the probability that a run of Dual-Attention scores higher than a run of the row in "
+        "the same cell (ties count half; rliable.metrics.probability_of_improvement), with its 95% interval from the "
+        "same resampling (rliable.library.get_interval_estimates). Read the difference beside the probability",
+        "Dual-Attention − row = the difference of the two rows' means in that cell",
+        "IQM = the interquartile mean of a row's runs (rliable.metrics.aggregate_iqm;",
+    ):
+        assert sentence in footer
 
 
 def test_a_table_without_a_reference_row_still_lists_every_metric_of_every_row():
