@@ -132,3 +132,16 @@ def test_the_footer_says_what_each_number_is_and_names_no_comparison_without_a_r
     assert summary(table, _cells({(CONCAT, "easy", True, SGN): [0.3]}))[1] == COMMON + COMPARED + TAIL
     alone = dataclasses.replace(table, rows=tuple(r for r in table.rows if r.label != DA))
     assert summary(alone, _cells({(CONCAT, "easy", True, SGN): [0.3]}))[1] == COMMON + TAIL
+
+
+def test_the_mean_difference_has_an_interval_only_with_two_runs_on_each_side():
+    """mean(x) − mean(y) in one cell: a single number while either side has one run, the resampled interval from two
+    runs on each side (the values chosen to be exact in binary)."""
+    from emml.report.aggregate import mean_difference
+
+    assert mean_difference([0.75, 0.25], [0.5]) == Estimate(0.0, 0.0, 0.0, 3, 1, False)
+    assert mean_difference([0.5], [0.75, 0.25]) == Estimate(0.0, 0.0, 0.0, 3, 1, False)
+    e = mean_difference([0.75, 0.25], [0.5, 0.0])
+    assert e.value == 0.25 and e.spread and e.lo < 0.25 < e.hi and (e.runs, e.cells) == (4, 1)
+    # each extreme (x resampled to its worst twice, y to its best, and back) has 1/16 > 2.5% of the resamples
+    assert (e.lo, e.hi) == (-0.25, 0.75)
