@@ -6,6 +6,7 @@ missing runs and the campaign steps that train them)."""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from emml.config.profiles import Profile
@@ -14,8 +15,10 @@ from emml.experiments.claims.evidence import (
     CONTRADICTED,
     INCONCLUSIVE,
     LEAVE,
+    REVERSED,
     STATUSES,
     SUPPORTED,
+    UNCLEAR,
     UNTESTABLE,
     Chance,
     Z,
@@ -115,10 +118,27 @@ def page_names(name: str) -> dict[str, str]:
     }
 
 
-def focus_rows(claim) -> list[str]:
+def focus_rows(claim, decision=None) -> list[str]:
     """The rows whose numbers the status table and the figure show: the reference row the claim compares with
-    (`than`), then its first row ('best': the row it puts above every other)."""
-    return list(dict.fromkeys([*([claim.than] if claim.than else []), *claim.rows[:1]]))
+    (`than`), then its first row ('best': the row it puts above every other), then the rows of the comparison that
+    decides against the claim, where one does (`against`): a contradicted claim shows the number that contradicts it."""
+    rows = [*([claim.than] if claim.than else []), *claim.rows[:1]]
+    return list(dict.fromkeys(rows + (against(decision) if decision is not None else [])))
+
+
+def against(decision) -> list[str]:
+    """The rows of the first of the decision's comparisons that went against its claim (reversed, else unclear) while
+    the claim is not supported: the rows its text names ('Dual-Attention > Concat', 'Go to the red object ≥ 0.8'),
+    as its evidence names them; [] for a supported or untestable claim."""
+    if decision.status in (SUPPORTED, UNTESTABLE):
+        return []
+    rows = {e["row"] for e in decision.evidence}
+    for outcome in (REVERSED, UNCLEAR):
+        for check in decision.checks:
+            if check.outcome == outcome:
+                named = re.split(r" > | level with | ≥ ", check.what.split(": ", 1)[-1])
+                return [name for name in named if name in rows]
+    return []
 
 
 @dataclass
@@ -138,8 +158,10 @@ class Cell:
 
 def cells(decision, paper_decision, claim) -> list[Cell]:
     """The focus rows' cells of a decision (`focus_rows`), with the paper's number for the same cell."""
-    focus = focus_rows(claim)
-    entries = [e for e in decision.evidence if e["row"] in focus]
+    focus, base = focus_rows(claim, decision), focus_rows(claim)
+    entries = [e for e in decision.evidence if e["row"] in base]  # in the evidence's order, then the rows against
+    entries += sorted((e for e in decision.evidence if e["row"] not in base and e["row"] in focus),
+                      key=lambda e: focus.index(e["row"]))  # fmt: skip
     theirs = {
         (e["row"], e["setting"], e["metric"]): next(iter(e["values"].values()), None)
         for e in (paper_decision.evidence if paper_decision is not None else [])
@@ -214,7 +236,8 @@ def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict) -> 
         f"Ours (the mean over seeds, each seed a hollow point) against the paper (×) on each claim's focus rows, "
         f"SGN in blue, EQA in orange, a `diag/*` figure in green ([PDF]({names['pdf']}), {FIGURE_WIDTH:g} in wide). "
         "The focus rows are the row a claim compares with and its first row (for 'best', the row it puts above "
-        "every other); a 'faster' claim's crossings are frames, in the table only. Seeds: the fewest seeds of the "
+        "every other), and for a claim not supported the rows of the comparison that goes against it; a 'faster' "
+        "claim's crossings are frames, in the table only. Seeds: the fewest seeds of the "
         "rows any comparison of the claim read.",
         "",
         f"Every claim's comparisons, the numbers per row and seed, the decision rules, the runs still missing and the "

@@ -244,3 +244,48 @@ def test_the_counts_cover_every_status():
     assert counts([decision(SUPPORTED), decision(BUDGET), decision(SUPPORTED)]) == {
         s: {SUPPORTED: 2, BUDGET: 1}.get(s, 0) for s in STATUSES
     }
+
+
+def test_a_claim_not_supported_shows_the_rows_of_the_comparison_against_it(tmp_path):
+    """The status table's focus rows gain the rows of the first comparison that goes against the claim (reversed
+    before unclear): 'contradicted' beside the paper's number and ours on Dual-Attention alone would hide the row that
+    contradicts it. A supported claim shows its focus rows only."""
+    from emml.experiments.claims.evidence import Check
+    from emml.report.claims_page import against, cells, focus_rows
+
+    def checks(*pairs):
+        return [Check(what, outcome, "") for what, outcome in pairs]
+
+    evidence = [{"row": r} for r in ("Dual-Attention", "Concat", "GA", "Go to the red <known_object>")]
+    d = decision(CONTRADICTED, 1, evidence=evidence, checks=checks(
+        ("SGN test, Easy · Aux: Dual-Attention > GA", "unclear"),
+        ("EQA test, Hard · Aux: Dual-Attention > Concat", "reversed"),
+    ))  # fmt: skip
+    assert against(d) == ["Dual-Attention", "Concat"]  # the reversed one, though the unclear one comes first
+    d.checks = checks(("SGN test, Easy · Aux: Dual-Attention > GA", "unclear"), ("x: Dual-Attention > Concat", "holds"))
+    assert against(d) == ["Dual-Attention", "GA"]
+    d.checks = checks(("SGN, Easy · Aux: Go to the red <known_object> ≥ 0.8", "reversed"))
+    assert against(d) == ["Go to the red <known_object>"]
+    d.checks = checks(("SGN test, Easy · Aux: Concat level with GA", "reversed"))
+    assert against(d) == ["Concat", "GA"]
+    d.status = SUPPORTED
+    assert against(d) == []
+    d.status = INCONCLUSIVE
+    assert against(d) == ["Concat", "GA"]
+
+    root = tmp_path / "results"
+    fake_results("table2", root, value=da_ahead)
+    claim = CLAIMS["da-best-easy-aux"]
+    supported = decide(claim, PROFILE, root)
+    assert focus_rows(claim, supported) == ["Dual-Attention"]
+    assert [c.label for c in cells(supported, None, claim)] == ["SGN test", "EQA test"]
+    for seed in (0, 1, 2):  # Text only ahead on EQA in every seed: contradicted
+        edit(root, "table2", f"text_only-easy-aux-s{seed}-quick", eqa_test=0.95)
+    d = decide(claim, PROFILE, root)
+    assert d.status == CONTRADICTED and focus_rows(claim, d) == ["Dual-Attention", "Text only"]
+    assert [(c.label, c.shown) for c in cells(d, None, claim)] == [  # the focus rows in their order
+        ("Dual-Attention, SGN test", "0.60"),
+        ("Dual-Attention, EQA test", "0.60"),
+        ("Text only, SGN test", "0.20"),
+        ("Text only, EQA test", "0.95"),
+    ]
