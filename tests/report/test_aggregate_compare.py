@@ -145,3 +145,6 @@ def test_the_mean_difference_has_an_interval_only_with_two_runs_on_each_side():
     assert e.value == 0.25 and e.spread and e.lo < 0.25 < e.hi and (e.runs, e.cells) == (4, 1)
     # each extreme (x resampled to its worst twice, y to its best, and back) has 1/16 > 2.5% of the resamples
     assert (e.lo, e.hi) == (-0.25, 0.75)
+    x, y = [0.9, 0.7, 0.4, 0.65], [0.3, 0.55, 0.1]
+    assert mean_difference(x, y) == mean_difference(x, y)  # seeded: the same interval every time it is drawn
+    assert mean_difference(x, y, seed=1) != mean_difference(x, y)  # and the draws are the seed's
