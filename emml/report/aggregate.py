@@ -169,9 +169,8 @@ def mean_difference(x: list[float], y: list[float], reps: int = REPS, seed: int 
     diffs = x_[rng.integers(0, len(x_), (reps, len(x_)))].mean(1) - y_[rng.integers(0, len(y_), (reps, len(y_)))].mean(
         1
     )
-    alpha = (1 - CONFIDENCE) / 2 * 100
-    lo, hi = np.percentile(diffs, [alpha, 100 - alpha])
-    return Estimate(value, float(lo), float(hi), len(x_) + len(y_), 1, True)
+    lo, hi = percentile_interval(diffs)
+    return Estimate(value, lo, hi, len(x_) + len(y_), 1, True)
 
 
 @dataclass

@@ -120,8 +120,9 @@ def page_names(name: str) -> dict[str, str]:
 
 def focus_rows(claim, decision=None) -> list[str]:
     """The rows whose numbers the status table and the figure show: the reference row the claim compares with
-    (`than`), then its first row ('best': the row it puts above every other), then the rows of the comparison that
-    decides against the claim, where one does (`against`): a contradicted claim shows the number that contradicts it."""
+    (`than`), then its first row ('best': the row it puts above every other), then, given its ``decision``, the rows
+    of the comparison that decides against the claim, where one does (`against`): a contradicted claim shows the
+    number that contradicts it."""
     rows = [*([claim.than] if claim.than else []), *claim.rows[:1]]
     return list(dict.fromkeys(rows + (against(decision) if decision is not None else [])))
 
@@ -159,9 +160,9 @@ class Cell:
 def cells(decision, paper_decision, claim) -> list[Cell]:
     """The focus rows' cells of a decision (`focus_rows`), with the paper's number for the same cell."""
     focus, base = focus_rows(claim, decision), focus_rows(claim)
-    entries = [e for e in decision.evidence if e["row"] in base]  # in the evidence's order, then the rows against
-    entries += sorted((e for e in decision.evidence if e["row"] not in base and e["row"] in focus),
-                      key=lambda e: focus.index(e["row"]))  # fmt: skip
+    # the claim's own focus rows in the evidence's order, then each row against it in turn
+    entries = [e for e in decision.evidence if e["row"] in base]
+    entries += [e for row in focus if row not in base for e in decision.evidence if e["row"] == row]
     theirs = {
         (e["row"], e["setting"], e["metric"]): next(iter(e["values"].values()), None)
         for e in (paper_decision.evidence if paper_decision is not None else [])

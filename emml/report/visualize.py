@@ -191,7 +191,8 @@ def channels_figure(
         axes[r, -1].axis("off")
     title = f"conv3 channels and aux labels, '{first.sentence}' (first frame)"
     fig.suptitle(wrap(title, PAGE_INCHES - 0.2, plt.rcParams["figure.titlesize"]))
-    fig.colorbar(im, ax=axes, shrink=0.8, label=wrap("aux label / sigmoid(conv3): 0 black, 1 white", 3, 7))
+    scale = wrap("aux label / sigmoid(conv3): 0 black, 1 white", 3, plt.rcParams["axes.labelsize"])
+    fig.colorbar(im, ax=axes, shrink=0.8, label=scale)
     save(fig, path)
     return fig, labels, channels
 
