@@ -393,27 +393,27 @@ def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...], no_aux: bool =
 
 
 def _from_table(path: Path, key: str, name, model: str, overrides: dict, per_metric: dict, noaux: dict | None) -> None:
-    """A row borrowing another table's runs names a table (not itself borrowing) that trains this very setting
-    (``noaux``: its No Aux overrides, None when the borrowing table has no No Aux column)."""
+    """A row borrowing another table's runs names a table with a row, itself not borrowing, that trains this very
+    setting (``noaux``: its No Aux overrides, None when the borrowing table has no No Aux column)."""
     tables = [t for t in list_tables() if t != path.stem]
     if name not in tables:
         raise _err(path, key, f"{name!r} is not allowed; choose one of {', '.join(tables)}")
-    other = load_table(name)
-    if any(r.from_table for r in other.rows) or per_metric:
-        raise _err(path, key, f"only a plain row may borrow, from a table that borrows nothing ({name})")
+    if per_metric:
+        raise _err(path, key, "only a plain row may borrow (no metric_overrides)")
     if not any(
         r.model == model
         and r.overrides == overrides
         and (noaux is None or r.noaux_overrides == noaux)
         and not r.metric_overrides
-        for r in other.rows
+        and not r.from_table  # a row that trains its runs: no chain of borrowing
+        for r in load_table(name).rows
     ):
         raise _err(
             path,
             key,
             f"{name} has no row of model {model!r} with overrides {overrides}"
             + (f" and noaux_overrides {noaux}" if noaux is not None else "")
-            + " to borrow the runs of",
+            + " that trains its own runs (not borrowing them) to borrow",
         )
 
 

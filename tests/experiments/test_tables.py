@@ -147,6 +147,9 @@ def test_a_bad_noaux_override_fails_naming_the_row(tmp_path):
         ('from_table = "tableX"', "'tableX' is not allowed"),  # itself
         ('from_table = "table2"\noverrides = { "env.shaping" = false }', "no row of model 'dual_attention'"),
         ('from_table = "table2"\nnoaux_overrides = { "ppo.lr" = 0.001 }', "noaux_overrides {'ppo.lr': 0.001}"),
+        # Table 3's DA Multi-Task row is this setting, but borrows it from Table 2 itself: no chain
+        ('from_table = "table3"\nnoaux_overrides = { "model_options.answer_gate_frames" = 400000 }', "its own runs"),
+        ('from_table = "table2"\nmetric_overrides = { sgn_test = { "env.tasks" = "sgn" } }', "only a plain row"),
     ],
 )
 def test_a_row_borrows_only_a_run_another_table_trains(tmp_path, borrow, what):
