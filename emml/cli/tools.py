@@ -41,7 +41,7 @@ def tasks_show(
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """A dataset's instructions and questions by task and split, its vocabulary and objects."""
-    from emml.tasks.language import KINDS, SPLITS, Vocabulary, load_dataset
+    from emml.tasks.language import SPLITS, TASKS, Vocabulary, load_dataset
 
     try:
         ds = load_dataset(dataset)
@@ -53,7 +53,7 @@ def tasks_show(
         "actors": {n: {"words": list(a.words()), "area": a.area} for n, a in ds.actors.items()},
     }
     lines = []
-    for kind in KINDS:
+    for kind in TASKS:
         for split in SPLITS:
             sents = ds.select(kind, split)
             data[f"{kind}_{split}"] = [s.text for s in sents]

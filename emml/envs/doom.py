@@ -27,11 +27,10 @@ from emml.envs.labels import LabelGrid, channel_mask, default_aux_words
 from emml.envs.objects import ACTORS, iwad_path
 from emml.envs.wad import ROOM, map_name, wad_path
 from emml.tasks.episodes import Episode, sample_episode
-from emml.tasks.language import load_dataset, normalize, resolve_vocabulary
+from emml.tasks.language import TASKS, load_dataset, normalize, resolve_vocabulary
 
 MOVES = ("forward", "left", "right", "answer")
 FORWARD, LEFT, RIGHT, ANSWER = range(4)
-TASKS = ("sgn", "eqa")
 
 EASY_START = (128, 512, 0)
 """(x, y, angle°) of the agent in Easy (the reference SGN room)."""

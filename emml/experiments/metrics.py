@@ -14,7 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-TASKS = ("sgn", "eqa")
+from emml.tasks.language import TASKS as TASKS  # the tasks, re-exported beside the splits of each metric
+
 SPLITS = ("train", "test", "transfer")
 
 

@@ -9,6 +9,8 @@ import sys
 import numpy as np
 from tqdm import tqdm
 
+from emml.tasks.language import TASKS  # re-exported: the trainer's lines name the tasks by it
+
 
 def update_metrics(
     stats: dict, fps: float, recent: dict, update: int, dropped: int, seconds: dict | None = None
@@ -43,10 +45,6 @@ def say(line: str) -> None:
     when written (and before a failure's line on stderr)."""
     tqdm.write(line)
     sys.stdout.flush()
-
-
-TASKS = ("sgn", "eqa")
-"""The tasks by id (0 SGN, 1 EQA), as metrics and log lines name them."""
 
 
 def success_text(m: dict, task: str) -> str:

@@ -17,7 +17,8 @@ import tomllib
 from emml.config.schema import VOCABULARY_SOURCES, check_choice  # the config's allowed values (also imported from here)
 
 SPLITS = ("train", "test")
-KINDS = ("sgn", "eqa")
+TASKS = ("sgn", "eqa")
+"""The tasks by id (0 SGN, 1 EQA) and as a sentence's ``kind``, metrics and log lines name them: the one list."""
 
 
 @dataclass(frozen=True)
@@ -59,7 +60,7 @@ class Dataset:
     superlative_margin: int
 
     def select(self, kind: str, split: str) -> tuple[Sentence, ...]:
-        check_choice("kind", kind, KINDS)
+        check_choice("kind", kind, TASKS)
         check_choice("split", split, SPLITS)
         return tuple(s for s in self.sentences if s.kind == kind and s.split == split)
 
