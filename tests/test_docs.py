@@ -85,3 +85,15 @@ def test_every_readme_link_exists_or_is_written_by_make_reports():
         if re.match(r"^[a-z]+:", link):
             continue
         assert (ROOT / link).exists() or link in written, link
+
+
+def test_every_experiment_file_has_its_row_in_the_experiments_page():
+    """docs/experiments.md lists each reproduce/experiments/NAME.toml as `NAME` in its table (a new experiment is not
+    left undocumented; a retired one keeps its row only if it says so)."""
+    page = (ROOT / "docs" / "experiments.md").read_text()
+    listed = re.findall(r"^\| `(\w+)`( \([^)]*\))? \|", page, flags=re.M)
+    files = {p.stem for p in (ROOT / "reproduce" / "experiments").glob("*.toml")}
+    assert files, "no experiment files found"
+    assert files <= {name for name, _ in listed}, sorted(files - {name for name, _ in listed})
+    for name, why in listed:
+        assert name in files or "retired" in why, f"{name}: listed, but no reproduce/experiments/{name}.toml"
