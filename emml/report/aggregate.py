@@ -199,9 +199,9 @@ def compare(table, cells) -> list[Comparison]:
     by = {(c.row, c.difficulty, c.aux, c.metric): c.values for c in cells}
     out = []
     for difficulty, aux, metric in table.columns():
-        theirs = by.get((ref, difficulty, aux, metric), []) if ref is not None else []
+        theirs = by.get((ref, difficulty, aux, metric), [])  # no reference row (ref None): no cell, none
         for row in (r.label for r in table.rows):
-            own = by.get((row, difficulty, aux, metric), [])
+            own = by.get((row, difficulty, aux, metric))
             if not own:
                 continue
             c = Comparison(difficulty, aux, metric, row, iqm([own]), reference_runs=len(theirs))

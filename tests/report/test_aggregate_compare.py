@@ -148,3 +148,13 @@ def test_the_mean_difference_has_an_interval_only_with_two_runs_on_each_side():
     x, y = [0.9, 0.7, 0.4, 0.65], [0.3, 0.55, 0.1]
     assert mean_difference(x, y) == mean_difference(x, y)  # seeded: the same interval every time it is drawn
     assert mean_difference(x, y, seed=1) != mean_difference(x, y)  # and the draws are the seed's
+
+
+def test_an_iqm_has_an_interval_from_two_runs_a_cell():
+    """Two runs in a cell are enough to resample: each resample is both at 0.25, both at 0.75 (1/4 each, > 2.5%) or
+    one of each, so the 95% interval runs from 0.25 to 0.75 around the IQM of the two (their mean, 0.5). One run: the
+    point alone."""
+    from emml.report.aggregate import iqm
+
+    assert iqm([[0.25, 0.75]]) == Estimate(0.5, 0.25, 0.75, 2, 1, True)
+    assert iqm([[0.25], [0.75]]) == Estimate(0.5, 0.5, 0.5, 2, 2, False)
