@@ -158,3 +158,13 @@ def test_an_iqm_has_an_interval_from_two_runs_a_cell():
 
     assert iqm([[0.25, 0.75]]) == Estimate(0.5, 0.25, 0.75, 2, 1, True)
     assert iqm([[0.25], [0.75]]) == Estimate(0.5, 0.5, 0.5, 2, 2, False)
+
+
+def test_p_of_improvement_has_an_interval_when_either_row_has_two_runs_in_a_cell():
+    """Called alone (compare masks it when a side has one run): x = (0.25, 0.75) against y = 0.5, one cell. Each
+    resample of x is both low (P = 0), both high (P = 1), 1/4 each (> 2.5%), or one of each (0.5): the interval is
+    [0, 1] around 0.5, whichever side has the two runs; one run a side: the point alone."""
+    two, one = [[0.25, 0.75]], [[0.5]]
+    assert probability_of_improvement(two, one) == Estimate(0.5, 0.0, 1.0, 3, 1, True)
+    assert probability_of_improvement(one, two) == Estimate(0.5, 0.0, 1.0, 3, 1, True)
+    assert probability_of_improvement(one, [[0.25]]) == Estimate(1.0, 1.0, 1.0, 2, 1, False)
