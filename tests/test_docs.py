@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from emml.experiments.table_files import list_experiments
+
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 MKDOCS = importlib.util.find_spec("mkdocs") is not None and importlib.util.find_spec("material") is not None
@@ -92,7 +94,7 @@ def test_every_experiment_file_has_its_row_in_the_experiments_page():
     left undocumented; a retired one keeps its row only if it says so)."""
     page = (ROOT / "docs" / "experiments.md").read_text()
     listed = re.findall(r"^\| `(\w+)`( \([^)]*\))? \|", page, flags=re.M)
-    files = {p.stem for p in (ROOT / "reproduce" / "experiments").glob("*.toml")}
+    files = set(list_experiments())
     assert files, "no experiment files found"
     assert files <= {name for name, _ in listed}, sorted(files - {name for name, _ in listed})
     for name, why in listed:

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 from tqdm import tqdm
 
-from emml.tasks.language import TASKS  # re-exported: the trainer's lines name the tasks by it
+from emml.tasks.language import TASKS
 
 
 def update_metrics(

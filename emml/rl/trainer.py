@@ -32,7 +32,7 @@ from emml.rl.graphs import Graphs, Kept, captures, mean_stats
 from emml.rl.ppo import explained_variance, make_optimizer, model_forward, ppo_step, ppo_update
 from emml.rl.precision import conv_precision
 from emml.rl.prepare import prepare
-from emml.rl.progress import TASKS, TIME_SPLIT, eta_text, log_line, say, success_text, update_metrics
+from emml.rl.progress import TIME_SPLIT, eta_text, log_line, say, success_text, update_metrics
 from emml.rl.rollout import RolloutBuffer
 from emml.rl.sampler import Sampler
 from emml.runs.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
@@ -61,7 +61,7 @@ from emml.runs.rundir import (
 from emml.runs.runlock import hold_run
 from emml.runs.segments import begin_segment
 from emml.runs.tracking import Tracker, display_name
-from emml.tasks.language import load_dataset, resolve_vocabulary
+from emml.tasks.language import TASKS, load_dataset, resolve_vocabulary
 
 log = logging.getLogger(__name__)
 
