@@ -6,7 +6,6 @@ missing runs and the campaign steps that train them)."""
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 from emml.config.profiles import Profile
@@ -129,16 +128,14 @@ def focus_rows(claim, decision=None) -> list[str]:
 
 def against(decision) -> list[str]:
     """The rows of the first of the decision's comparisons that went against its claim (reversed, else unclear) while
-    the claim is not supported: the rows its text names ('Dual-Attention > Concat', 'Go to the red object ≥ 0.8'),
-    as its evidence names them; [] for a supported or untestable claim."""
+    the claim is not supported: the rows it reads (`Check.rows`: 'Dual-Attention > Concat' reads both, 'Go to the red
+    object ≥ 0.8' its one row, 'most rows' none); [] for a supported or untestable claim."""
     if decision.status in (SUPPORTED, UNTESTABLE):
         return []
-    rows = {e["row"] for e in decision.evidence}
     for outcome in (REVERSED, UNCLEAR):
         for check in decision.checks:
             if check.outcome == outcome:
-                named = re.split(r" > | level with | ≥ ", check.what.split(": ", 1)[-1])
-                return [name for name in named if name in rows]
+                return list(check.rows)
     return []
 
 

@@ -253,25 +253,32 @@ def test_a_claim_not_supported_shows_the_rows_of_the_comparison_against_it(tmp_p
     from emml.experiments.claims.evidence import Check
     from emml.report.claims_page import against, cells, focus_rows
 
-    def checks(*pairs):
-        return [Check(what, outcome, "") for what, outcome in pairs]
+    def checks(*triples):
+        return [Check(what, outcome, "", rows=rows) for what, outcome, rows in triples]
 
     evidence = [{"row": r} for r in ("Dual-Attention", "Concat", "GA", "Go to the red <known_object>")]
     d = decision(CONTRADICTED, 1, evidence=evidence, checks=checks(
-        ("SGN test, Easy · Aux: Dual-Attention > GA", "unclear"),
-        ("EQA test, Hard · Aux: Dual-Attention > Concat", "reversed"),
+        ("SGN test, Easy · Aux: Dual-Attention > GA", "unclear", ("Dual-Attention", "GA")),
+        ("EQA test, Hard · Aux: Dual-Attention > Concat", "reversed", ("Dual-Attention", "Concat")),
     ))  # fmt: skip
     assert against(d) == ["Dual-Attention", "Concat"]  # the reversed one, though the unclear one comes first
-    d.checks = checks(("SGN test, Easy · Aux: Dual-Attention > GA", "unclear"), ("x: Dual-Attention > Concat", "holds"))
+    d.checks = checks(
+        ("SGN test, Easy · Aux: Dual-Attention > GA", "unclear", ("Dual-Attention", "GA")),
+        ("x: Dual-Attention > Concat", "holds", ("Dual-Attention", "Concat")),
+    )
     assert against(d) == ["Dual-Attention", "GA"]
-    d.checks = checks(("SGN, Easy · Aux: Go to the red <known_object> ≥ 0.8", "reversed"))
+    d.checks = checks(
+        ("SGN, Easy · Aux: Go to the red <known_object> ≥ 0.8", "reversed", ("Go to the red <known_object>",))
+    )
     assert against(d) == ["Go to the red <known_object>"]
-    d.checks = checks(("SGN test, Easy · Aux: Concat level with GA", "reversed"))
-    assert against(d) == ["Concat", "GA"]
+    d.checks = checks(("Easy · Aux: EQA test below SGN test", "reversed", ()))  # 'harder': most rows, none named
+    assert against(d) == []
+    d.checks = checks(("SGN test, Easy · Aux: Concat level with GA", "reversed", ("GA", "Concat")))
+    assert against(d) == ["GA", "Concat"]
     d.status = SUPPORTED
     assert against(d) == []
     d.status = INCONCLUSIVE
-    assert against(d) == ["Concat", "GA"]
+    assert against(d) == ["GA", "Concat"]
 
     root = tmp_path / "results"
     fake_results("table2", root, value=da_ahead)

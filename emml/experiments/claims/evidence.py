@@ -137,10 +137,13 @@ class Check:
     metric: str = ""
     subject: str = ""
     """The row the claim puts higher."""
+    rows: tuple[str, ...] = ()
+    """The table rows the comparison reads (the page shows them when it decides against the claim)."""
 
-    def tag(self, setting: str, metric: str, subject: str) -> Check:
-        """The check with its setting, metric label and higher row named (the page groups by setting)."""
-        self.setting, self.metric, self.subject = setting, metric, subject
+    def tag(self, setting: str, metric: str, subject: str, rows: tuple[str, ...]) -> Check:
+        """The check with its setting, metric label, higher row and the rows it reads named (the page groups by
+        setting)."""
+        self.setting, self.metric, self.subject, self.rows = setting, metric, subject, rows
         return self
 
 
@@ -297,7 +300,7 @@ def most(what: str, checks: list[Check], unlearned_rows: int) -> Check:
     "most models" counts every row): HOLDS when more than half hold, REVERSED when more than half are reversed,
     MISSING while a row has no run; `chance` when more than half of the rows have not learned their training split
     (`unlearned_rows` of them)."""
-    absent = [c.what.split(":", 1)[0] for c in checks if c.outcome == MISSING]
+    absent = [row for c in checks if c.outcome == MISSING for row in c.rows]
     if absent:
         return Check(what, MISSING, f"no run yet for {', '.join(absent)}")
     held = sum(c.outcome == HOLDS for c in checks)

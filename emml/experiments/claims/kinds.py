@@ -80,12 +80,13 @@ class Kind:
         out = []
         for d, a, m in keys:
             out += [
-                c.tag(setting_text(d, a), metric_text(m), subject)
-                for c, subject in self.compare(claim, table, d, a, m, get)
+                c.tag(setting_text(d, a), metric_text(m), rows[0], rows)
+                for c, rows in self.compare(claim, table, d, a, m, get)
             ]
         return out
 
-    def compare(self, claim, table, d: str, a: bool, m: str, get: Get) -> list[tuple[Check, str]]:
+    def compare(self, claim, table, d: str, a: bool, m: str, get: Get) -> list[tuple[Check, tuple[str, ...]]]:
+        """The cell's comparisons, each with the rows it reads, the row the claim puts higher first."""
         raise NotImplementedError
 
 
@@ -108,7 +109,7 @@ class Best(Kind):
     def compare(self, claim, table, d, a, m, get):
         top = claim.rows[0]
         return [
-            (order(f"{_where(d, a, m)}: {top} > {other}", get(top, d, a, m), get(other, d, a, m)), top)
+            (order(f"{_where(d, a, m)}: {top} > {other}", get(top, d, a, m), get(other, d, a, m)), (top, other))
             for other in (r.label for r in table.rows if r.label != top)
         ]
 
@@ -120,7 +121,10 @@ class Below(Kind):
 
     def compare(self, claim, table, d, a, m, get):
         return [
-            (order(f"{_where(d, a, m)}: {claim.than} > {row}", get(claim.than, d, a, m), get(row, d, a, m)), claim.than)
+            (
+                order(f"{_where(d, a, m)}: {claim.than} > {row}", get(claim.than, d, a, m), get(row, d, a, m)),
+                (claim.than, row),
+            )
             for row in claim.rows
         ]
 
@@ -142,7 +146,7 @@ class Level(Kind):
                     get(claim.than, d, a, m),
                     claim.margin,
                 ),
-                claim.than,
+                (claim.than, row),
             )
             for row in claim.rows
         ]
@@ -155,7 +159,7 @@ class AtLeast(Kind):
 
     def compare(self, claim, table, d, a, m, get):
         return [
-            (threshold(f"{_where(d, a, m)}: {row} ≥ {claim.value:g}", get(row, d, a, m), claim.value), row)
+            (threshold(f"{_where(d, a, m)}: {row} ≥ {claim.value:g}", get(row, d, a, m), claim.value), (row,))
             for row in claim.rows
         ]
 
@@ -171,7 +175,7 @@ class AuxHelps(Kind):
             for d, m in dict.fromkeys((d, m) for (d, _, m) in keys):
                 what = f"{metric_text(m)}, {setting_text(d, None)}: {row} Aux > No Aux"
                 check = order(what, get(row, d, True, m), get(row, d, False, m))
-                out.append(check.tag(setting_text(d, None), metric_text(m), f"{row} Aux"))
+                out.append(check.tag(setting_text(d, None), metric_text(m), f"{row} Aux", (row,)))
         return out
 
 
@@ -194,12 +198,14 @@ class Harder(Kind):
         out = []
         for d, a in dict.fromkeys((d, a) for (d, a, _) in keys):
             per_row = [
-                order(f"{row}: {metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard))
+                order(
+                    f"{row}: {metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard)
+                ).tag(setting_text(d, a), "", row, (row,))
                 for row in claim.rows
             ]
             unlearned = sum(not learned(get(row, d, a, easy)) for row in claim.rows if get(row, d, a, easy))
             check = most(f"{setting_text(d, a)}: {metric_text(hard)} below {metric_text(easy)}", per_row, unlearned)
-            out.append(check.tag(setting_text(d, a), "", "most rows"))  # its `what` names both metrics
+            out.append(check.tag(setting_text(d, a), "", "most rows", ()))  # its `what` names both metrics
         return out
 
 
@@ -227,7 +233,7 @@ class Faster(Kind):
                     get(claim.than, d, a, m),
                     get(row, d, a, m),
                 ),
-                claim.than,
+                (claim.than, row),
             )
             for row in claim.rows
         ]
@@ -263,14 +269,14 @@ class Diagnostic(Kind):
                     if not ref:
                         out.append(
                             Check(what, MISSING, f"no run with a metrics.csv here in {ref_text}").tag(
-                                setting_text(d, a), claim.key, row
+                                setting_text(d, a), claim.key, row, (row,)
                             )
                         )
                         continue
                     value = claim.value * mean(ref)
                     what = f"{setting_text(d, a)}, {claim.key}: {row} ≥ {claim.value:g} × its {ref_text} run's"
                     what += f" {mean(ref):.2f}"
-                out.append(diagnostic(what, get(row, d, a, m), value).tag(setting_text(d, a), claim.key, row))
+                out.append(diagnostic(what, get(row, d, a, m), value).tag(setting_text(d, a), claim.key, row, (row,)))
         return out
 
 

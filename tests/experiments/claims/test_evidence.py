@@ -274,8 +274,8 @@ def test_diagnostic_reports_each_seed_at_its_frames():
     assert (c.what, c.outcome, c.detail) == ("x", MISSING, "no run with a metrics.csv here")
 
 
-def check(what, outcome, seeds=1, numbers="n"):
-    return Check(what, outcome, "", seeds=seeds, numbers=numbers)
+def check(what, outcome, seeds=1, numbers="n", rows=()):
+    return Check(what, outcome, "", seeds=seeds, numbers=numbers, rows=rows)
 
 
 def test_most_counts_every_row_and_waits_for_a_missing_one():
@@ -290,11 +290,13 @@ def test_most_counts_every_row_and_waits_for_a_missing_one():
     half = [check("A: a", HOLDS), check("B: b", REVERSED)]  # one of two each way: neither more than half
     assert most("m", half, 1).outcome == UNCLEAR and not most("m", half, 1).chance
     assert most("m", [check("A", REVERSED), check("B", REVERSED), check("C", HOLDS)], 0).outcome == REVERSED
-    gone = most("m", [check("A: a", MISSING), check("B: b", HOLDS), check("C: c", MISSING)], 0)
+    gone = most(
+        "m", [check("a", MISSING, rows=("A",)), check("b", HOLDS, rows=("B",)), check("c", MISSING, rows=("C",))], 0
+    )
     assert (gone.outcome, gone.detail) == (MISSING, "no run yet for A, C")
-    # the row is named by what comes before the first colon of its comparison
-    gone = most("m", [check("GA: SGN: test > EQA", MISSING)], 0)
-    assert (gone.what, gone.detail) == ("m", "no run yet for GA")
+    # the row is the one its comparison reads, not a word of its text
+    gone = most("m", [check("GA: SGN: test > EQA", MISSING, rows=("FiLM",))], 0)
+    assert (gone.what, gone.detail) == ("m", "no run yet for FiLM")
 
 
 def test_status_ranks_contradicted_then_budget_then_untestable():

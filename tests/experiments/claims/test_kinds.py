@@ -288,13 +288,19 @@ def checks(c: Claim, cells: dict) -> list:
 
 
 def named(cs: list) -> list[tuple]:
-    return [(c.what, c.setting, c.metric, c.subject) for c in cs]
+    return [(c.what, c.setting, c.metric, c.subject, c.rows) for c in cs]
 
 
 def test_best_compares_the_row_with_every_other_in_the_table_order():
     cs = checks(claim("best", rows=("Dual-Attention",)), best([run(0.9)]))
     assert named(cs) == [
-        (f"SGN test, Easy · Aux: Dual-Attention > {other}", "Easy · Aux", "SGN test", "Dual-Attention")
+        (
+            f"SGN test, Easy · Aux: Dual-Attention > {other}",
+            "Easy · Aux",
+            "SGN test",
+            "Dual-Attention",
+            ("Dual-Attention", other),
+        )
         for other in ("Text only", "Image only", "Concat", "GA", "FiLM", "PACMAN")
     ]
     assert KINDS["best"].involved(claim("best", rows=("Dual-Attention",)), TABLE2) == set(ROWS)
@@ -303,13 +309,19 @@ def test_best_compares_the_row_with_every_other_in_the_table_order():
 def test_below_level_and_at_least_name_their_rows():
     cells = table({"Text only": [run(0.45)], "GA": [run(0.3)], "Dual-Attention": [run(0.9)]})
     assert named(checks(claim("below", rows=("GA",), than="Text only"), cells)) == [
-        ("SGN test, Easy · Aux: Text only > GA", "Easy · Aux", "SGN test", "Text only")
+        ("SGN test, Easy · Aux: Text only > GA", "Easy · Aux", "SGN test", "Text only", ("Text only", "GA"))
     ]
     assert named(checks(level_claim(), cells)) == [
-        ("SGN test, Easy · Aux: GA level with Dual-Attention", "Easy · Aux", "SGN test", "Dual-Attention")
+        (
+            "SGN test, Easy · Aux: GA level with Dual-Attention",
+            "Easy · Aux",
+            "SGN test",
+            "Dual-Attention",
+            ("Dual-Attention", "GA"),
+        )
     ]
     assert named(checks(at_least_claim(), cells)) == [
-        ("SGN test, Easy · Aux: GA ≥ 0.8", "Easy · Aux", "SGN test", "GA")
+        ("SGN test, Easy · Aux: GA ≥ 0.8", "Easy · Aux", "SGN test", "GA", ("GA",))
     ]
     assert KINDS["below"].involved(claim("below", rows=("GA",), than="Text only"), TABLE2) == {"GA", "Text only"}
     assert KINDS["at_least"].involved(at_least_claim(), TABLE2) == {"GA"}
@@ -321,8 +333,8 @@ def test_aux_helps_makes_one_comparison_per_row_and_difficulty():
     cells[("FiLM", "easy", False, "sgn_test")] = [run(0.6)]
     cs = checks(c, cells)
     assert named(cs) == [
-        ("SGN test, Easy: GA Aux > No Aux", "Easy", "SGN test", "GA Aux"),
-        ("SGN test, Easy: FiLM Aux > No Aux", "Easy", "SGN test", "FiLM Aux"),
+        ("SGN test, Easy: GA Aux > No Aux", "Easy", "SGN test", "GA Aux", ("GA",)),
+        ("SGN test, Easy: FiLM Aux > No Aux", "Easy", "SGN test", "FiLM Aux", ("FiLM",)),
     ]
     assert [x.outcome for x in cs] == ["holds", "unclear"]
     # several subjects: one row unlearned with its other cell missing waits for the cell
@@ -336,7 +348,7 @@ def test_aux_helps_makes_one_comparison_per_row_and_difficulty():
 def test_harder_names_the_setting_and_each_rows_comparison():
     eqa = {row: (0.5 if i < 4 else 0.95) for i, row in enumerate(ROWS)}
     (c,) = checks(harder_claim(), harder_cells(eqa))
-    assert named([c]) == [("Easy · Aux: EQA test below SGN test", "Easy · Aux", "", "most rows")]
+    assert named([c]) == [("Easy · Aux: EQA test below SGN test", "Easy · Aux", "", "most rows", ())]
     assert c.numbers == "in 4 of 7 rows"
     assert c.detail.startswith("Text only: SGN test > EQA test: holds, 0.80 vs 0.50; Image only: SGN test > EQA test")
     assert c.detail.endswith("(0 of 7 rows have not learned their training split)")
@@ -348,7 +360,13 @@ def test_harder_names_the_setting_and_each_rows_comparison():
 def test_faster_names_its_mark():
     cs = checks(faster_claim(), faster_cells([crossing(300_000)], [crossing(500_000)]))
     assert named(cs) == [
-        ("SGN train, Easy · Aux: Dual-Attention leaves chance before GA", "Easy · Aux", "SGN train", "Dual-Attention")
+        (
+            "SGN train, Easy · Aux: Dual-Attention leaves chance before GA",
+            "Easy · Aux",
+            "SGN train",
+            "Dual-Attention",
+            ("Dual-Attention", "GA"),
+        )
     ]
     labels = {
         m: KINDS["faster"].metric_label(replace(faster_claim(), mark=m), "sgn_train") for m in ("chance", "0.5", "0.9")
@@ -364,7 +382,13 @@ def test_faster_names_its_mark():
 
 def test_diagnostic_names_its_key_and_the_reference_it_reads():
     assert named(checks(diag_claim(), diag_cells([run(0.6)]))) == [
-        ("Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5", "Easy · No Aux", "diag/detector_ap", "Dual-Attention")
+        (
+            "Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5",
+            "Easy · No Aux",
+            "diag/detector_ap",
+            "Dual-Attention",
+            ("Dual-Attention",),
+        )
     ]
     c = diag_claim(relative={"aux": True})
     assert KINDS["diagnostic"].wheres(c) == [{"difficulty": "easy", "aux": False}, {"difficulty": "easy", "aux": True}]
@@ -375,7 +399,13 @@ def test_diagnostic_names_its_key_and_the_reference_it_reads():
     (x,) = checks(c, diag_cells([run(0.9)], []))
     assert (x.outcome, x.detail) == ("missing", "no run with a metrics.csv here in Easy · Aux")
     assert named([x]) == [
-        ("Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5", "Easy · No Aux", "diag/detector_ap", "Dual-Attention")
+        (
+            "Easy · No Aux, diag/detector_ap: Dual-Attention ≥ 0.5",
+            "Easy · No Aux",
+            "diag/detector_ap",
+            "Dual-Attention",
+            ("Dual-Attention",),
+        )
     ]
 
 
