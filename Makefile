@@ -53,7 +53,7 @@ MUTATE ?= experiments/claims/evidence experiments/claims/kinds report/claims rep
 # paper's table; report/claims against those and the claims page's, chance's and efficiency's tests (fixtures of
 # results rows: ~45 s a survivor beside a training); report/chance against its own and the paper's table
 MUT_TESTS_RULES = $(wildcard tests/experiments/claims/test_*.py) tests/report/test_claims_on_paper.py
-MUT_TESTS_CLAIMS = $(MUT_TESTS_RULES) tests/report/test_claims.py tests/report/test_claims_page.py tests/report/test_chance.py tests/report/test_efficiency.py
+MUT_TESTS_CLAIMS = $(MUT_TESTS_RULES) tests/report/test_claims.py tests/report/test_claims_gather.py tests/report/test_claims_page.py tests/report/test_chance.py tests/report/test_efficiency.py
 MUT_TESTS_experiments/claims/evidence = $(MUT_TESTS_RULES)
 MUT_TESTS_experiments/claims/kinds = $(MUT_TESTS_RULES)
 MUT_TESTS_report/claims = $(MUT_TESTS_CLAIMS)

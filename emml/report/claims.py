@@ -104,7 +104,7 @@ def _isnan(v) -> bool:
         return True
 
 
-def _wanted(claim, where: dict, cell_metric: str, c) -> bool:
+def _wanted(where: dict, cell_metric: str, c) -> bool:
     return c.metric == cell_metric and all(
         getattr(c, "difficulty" if k == "difficulty" else "aux") == v for k, v in where.items()
     )
@@ -128,7 +128,7 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
     table = plan.table
     results = table_results(table, plan.profile, plan.results_root)
     cells = build_cells(plan, results, paper_numbers(table.name))
-    rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
+    rows = {r["run_name"]: r for r in results.to_dict("records")}
     planned = plan.by_name()  # every run's config and name made once
     run_root = plan.run_root
     chance = chance if chance is not None else blind_prior(plan.profile, plan.results_root)
@@ -139,7 +139,7 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
     for where in kind.wheres(claim):
         for m in claim.metrics:
             cell_metric = m if m in columns else m.replace("_train", "_test")  # a train twin reads the test cell's runs
-            for c in (c for c in cells if _wanted(claim, where, cell_metric, c) and c.row in involved):
+            for c in (c for c in cells if _wanted(where, cell_metric, c) and c.row in involved):
                 per = len(table.cell_columns(c.row, c.metric))
                 found, shown = [], {}
                 for name, value in zip(c.runs, c.values):
@@ -282,7 +282,7 @@ def decide_paper(claim) -> Decision:
     from emml.report.cells import paper_numbers
 
     printed = set(paper_numbers(claim.table)["row"])
-    if not claim.kind_of.one_row and printed:
+    if not claim.kind_of.one_row:
         claim = replace(claim, rows=tuple(r for r in claim.rows if r in printed))
     return judge(claim, paper_evidence(claim), PAPER)
 
@@ -435,7 +435,7 @@ def _tables_with_runs(names: set[str], profile: Profile, results_root) -> set[st
     from emml.report.cells import table_results
 
     out = set()
-    for name in names:
+    for name in sorted(names):
         table = load_table(name)
         if table.placeholder:
             continue

@@ -62,6 +62,14 @@ def test_the_phrase_of_a_setting_with_nothing_run_says_who_has_not_learned():
         "Hard · Aux: 1 comparison not run yet; Hard · No Aux: DA has not learned (SGN test 0.25), 1 comparison not run "
         "yet"
     )
+    # a missing comparison whose higher row is there and learned excuses nothing
+    assert phrase([check("Hard · Aux", MISSING, high=[Score("r", 0, 0.9, 100, 0)])]) == (
+        "Hard · Aux: 1 comparison not run yet"
+    )
+    eqa = replace(unlearned, metric="EQA test", high=[Score("r", 0, 0.5, 100, 0)])
+    assert phrase([unlearned, eqa]) == (
+        "Hard · No Aux: DA has not learned (SGN test 0.25, EQA test 0.50), 2 comparisons not run yet"
+    )
 
 
 def test_every_claim_is_decided_with_the_one_blind_prior_of_the_results_read(monkeypatch):
