@@ -170,7 +170,35 @@ def test_the_paper_evidence_reads_the_claims_rows_with_the_chance_given():
     assert (ga.run, ga.seed, ga.value, ga.episodes, ga.train, ga.bar) == ("the paper's table", 0, 0.24, 500, 0.24, 0.6)
     (blind,) = ev.scores[("Text only", "easy", True, "eqa_test")]
     assert (blind.value, blind.bar) == (0.33, -math.inf)
+    assert ga.frames == 0  # the paper gives no frames per cell
+    (entry,) = [e for e in ev.evidence if e["row"] == "GA" and e["setting"] == "Easy · Aux"]
+    assert entry == {
+        "row": "GA",
+        "setting": "Easy · Aux",
+        "metric": "EQA test",
+        "values": {0: 0.24},
+        "shown": {0: "0.24"},
+        "declared": 1,
+    }
     # a training column: the paper prints none, so each cell is missing
     train = paper_evidence(claims["da-best-hard-train"])
     assert train.scores[("Dual-Attention", "hard", True, "sgn_train")] == []
     assert "Dual-Attention, Hard · Aux, SGN train (no number)" in train.missing
+    (entry,) = [
+        e
+        for e in train.evidence
+        if (e["row"], e["setting"], e["metric"]) == ("Dual-Attention", "Hard · Aux", "SGN train")
+    ]
+    assert (entry["values"], entry["shown"], entry["declared"]) == ({}, {}, 1)
+
+
+def test_every_claim_is_decided_with_each_table_planned_once(monkeypatch):
+    """decide_all plans a table once for all of its claims (each plan names every run of the table)."""
+    import emml.report.claims as claims
+
+    planned = []
+    real = claims.plan_report
+    monkeypatch.setattr(claims, "plan_report", lambda table, *a: planned.append(table) or real(table, *a))
+    decisions = claims.decide_all("quick", "RESULTS-NOWHERE", run_root="RUNS-NOWHERE")
+    assert len(decisions) == len(load_claims())
+    assert sorted(planned) == sorted({c.table for c in load_claims().values()})

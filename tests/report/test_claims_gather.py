@@ -185,7 +185,7 @@ def test_a_curve_that_stops_short_is_read_only_where_its_gap_reaches_the_runs_fr
     curve(folder, at(3, 0.2) + at(5, 0.95)[3:])  # crossed at 0.4, then the file stops
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert scores(ev, "w/o Reward Shaping", "easy", True, "sgn_train")[0][2] == float(frames * 4 // 10)
-    curve(folder, [(frames, {"diag/detector_ap": 0.5})])  # a curve without the claim's metric: missing, named
+    curve(folder, [(frames, {"eval/sgn_test": 0.5})])  # a curve without the metric the claim reads: missing, named
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert ev.missing == [f"{name} (no complete metrics.csv here)"]
 
@@ -215,3 +215,49 @@ def test_a_diagnostic_is_the_last_evaluations_figure_learned_on_either_training_
     edit(results, "table2", name, sgn_train=float("nan"), eqa_train=float("nan"))
     ev = gather(claim, plan_report("table2", PROFILE, results, runs), CHANCE)
     assert scores(ev, "Dual-Attention", "easy", False, "sgn_test")[0][5] < 0
+
+
+def test_a_transfer_rows_number_is_its_instructions_mean_over_all_their_episodes(tmp_path):
+    """Table 4: a row averaging n instructions, each scored on the run's 100 episodes, is a rate of 100 × n."""
+    import pandas as pd
+
+    root = tmp_path / "results"
+    table = load_table("table4")
+    plan = plan_report("table4", PROFILE, root)
+    columns = [c for r in table.rows for c in table.cell_columns(r.label, "sgn_transfer")]
+    rows = [
+        {"run_name": run.name, "model": run.spec.model, "difficulty": run.spec.difficulty, "aux": run.spec.aux,
+         "seed": run.spec.seed, "frames": 1000, "eval_episodes": 100, "sgn_train": 0.9, **dict.fromkeys(columns, 0.9)}
+        for run in plan.runs
+    ]  # fmt: skip
+    (root / "table4").mkdir(parents=True)
+    pd.DataFrame(rows).to_csv(root / "table4" / f"{PROFILE}.csv", index=False)
+    ev = gather(CLAIMS["transfer-easy"], plan, CHANCE)
+    several = next(r for r in table.rows if len(r.instructions) > 1)
+    ((key, found),) = [(k, v) for k, v in ev.scores.items() if k[0] == several.label and k[1] == "easy"]
+    assert {s.episodes for s in found} == {100 * len(several.instructions)}
+
+
+def test_the_tables_with_runs_are_the_active_ones_with_a_finished_run_of_the_profile(tmp_path):
+    """A placeholder table (a file of one's own, named by its path: sorted first) is skipped, not the end of the
+    search; a table with no results CSV has no run."""
+    from emml.config.profiles import resolve_profile
+    from emml.report.claims import _tables_with_runs
+
+    root = tmp_path / "results"
+    fake_results("table2", root, value=da_ahead)
+    placeholder = tmp_path / "tableP.toml"
+    placeholder.write_text('title = "t"\npaper_label = "tab:p"\nstatus = "placeholder"\n')
+    names = {str(placeholder), "table2", "table4"}  # (Table 3 would have runs: its DA Multi-Task is Table 2's)
+    assert _tables_with_runs(names, resolve_profile(PROFILE), root) == {"table2"}
+
+
+def test_a_smoke_page_is_refused_in_the_committed_reports_before_anything_is_decided(monkeypatch):
+    import pytest
+
+    import emml.report.claims as claims
+    from emml.config.paths import project_root
+
+    monkeypatch.setattr(claims, "decide_all", lambda *a: pytest.fail("decided before the folder was checked"))
+    with pytest.raises(ValueError, match="'smoke' profile's numbers are not results"):
+        claims.write_claims("smoke", project_root() / "reports")
