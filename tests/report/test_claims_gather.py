@@ -5,13 +5,29 @@ and field worked out by hand (issue 66: written against the survivors of `make m
 import math
 from dataclasses import replace
 
-from emml.config.profiles import profile_seeds
+import pandas as pd
+import pytest
+
+import emml.report.claims as claims
+from emml.config.paths import project_root
+from emml.config.profiles import profile_seeds, resolve_profile
 from emml.experiments.claims.evidence import LEAVE, Chance, Score
 from emml.experiments.tables import load_table
-from emml.report.claims import BUDGET, PAPER, UNTESTABLE, Evidence, _isnan, decide, decide_paper, gather, judge
+from emml.report.claims import (
+    BUDGET,
+    PAPER,
+    UNTESTABLE,
+    Evidence,
+    _isnan,
+    _tables_with_runs,
+    decide,
+    decide_paper,
+    gather,
+    judge,
+)
 from emml.report.plan import plan_report
 from tests.report.test_claims_page import CLAIMS, da_ahead, edit
-from tests.report.test_efficiency import write_curves
+from tests.report.test_efficiency import write_curves, write_points
 from tests.report.test_tables import PROFILE, fake_results
 
 COLUMNS = ("sgn_train", "sgn_test", "eqa_train", "eqa_test")
@@ -130,13 +146,6 @@ def test_decide_plans_each_table_once_reads_the_chance_given_and_names_its_profi
     assert decide_paper(CLAIMS["da-best-easy-aux"]).profile == PAPER
 
 
-def curve(folder, points: list[tuple[int, dict]]) -> None:
-    """FIXTURE: a metrics.csv with the given keys at the given steps."""
-    folder.mkdir(parents=True, exist_ok=True)
-    lines = ["step,key,value"] + [f"{step},{k},{v}" for step, values in points for k, v in values.items()]
-    (folder / "metrics.csv").write_text("\n".join(lines) + "\n")
-
-
 def speed(tmp_path):
     """FIXTURE: Table 3 and 2 results (every run learned) and curves leaving chance at 0.3 of the frames."""
     results, runs = tmp_path / "results", tmp_path / "runs"
@@ -168,24 +177,26 @@ def test_a_curve_that_stops_short_is_read_only_where_its_gap_reaches_the_runs_fr
     """Evaluations every 0.1 of the frames: a curve one evaluation short still rules out a later crossing (its
     last + its gap reach the run's frames), two short does not; a crossing seen is read however short."""
     results, runs, frames = speed(tmp_path)
-    name = "dual_attention-easy-aux-noshaping-s0-quick"
-    folder = runs / "table3" / name
+    spec = next(s for s in load_table("table3").runs([0]) if s.row == "w/o Reward Shaping" and s.aux)
+    name = spec.run_name(PROFILE)
     claim = CLAIMS["shaping-speed"]
 
-    def at(n: int, value: float) -> list[tuple[int, dict]]:
-        return [(frames * i // 10, {"eval/sgn_train": value}) for i in range(1, n + 1)]
+    def at(n: int, value: float) -> list[str]:
+        return [f"{frames * i // 10},eval/sgn_train,{value}" for i in range(1, n + 1)]
 
-    curve(folder, at(9, 0.2))  # never crossed, one evaluation short
+    write_points(runs, spec, at(9, 0.2))  # never crossed, one evaluation short
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert scores(ev, "w/o Reward Shaping", "easy", True, "sgn_train")[0][2] == math.inf
-    curve(folder, at(8, 0.2))  # two short: a crossing after it cannot be ruled out
+    write_points(runs, spec, at(8, 0.2))  # two short: a crossing after it cannot be ruled out
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert ev.missing == [f"{name} (no complete metrics.csv here)"]
     assert [s[1] for s in scores(ev, "w/o Reward Shaping", "easy", True, "sgn_train")] == [1, 2]  # the next seeds
-    curve(folder, at(3, 0.2) + at(5, 0.95)[3:])  # crossed at 0.4, then the file stops
+    write_points(runs, spec, at(3, 0.2) + at(5, 0.95)[3:])  # crossed at 0.4, then the file stops
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert scores(ev, "w/o Reward Shaping", "easy", True, "sgn_train")[0][2] == float(frames * 4 // 10)
-    curve(folder, [(frames, {"eval/sgn_test": 0.5})])  # a curve without the metric the claim reads: missing, named
+    write_points(
+        runs, spec, [f"{frames},eval/sgn_test,0.5"]
+    )  # a curve without the metric the claim reads: missing, named
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert ev.missing == [f"{name} (no complete metrics.csv here)"]
 
@@ -204,8 +215,7 @@ def test_a_diagnostic_is_the_last_evaluations_figure_learned_on_either_training_
     claim = CLAIMS["attention-on-target"]
     claim = replace(claim, where={"difficulty": "easy", "aux": False}, key="diag/detector_ap")
     for spec in load_table("table2").runs(profile_seeds(PROFILE)):
-        points = [(100, {"diag/detector_ap": 0.1}), (200, {"diag/detector_ap": 0.3}), (300, {"diag/detector_ap": 0.4})]
-        curve(runs / "table2" / spec.run_name(PROFILE), points)
+        write_points(runs, spec, ["100,diag/detector_ap,0.1", "200,diag/detector_ap,0.3", "300,diag/detector_ap,0.4"])
     ev = gather(claim, plan_report("table2", PROFILE, results, runs), CHANCE)
     first = scores(ev, "Dual-Attention", "easy", False, "sgn_test")[0]
     assert first == (name, 0, 0.4, 0, 300, round(0.9 - (0.5 + LEAVE), 6), 0.0, 0)
@@ -219,8 +229,6 @@ def test_a_diagnostic_is_the_last_evaluations_figure_learned_on_either_training_
 
 def test_a_transfer_rows_number_is_its_instructions_mean_over_all_their_episodes(tmp_path):
     """Table 4: a row averaging n instructions, each scored on the run's 100 episodes, is a rate of 100 × n."""
-    import pandas as pd
-
     root = tmp_path / "results"
     table = load_table("table4")
     plan = plan_report("table4", PROFILE, root)
@@ -241,9 +249,6 @@ def test_a_transfer_rows_number_is_its_instructions_mean_over_all_their_episodes
 def test_the_tables_with_runs_are_the_active_ones_with_a_finished_run_of_the_profile(tmp_path):
     """A placeholder table (a file of one's own, named by its path: sorted first) is skipped, not the end of the
     search; a table with no results CSV has no run."""
-    from emml.config.profiles import resolve_profile
-    from emml.report.claims import _tables_with_runs
-
     root = tmp_path / "results"
     fake_results("table2", root, value=da_ahead)
     placeholder = tmp_path / "tableP.toml"
@@ -253,11 +258,6 @@ def test_the_tables_with_runs_are_the_active_ones_with_a_finished_run_of_the_pro
 
 
 def test_a_smoke_page_is_refused_in_the_committed_reports_before_anything_is_decided(monkeypatch):
-    import pytest
-
-    import emml.report.claims as claims
-    from emml.config.paths import project_root
-
     monkeypatch.setattr(claims, "decide_all", lambda *a: pytest.fail("decided before the folder was checked"))
     with pytest.raises(ValueError, match="'smoke' profile's numbers are not results"):
         claims.write_claims("smoke", project_root() / "reports")
