@@ -338,9 +338,9 @@ def _phrase(checks: list[Check]) -> str:
             (c for c in failing if c.chance), failing[0] if failing else None
         )
         if worst is not None:
-            note = f" ({worst.subject} has not learned)" if worst.chance else ""
+            note = f"; {worst.subject} has not learned" if worst.chance else ""
             compared = " ".join(x for x in (worst.metric, worst.what.split(": ", 1)[1]) if x)
-            text += f"; {worst.outcome}: {compared} {worst.numbers}{note}"
+            text += f"; {worst.outcome}: {compared} ({worst.numbers}{note})"
         parts.append(text)
     return "; ".join(parts)
 

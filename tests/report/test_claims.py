@@ -39,16 +39,18 @@ def check(setting, outcome, what="SGN test, Easy · Aux: DA > GA", numbers="0.30
 def test_the_phrase_counts_each_settings_comparisons_and_names_the_one_against():
     held = check("Easy · Aux", HOLDS, "SGN test, Easy · Aux: DA > FiLM", "0.90 vs 0.20")
     assert phrase([held, check("Easy · Aux", REVERSED)]) == (
-        "Easy · Aux: 1 of 2 hold; reversed: SGN test DA > GA 0.30 vs 0.50"
+        "Easy · Aux: 1 of 2 hold; reversed: SGN test DA > GA (0.30 vs 0.50)"
     )
     # a reversal of a row that learned goes before an excused one, which goes before one within the error
     excused = check("Easy · Aux", REVERSED, "SGN test, Easy · Aux: DA > Concat", "0.20 vs 0.40", chance=True)
     unclear = check("Easy · Aux", UNCLEAR, "SGN test, Easy · Aux: DA > PACMAN", "0.50 vs 0.52")
-    assert phrase([unclear, excused, check("Easy · Aux", REVERSED)]).endswith("reversed: SGN test DA > GA 0.30 vs 0.50")
-    assert phrase([unclear, excused]) == (
-        "Easy · Aux: 0 of 2 hold; reversed: SGN test DA > Concat 0.20 vs 0.40 (DA has not learned)"
+    assert phrase([unclear, excused, check("Easy · Aux", REVERSED)]).endswith(
+        "reversed: SGN test DA > GA (0.30 vs 0.50)"
     )
-    assert phrase([held, unclear]) == "Easy · Aux: 1 of 2 hold; unclear: SGN test DA > PACMAN 0.50 vs 0.52"
+    assert phrase([unclear, excused]) == (
+        "Easy · Aux: 0 of 2 hold; reversed: SGN test DA > Concat (0.20 vs 0.40; DA has not learned)"
+    )
+    assert phrase([held, unclear]) == "Easy · Aux: 1 of 2 hold; unclear: SGN test DA > PACMAN (0.50 vs 0.52)"
     assert phrase([held, check("Easy · Aux", MISSING)]) == "Easy · Aux: 1 of 1 hold, 1 not run yet"
 
 
