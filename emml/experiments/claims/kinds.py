@@ -6,6 +6,7 @@ and cells it reads, its rule as the claims page states it, and how it turns the 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 from emml.experiments.claims.evidence import (
     MISSING,
@@ -197,10 +198,13 @@ class Harder(Kind):
         hard, easy = claim.metrics
         out = []
         for d, a in dict.fromkeys((d, a) for (d, a, _) in keys):
-            per_row = [
-                order(
-                    f"{row}: {metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard)
-                ).tag(setting_text(d, a), "", row, (row,))
+            per_row = [  # each row's own comparison, read by `most` (no setting of its own)
+                replace(
+                    order(
+                        f"{row}: {metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard)
+                    ),
+                    rows=(row,),
+                )
                 for row in claim.rows
             ]
             unlearned = sum(not learned(get(row, d, a, easy)) for row in claim.rows if get(row, d, a, easy))

@@ -148,7 +148,7 @@ def test_the_error_is_between_seeds_when_either_row_has_several():
 def test_order_with_an_empty_cell_says_which_and_excuses_only_an_unlearned_higher_row():
     assert order("x", [], []).detail == "no run yet in either cell"
     c = order("x", [], [s(0.4)])
-    assert (c.outcome, c.chance, c.seeds, c.high) == (MISSING, False, 0, [])
+    assert (c.what, c.outcome, c.chance, c.seeds, c.high) == ("x", MISSING, False, 0, [])
     assert c.detail == "no run yet in the higher row's cell"
     hi = [s(0.6)]
     c = order("x", hi, [])
