@@ -194,9 +194,8 @@ def test_a_curve_that_stops_short_is_read_only_where_its_gap_reaches_the_runs_fr
     write_points(runs, spec, at(3, 0.2) + at(5, 0.95)[3:])  # crossed at 0.4, then the file stops
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert scores(ev, "w/o Reward Shaping", "easy", True, "sgn_train")[0][2] == float(frames * 4 // 10)
-    write_points(
-        runs, spec, [f"{frames},eval/sgn_test,0.5"]
-    )  # a curve without the metric the claim reads: missing, named
+    # a curve without the metric the claim reads: missing, named
+    write_points(runs, spec, [f"{frames},eval/sgn_test,0.5"])
     ev = gather(claim, plan_report("table3", PROFILE, results, runs))
     assert ev.missing == [f"{name} (no complete metrics.csv here)"]
 
