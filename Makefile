@@ -78,7 +78,7 @@ mutate/%: setup
 	{ echo "[mutmut]"; echo "source_paths = emml"; echo "only_mutate = emml/$*.py"; echo "also_copy = reproduce"; \
 	  echo "process_isolation = forkserver"; echo "timeout_constant = 30"; echo "pytest_add_cli_args_test_selection ="; \
 	  for t in $(MUT_TESTS_$*); do echo "    $$t"; done; echo "pytest_add_cli_args ="; \
-	  for a in -p no:cacheprovider $(if $(filter $*,$(MUT_CONFTEST)),,--noconftest) $(MUT_DESELECT); do echo "    $$a"; done; \
+	  for a in -p no:cacheprovider -p tests.mutmut_order $(if $(filter $*,$(MUT_CONFTEST)),,--noconftest) $(MUT_DESELECT); do echo "    $$a"; done; \
 	} > $$dir/setup.cfg; \
 	echo "mutmut on emml/$*.py ($$dir/mutmut.log)…"; \
 	cd $$dir && { nice -n 10 $(CURDIR)/$(VENV)/bin/mutmut run $(MUT_NAMES_$*) > mutmut.log 2>&1 || { tail -c 3000 mutmut.log; exit 1; }; } && \

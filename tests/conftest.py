@@ -233,3 +233,14 @@ def placeholder_table(tmp_path, monkeypatch):
     )
     monkeypatch.setattr(emml.report.cells, "PAPER_DIR", folder / "paper")
     return "table9"
+
+
+@pytest.fixture(autouse=True)
+def tables_validated_again():
+    """Each test validates the tables it loads itself (`emml.experiments.tables.LOADED` caches a process's tables by
+    their bytes, not by the profiles or model registry a test may change)."""
+    from emml.experiments.tables import LOADED
+
+    LOADED.clear()
+    yield
+    LOADED.clear()

@@ -190,6 +190,32 @@ def test_a_good_fixture_loads(tmp_path):
     assert len(load_table("tableX", _write(tmp_path, GOOD)).runs([0])) == 1
 
 
+def test_a_table_is_validated_once_per_content_and_read_again_when_its_file_changes(tmp_path, monkeypatch):
+    """`LOADED`: a report reads each table once per claim; the second load of the same bytes is the first's Table,
+    an edited file (the same size, the same second) or an edited table it may borrow from is parsed and checked again,
+    a bad edit fails again."""
+    import emml.experiments.tables as tables
+
+    parsed = []
+    monkeypatch.setattr(tables, "_parse", lambda name, path, data: parsed.append(data["title"]) or data["title"])
+    path = _write(tmp_path, GOOD)
+    assert load_table("tableX", path) == "t" and load_table("tableX", path) == "t" and parsed == ["t"]
+    path.write_text(GOOD.replace('title = "t"', 'title = "u"'))
+    assert load_table("tableX", path) == "u" and parsed == ["t", "u"]
+    other = tmp_path / "tableB.toml"  # a table of reproduce/ it may borrow runs from (`_from_table`)
+    monkeypatch.setattr(tables, "list_tables", lambda: ["tableB"])
+    monkeypatch.setattr(tables, "table_path", lambda name: tmp_path / f"{name}.toml")
+    other.write_text("b = 1")
+    assert load_table("tableX", path) == "u" and parsed == ["t", "u", "u"]
+    assert load_table("tableX", path) == "u" and parsed == ["t", "u", "u"]
+    other.write_text("b = 2")
+    assert load_table("tableX", path) == "u" and parsed == ["t", "u", "u", "u"]
+    path.write_text(GOOD.replace('title = "t"', 'title = "t'))
+    for _ in range(2):
+        with pytest.raises(ValueError, match="not valid TOML"):
+            load_table("tableX", path)
+
+
 @pytest.mark.parametrize(
     "old, new, key, what",
     [

@@ -186,9 +186,16 @@ def test_a_run_without_its_run_dir_falls_back_to_its_registry_config_and_says_so
     assert "1 run from the registry's config (no run dir here: reference rows of the results CSV)" in sources
 
 
-def test_the_aggregate_under_the_table(tmp_path):
+def no_field_figure(monkeypatch) -> None:
+    """The report without its rliable figure: the aggregate tests read the table under the report, and the figure
+    (test_aggregate.py's business) is ~80% of a report's time, which `make mutate` paid per mutant of aggregate.py."""
+    monkeypatch.setattr("emml.report.field.plot_field", lambda *a: [])
+
+
+def test_the_aggregate_under_the_table(tmp_path, monkeypatch):
     """Per setting and metric: IQM per row, the mean difference to Dual-Attention and P(Dual-Attention > row), each
     with its interval when both rows have runs to resample; reproducible to the digit."""
+    no_field_figure(monkeypatch)
 
     def value(spec):  # Dual-Attention ahead of every baseline in every cell
         return 0.5 + 0.1 * spec.seed if spec.row == "Dual-Attention" else 0.1 * (spec.seed + 1)
@@ -216,11 +223,12 @@ def test_the_aggregate_under_the_table(tmp_path):
     assert (tmp_path / "reports" / "table2-quick.md").read_text() == first
 
 
-def test_the_aggregate_compares_like_with_like_issue_49(tmp_path):
+def test_the_aggregate_compares_like_with_like_issue_49(tmp_path, monkeypatch):
     """Issue 49's Table 3: DA Multi-Task has an Aux (0.93) and a No Aux (0.19) cell on seed 0, the ablations Aux only
     (0.89-0.93). The aggregate read 'DA Multi-Task SGN IQM 0.56' beside 0.89-0.93 (both of its cells pooled) and
     P(DA > row) '1.00 [1.00, 1.00] (n=4)' from one cell; now each setting is compared apart, one run per cell has no
     interval, and the difference is shown beside P."""
+    no_field_figure(monkeypatch)
     sgn = {"DA Multi-Task": 0.934, "w/o GA2": 0.91, "w/o Task Indicator": 0.93, "w/o Reward Shaping": 0.90}
     keep = {"dual_attention-easy-noaux-warm400000-s0-quick"}
 
