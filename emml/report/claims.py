@@ -413,6 +413,7 @@ def write_claims(
     ``tables``: the tables whose page `make reports` writes for the profile, which the detail links (None: those
     that have a finished run of the profile)."""
     from emml.experiments.claims import load_claims
+    from emml.report import eqa_test
     from emml.report.claims_page import write_pages
     from emml.report.tables import reports_dir
 
@@ -425,7 +426,8 @@ def write_claims(
     if tables is None:
         tables = _tables_with_runs({c.table for c in claims.values()}, profile, results_root)
     chance = blind_prior(profile, results_root)
-    paths = write_pages(folder, decisions, profile, paper, claims, chance, set(tables))
+    eqa = eqa_test.finding(eqa_test.read_arms(profile, results_root), eqa_test.paper_value(), chance, profile.name)
+    paths = write_pages(folder, decisions, profile, paper, claims, chance, set(tables), eqa)
     return paths[0], decisions
 
 

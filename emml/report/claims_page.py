@@ -193,10 +193,10 @@ def counts(decisions: list) -> dict[str, int]:
     return {s: sum(d.status == s for d in decisions) for s in STATUSES}
 
 
-def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict) -> str:
+def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict, findings: list[str] = ()) -> str:
     """The page a reviewer reads first: a line of counts, the status table (each claim's status, seeds, the paper's
-    numbers and ours on its focus rows, its status on the paper's own table), the figure, and the way to the
-    detail."""
+    numbers and ours on its focus rows, its status on the paper's own table), the figure, ``findings`` (markdown
+    lines: a finding beyond the claims, e.g. emml/report/eqa_test.py's), and the way to the detail."""
     names = page_names(profile.name)
     n = counts(decisions)
     frames = sorted({f for d in decisions for f in d.frames})
@@ -238,6 +238,7 @@ def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict) -> 
         "claim's crossings are frames, in the table only. Seeds: the fewest seeds of the "
         "rows any comparison of the claim read.",
         "",
+        *findings,
         f"Every claim's comparisons, the numbers per row and seed, the decision rules, the runs still missing and the "
         f"campaign step that trains each: [{names['detail']}]({names['detail']}).",
     ]
@@ -368,8 +369,11 @@ def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:
     plt.close(fig)
 
 
-def write_pages(folder, decisions: list, profile: Profile, paper: dict, claims: dict, chance: Chance, tables=None):
-    """The claims page, its detail and its figure into ``folder``; returns their paths, the page first."""
+def write_pages(
+    folder, decisions: list, profile: Profile, paper: dict, claims: dict, chance: Chance, tables=None, findings=()
+):
+    """The claims page (with ``findings``, `quick_page`), its detail and its figure into ``folder``; returns their
+    paths, the page first."""
     from pathlib import Path
 
     from emml.runs.atomic import write_text
@@ -378,7 +382,7 @@ def write_pages(folder, decisions: list, profile: Profile, paper: dict, claims: 
     folder = Path(folder)
     names = page_names(profile.name)
     page, detail = folder / names["page"], folder / names["detail"]
-    write_text(page, quick_page(decisions, profile, paper, claims), then=RERUN)  # whole or not at all
+    write_text(page, quick_page(decisions, profile, paper, claims, findings), then=RERUN)  # whole or not at all
     write_text(detail, detail_page(decisions, profile, paper, claims, chance, tables), then=RERUN)
     figs = [folder / names["png"], folder / names["pdf"]]
     figure(decisions, paper, claims, figs)

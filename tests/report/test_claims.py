@@ -104,6 +104,7 @@ def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, m
     page in a folder made for it (`out`, parents and all) as claims-<profile>.md."""
     import emml.report.claims as claims
     import emml.report.claims_page as page
+    import emml.report.eqa_test as eqa
 
     prior, got = Chance({("easy", "eqa_test"): 0.4}), {}
     monkeypatch.setattr(claims, "blind_prior", lambda profile, root=None: prior if root == "RESULTS" else None)
@@ -118,14 +119,18 @@ def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, m
         return [folder / "claims-quick.md", folder / "claims-quick-detail.md"]
 
     monkeypatch.setattr(page, "write_pages", pages)
+    monkeypatch.setattr(eqa, "read_arms", lambda profile, root: got.setdefault("arms", (profile.name, root)) and [])
+    monkeypatch.setattr(eqa, "finding", lambda arms, paper, chance, profile: ["EQA", arms, paper, chance, profile])
     out = tmp_path / "a" / "b"
     path, decisions = claims.write_claims("quick", out, "RESULTS", {"k": "v"}, "RUNS")
     assert path == out / "claims-quick.md" and path.read_text() == "PAGE\n" and decisions == ["decided"]
     assert got["decide_all"] == (resolve_profile("quick"), "RESULTS", {"k": "v"}, "RUNS")
     ids = list(load_claims())
-    folder, decided, profile, paper, loaded, chance, tables = got["pages"]
+    folder, decided, profile, paper, loaded, chance, tables, findings = got["pages"]
     assert (folder, decided, profile.name, paper) == (out, ["decided"], "quick", {i: f"paper {i}" for i in ids})
     assert list(loaded) == ids and chance == prior and tables == {"table2"}
+    # issue 62's finding, from the results given and the same blind prior, at the paper's 0.58
+    assert got["arms"] == ("quick", "RESULTS") and findings == ["EQA", [], 0.58, prior, "quick"]
 
 
 def test_the_campaign_costs_each_unfinished_run_by_its_step(monkeypatch):
