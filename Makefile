@@ -44,7 +44,8 @@ docs: setup
 	$(VENV)/bin/mkdocs build --strict
 
 # Mutation testing (issue 66; docs/testing.md): mutmut over the modules that decide numbers, each against the tests
-# that read it, then the score per module. Not in CI: ~1 h on 2 idle cores for all of them, hours beside a training.
+# that read it, then the score per module. Not in CI: 24 min on 2 idle cores for all of them (docs/testing.md), hours
+# beside a training.
 # Each module is mutated in its own copy of the checkout (scratch/mutate/<module>/: mutmut rewrites the files it
 # mutates; the checkout is never touched), at nice 10. `make mutate MUTATE=rl/ppo` runs one; the survivors are then
 # listed by `cd scratch/mutate/rl-ppo && ../../../.venv/bin/mutmut results` (`mutmut show NAME`: the diff).

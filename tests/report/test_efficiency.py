@@ -217,12 +217,13 @@ def test_a_tables_crossings_read_the_profiles_blind_prior_by_default(tmp_path, m
     asked = []
 
     def prior(profile, results_root=None):
-        asked.append(profile)
+        asked.append((profile.name, results_root))
         return Chance({("easy", "sgn_test"): 0.5})
 
     monkeypatch.setattr(emml.report.chance, "blind_prior", prior)
     points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
     write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points])
-    (eff,) = table_efficiency(plan_report("table3", PROFILE, run_root=tmp_path), [W_O_SA.run_name(PROFILE)])
-    assert [p.name for p in asked] == [PROFILE]
+    plan = plan_report("table3", PROFILE, results_root=tmp_path / "results", run_root=tmp_path)
+    (eff,) = table_efficiency(plan, [W_O_SA.run_name(PROFILE)])
+    assert asked == [(PROFILE, tmp_path / "results")]  # the plan's results, not the profile's default folder
     assert eff.crossings["sgn_test"]["chance"] == 299_008  # above 0.6, not the uniform 0.3
