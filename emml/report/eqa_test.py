@@ -46,17 +46,11 @@ def finding(arms: list[Arm], paper: float, chance: Chance, profile: str) -> list
         verdict = f"EQA test reproduced at the {profile} budget under the paper's stated model"
     elif check.outcome != REVERSED:
         verdict = f"EQA test within the error of the paper's at the {profile} budget: neither reproduced nor refuted"
-    elif clear:
-        verdict = (
-            f"EQA test below the paper's at the {profile} budget under the paper's stated model; "
-            + ", ".join(f"'{a}'" for a in clear)
-            + " clears the blind prior: its seeds 1 and 2 before anything changes"
-        )
-    elif waiting:
-        verdict = (
-            f"EQA test below the paper's at the {profile} budget under the paper's stated model; "
-            + ", ".join(f"'{a}'" for a in waiting)
-            + " still to run"
+    elif clear or waiting:  # below the paper, and an arm may still move it
+        verdict = f"EQA test below the paper's at the {profile} budget under the paper's stated model; " + (
+            ", ".join(f"'{a}'" for a in clear) + " clears the blind prior: its seeds 1 and 2 before anything changes"
+            if clear
+            else ", ".join(f"'{a}'" for a in waiting) + " still to run"
         )
     else:
         verdict = f"EQA test not reproduced at the {profile} budget under the paper's stated model"
@@ -90,7 +84,7 @@ def finding(arms: list[Arm], paper: float, chance: Chance, profile: str) -> list
 
 def read_arms(profile: Profile, results_root: str | Path | None = None) -> list[Arm]:
     """The experiment's rows with their finished runs' EQA test under ``profile`` (each run a Score of its
-    episodes, with its EQA train and the learning bar of the uniform chance)."""
+    episodes, with its EQA train; no learning bar: the finding reads means, not whether a row learned)."""
     from emml.report.cells import build_cells, paper_numbers, table_results
     from emml.report.plan import plan_report
 
@@ -111,8 +105,10 @@ def read_arms(profile: Profile, results_root: str | Path | None = None) -> list[
 
 
 def _train(row: dict) -> float | None:
+    import pandas as pd
+
     value = row.get("eqa_train")
-    return None if value is None or value != value else float(value)  # NaN: a row without its training score
+    return None if pd.isna(value) else float(value)  # absent or NaN: a row without its training score
 
 
 def paper_value() -> float:
