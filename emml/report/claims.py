@@ -339,7 +339,7 @@ def _phrase(checks: list[Check]) -> str:
         )
         if worst is not None:
             note = f"; {worst.subject} has not learned" if worst.chance else ""
-            compared = " ".join(x for x in (worst.metric, worst.what.split(": ", 1)[1]) if x)
+            compared = " ".join(x for x in (worst.metric, worst.compared) if x)
             text += f"; {worst.outcome}: {compared} ({worst.numbers}{note})"
         parts.append(text)
     return "; ".join(parts)

@@ -39,7 +39,7 @@ def finding(arms: list[Arm], paper: float, chance: Chance, profile: str) -> list
     head = ["## EQA test under the paper's stated model (issue 62)", ""]
     if not stated.scores:
         return [*head, f"Waiting for Table 2's Dual-Attention, Doom Easy, Aux at the '{profile}' profile.", ""]
-    check = threshold("Dual-Attention EQA test against the paper's", stated.scores, paper)
+    check = threshold("EQA test, Easy · Aux", "Dual-Attention ≥ the paper's", stated.scores, paper)
     clear = [a.label for a in others if a.scores and mean(a.scores) > prior]  # a choice that might move it
     waiting = [a.label for a in others if not a.scores]
     if check.outcome == HOLDS:

@@ -33,7 +33,8 @@ def test_each_missing_run_is_costed_under_its_own_table():
 
 
 def check(setting, outcome, what="SGN test, Easy · Aux: DA > GA", numbers="0.30 vs 0.50", chance=False, high=()):
-    return Check(what, outcome, "", chance, 1, list(high), numbers).tag(setting, "SGN test", "DA", ("DA",))
+    where, compared = what.split(": ", 1)  # the fixture's text as the page prints it: cells, then the comparison
+    return Check(where, compared, outcome, "", chance, 1, list(high), numbers).tag(setting, "SGN test", "DA", ("DA",))
 
 
 def test_the_phrase_counts_each_settings_comparisons_and_names_the_one_against():

@@ -254,7 +254,7 @@ def test_a_claim_not_supported_shows_the_rows_of_the_comparison_against_it(tmp_p
     from emml.report.claims_page import against, cells, focus_rows
 
     def checks(*triples):
-        return [Check(what, outcome, "", rows=rows) for what, outcome, rows in triples]
+        return [Check(*what.split(": ", 1), outcome, "", rows=rows) for what, outcome, rows in triples]
 
     evidence = [{"row": r} for r in ("Dual-Attention", "Concat", "GA", "Go to the red <known_object>")]
     d = decision(CONTRADICTED, 1, evidence=evidence, checks=checks(

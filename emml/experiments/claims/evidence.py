@@ -119,8 +119,10 @@ def learned(scores: list[Score]) -> bool:
 class Check:
     """One comparison a claim makes: two cells, or a cell against a threshold."""
 
-    what: str
-    """E.g. 'SGN test, Easy · Aux: Dual-Attention > Text only'."""
+    where: str
+    """The cells read, e.g. 'SGN test, Easy · Aux' (a row's name for one of 'harder''s per-row comparisons)."""
+    compared: str
+    """The comparison itself, e.g. 'Dual-Attention > Text only' (the claims' phrase names it after the metric)."""
     outcome: str
     """HOLDS, REVERSED (the opposite holds by the same rule), UNCLEAR or MISSING."""
     detail: str
@@ -139,6 +141,11 @@ class Check:
     """The row the claim puts higher."""
     rows: tuple[str, ...] = ()
     """The table rows the comparison reads (the page shows them when it decides against the claim)."""
+
+    @property
+    def what(self) -> str:
+        """E.g. 'SGN test, Easy · Aux: Dual-Attention > Text only'."""
+        return f"{self.where}: {self.compared}"
 
     def tag(self, setting: str, metric: str, subject: str, rows: tuple[str, ...]) -> Check:
         """The check with its setting, metric label, higher row and the rows it reads named (the page groups by
@@ -173,22 +180,24 @@ def _error_text(*rows: list[Score]) -> str:
     return "between seeds and binomial" if any(len(r) > 1 for r in rows) else "binomial, 1 seed"
 
 
-def _missing(what: str, hi: list[Score], lo: list[Score]) -> Check:
+def _missing(where: str, compared: str, hi: list[Score], lo: list[Score]) -> Check:
     """A comparison with a cell still empty; `chance` when the row the claim puts higher is there and unlearned."""
     if not hi:
-        return Check(what, MISSING, "no run yet in " + ("either cell" if not lo else "the higher row's cell"))
+        return Check(
+            where, compared, MISSING, "no run yet in " + ("either cell" if not lo else "the higher row's cell")
+        )
     unlearned = not learned(hi)
     detail = f"no run yet in the lower row's cell; the higher row {seeds_text(hi)}"
     if unlearned:
         detail += ", which has not learned its training split"
-    return Check(what, MISSING, detail, unlearned, len(hi), hi)
+    return Check(where, compared, MISSING, detail, unlearned, len(hi), hi)
 
 
-def order(what: str, hi: list[Score], lo: list[Score]) -> Check:
+def order(where: str, compared: str, hi: list[Score], lo: list[Score]) -> Check:
     """Whether `hi` is above `lo` (HOLDS), below (REVERSED) or neither: the gap of the means over every seed each
     row has, against Z standard errors (`gap_error`)."""
     if not hi or not lo:
-        return _missing(what, hi, lo)
+        return _missing(where, compared, hi, lo)
     gap, se = mean(hi) - mean(lo), gap_error(hi, lo)
     outcome = HOLDS if gap > Z * se else REVERSED if -gap > Z * se else UNCLEAR
     unlearned = not learned(hi)
@@ -197,14 +206,16 @@ def order(what: str, hi: list[Score], lo: list[Score]) -> Check:
     )
     if unlearned:
         detail += "; the higher row has not learned its training split"
-    return Check(what, outcome, detail, unlearned, min(len(hi), len(lo)), hi, f"{mean(hi):.2f} vs {mean(lo):.2f}")
+    return Check(
+        where, compared, outcome, detail, unlearned, min(len(hi), len(lo)), hi, f"{mean(hi):.2f} vs {mean(lo):.2f}"
+    )
 
 
-def level(what: str, row: list[Score], ref: list[Score], margin: float) -> Check:
+def level(where: str, compared: str, row: list[Score], ref: list[Score], margin: float) -> Check:
     """Whether `row` is within `margin` of `ref` (HOLDS), beyond it by more than Z standard errors (REVERSED) or
     neither; two unlearned rows are level trivially, so an unlearned reference never holds."""
     if not row or not ref:
-        return _missing(what, ref, row)
+        return _missing(where, compared, ref, row)
     diff, se = mean(row) - mean(ref), gap_error(row, ref)
     unlearned = not learned(ref)
     if abs(diff) <= margin and not unlearned:
@@ -219,21 +230,23 @@ def level(what: str, row: list[Score], ref: list[Score], margin: float) -> Check
     )
     if unlearned:
         detail += "; the reference row has not learned its training split"
-    return Check(what, outcome, detail, unlearned, min(len(row), len(ref)), ref, f"{mean(row):.2f} vs {mean(ref):.2f}")
+    return Check(
+        where, compared, outcome, detail, unlearned, min(len(row), len(ref)), ref, f"{mean(row):.2f} vs {mean(ref):.2f}"
+    )
 
 
-def threshold(what: str, row: list[Score], value: float) -> Check:
+def threshold(where: str, compared: str, row: list[Score], value: float) -> Check:
     """Whether the row's mean is at or above `value` (HOLDS), below it by more than Z standard errors (REVERSED) or
     neither."""
     if not row:
-        return Check(what, MISSING, "no run yet")
+        return Check(where, compared, MISSING, "no run yet")
     m, se = mean(row), math.sqrt(variance_of_mean(row))
     outcome = HOLDS if m >= value else REVERSED if value - m > Z * se else UNCLEAR
     unlearned = not learned(row)
     detail = f"{seeds_text(row)}: mean {m:.3f} against {value:g}, standard error {se:.3f} ({_error_text(row)})"
     if unlearned:
         detail += "; the row has not learned its training split"
-    return Check(what, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:g}")
+    return Check(where, compared, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:g}")
 
 
 def frames_text(frames: int | None, last: int) -> str:
@@ -253,19 +266,19 @@ def _median_frames(scores: list[Score]) -> str:
     return frames_text(None if math.isinf(v) else int(v), max(s.frames for s in scores))
 
 
-def faster(what: str, fast: list[Score], slow: list[Score]) -> Check:
+def faster(where: str, compared: str, fast: list[Score], slow: list[Score]) -> Check:
     """Whether `fast` crosses its mark more than one evaluation gap before `slow` in every seed both have (HOLDS),
     `slow` first by as much in every seed (REVERSED) or neither. A value is the frames at the crossing (inf: never by
     the run's last evaluation); the gap is the larger of the two runs' largest gaps between evaluations (a crossing
     is known to that resolution). `chance`: the faster row never crosses in the seeds compared."""
     if not fast or not slow:
         which = "either cell" if not fast and not slow else "one cell"
-        return Check(what, MISSING, f"no run with a metrics.csv here in {which}")
+        return Check(where, compared, MISSING, f"no run with a metrics.csv here in {which}")
     common = sorted({s.seed for s in fast} & {s.seed for s in slow})
     f = [s for s in fast if s.seed in common]
     s_ = [s for s in slow if s.seed in common]
     if not f:
-        return Check(what, MISSING, "no seed in common")
+        return Check(where, compared, MISSING, "no seed in common")
     apart = [max(a.every, b.every) for a, b in zip(f, s_)]
     if all(b.value - a.value > gap for a, b, gap in zip(f, s_, apart)):
         outcome = HOLDS
@@ -277,14 +290,14 @@ def faster(what: str, fast: list[Score], slow: list[Score]) -> Check:
     detail = f"{frames_list(f)} against {frames_list(s_)} (evaluations up to {max(apart):,} frames apart)"
     if never:
         detail += "; the faster row never crosses by its last evaluation"
-    return Check(what, outcome, detail, never, len(f), fast, f"{_median_frames(f)} vs {_median_frames(s_)}")
+    return Check(where, compared, outcome, detail, never, len(f), fast, f"{_median_frames(f)} vs {_median_frames(s_)}")
 
 
-def diagnostic(what: str, row: list[Score], value: float) -> Check:
+def diagnostic(where: str, compared: str, row: list[Score], value: float) -> Check:
     """Whether the row's mean diagnostic is at or above `value` (HOLDS), every seed below (REVERSED) or neither;
     `chance`: the row has not learned its training split (its figure says nothing yet)."""
     if not row:
-        return Check(what, MISSING, "no run with a metrics.csv here")
+        return Check(where, compared, MISSING, "no run with a metrics.csv here")
     m = mean(row)
     outcome = HOLDS if m >= value else REVERSED if all(s.value < value for s in row) else UNCLEAR
     unlearned = not learned(row)
@@ -292,24 +305,33 @@ def diagnostic(what: str, row: list[Score], value: float) -> Check:
     detail += f" against {value:.3g}"
     if unlearned:
         detail += "; the run has not learned its training split"
-    return Check(what, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:.2g}")
+    return Check(where, compared, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:.2g}")
 
 
-def most(what: str, checks: list[Check], unlearned_rows: int) -> Check:
+def most(where: str, compared: str, checks: list[Check], unlearned_rows: int) -> Check:
     """'harder': the rows' own comparisons (`order`, one per row) taken together, every row counted (the paper's
     "most models" counts every row): HOLDS when more than half hold, REVERSED when more than half are reversed,
     MISSING while a row has no run; `chance` when more than half of the rows have not learned their training split
     (`unlearned_rows` of them)."""
     absent = [row for c in checks if c.outcome == MISSING for row in c.rows]
     if absent:
-        return Check(what, MISSING, f"no run yet for {', '.join(absent)}")
+        return Check(where, compared, MISSING, f"no run yet for {', '.join(absent)}")
     held = sum(c.outcome == HOLDS for c in checks)
     reversed_ = sum(c.outcome == REVERSED for c in checks)
     outcome = HOLDS if held * 2 > len(checks) else REVERSED if reversed_ * 2 > len(checks) else UNCLEAR
     detail = "; ".join(f"{c.what}: {c.outcome}, {c.numbers}" for c in checks)
     detail += f" ({unlearned_rows} of {len(checks)} rows have not learned their training split)"
     seeds = min(c.seeds for c in checks)
-    return Check(what, outcome, detail, unlearned_rows * 2 > len(checks), seeds, [], f"in {held} of {len(checks)} rows")
+    return Check(
+        where,
+        compared,
+        outcome,
+        detail,
+        unlearned_rows * 2 > len(checks),
+        seeds,
+        [],
+        f"in {held} of {len(checks)} rows",
+    )
 
 
 def status(checks: list[Check], single_subject: bool = True) -> str:

@@ -110,7 +110,7 @@ class Best(Kind):
     def compare(self, claim, table, d, a, m, get):
         top = claim.rows[0]
         return [
-            (order(f"{_where(d, a, m)}: {top} > {other}", get(top, d, a, m), get(other, d, a, m)), (top, other))
+            (order(_where(d, a, m), f"{top} > {other}", get(top, d, a, m), get(other, d, a, m)), (top, other))
             for other in (r.label for r in table.rows if r.label != top)
         ]
 
@@ -123,7 +123,7 @@ class Below(Kind):
     def compare(self, claim, table, d, a, m, get):
         return [
             (
-                order(f"{_where(d, a, m)}: {claim.than} > {row}", get(claim.than, d, a, m), get(row, d, a, m)),
+                order(_where(d, a, m), f"{claim.than} > {row}", get(claim.than, d, a, m), get(row, d, a, m)),
                 (claim.than, row),
             )
             for row in claim.rows
@@ -142,7 +142,8 @@ class Level(Kind):
         return [
             (
                 level(
-                    f"{_where(d, a, m)}: {row} level with {claim.than}",
+                    _where(d, a, m),
+                    f"{row} level with {claim.than}",
                     get(row, d, a, m),
                     get(claim.than, d, a, m),
                     claim.margin,
@@ -160,7 +161,7 @@ class AtLeast(Kind):
 
     def compare(self, claim, table, d, a, m, get):
         return [
-            (threshold(f"{_where(d, a, m)}: {row} ≥ {claim.value:g}", get(row, d, a, m), claim.value), (row,))
+            (threshold(_where(d, a, m), f"{row} ≥ {claim.value:g}", get(row, d, a, m), claim.value), (row,))
             for row in claim.rows
         ]
 
@@ -174,8 +175,8 @@ class AuxHelps(Kind):
         out = []
         for row in claim.rows:
             for d, m in dict.fromkeys((d, m) for (d, _, m) in keys):
-                what = f"{metric_text(m)}, {setting_text(d, None)}: {row} Aux > No Aux"
-                check = order(what, get(row, d, True, m), get(row, d, False, m))
+                where = f"{metric_text(m)}, {setting_text(d, None)}"
+                check = order(where, f"{row} Aux > No Aux", get(row, d, True, m), get(row, d, False, m))
                 out.append(check.tag(setting_text(d, None), metric_text(m), f"{row} Aux", (row,)))
         return out
 
@@ -201,15 +202,15 @@ class Harder(Kind):
             per_row = [  # each row's own comparison, read by `most` (no setting of its own)
                 replace(
                     order(
-                        f"{row}: {metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard)
+                        row, f"{metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard)
                     ),
                     rows=(row,),
                 )
                 for row in claim.rows
             ]
             unlearned = sum(not learned(get(row, d, a, easy)) for row in claim.rows if get(row, d, a, easy))
-            check = most(f"{setting_text(d, a)}: {metric_text(hard)} below {metric_text(easy)}", per_row, unlearned)
-            out.append(check.tag(setting_text(d, a), "", "most rows", ()))  # its `what` names both metrics
+            check = most(setting_text(d, a), f"{metric_text(hard)} below {metric_text(easy)}", per_row, unlearned)
+            out.append(check.tag(setting_text(d, a), "", "most rows", ()))  # its comparison names both metrics
         return out
 
 
@@ -233,7 +234,8 @@ class Faster(Kind):
         return [
             (
                 faster(
-                    f"{_where(d, a, m)}: {claim.than} {MARK_LABELS[claim.mark]} before {row}",
+                    _where(d, a, m),
+                    f"{claim.than} {MARK_LABELS[claim.mark]} before {row}",
                     get(claim.than, d, a, m),
                     get(row, d, a, m),
                 ),
@@ -266,21 +268,24 @@ class Diagnostic(Kind):
             if any(claim.where.get(k) not in (None, v) for k, v in (("difficulty", d), ("aux", a))):
                 continue  # a reference setting's cell (`relative`): read by the comparison below
             for row in claim.rows:
-                value, what = claim.value, f"{setting_text(d, a)}, {claim.key}: {row} ≥ {claim.value:g}"
+                where, value, compared = f"{setting_text(d, a)}, {claim.key}", claim.value, f"{row} ≥ {claim.value:g}"
                 if claim.relative:
                     ref = get(row, claim.relative.get("difficulty", d), claim.relative.get("aux", a), m)
                     ref_text = setting_text(claim.relative.get("difficulty", d), claim.relative.get("aux", a))
                     if not ref:
                         out.append(
-                            Check(what, MISSING, f"no run with a metrics.csv here in {ref_text}").tag(
+                            Check(where, compared, MISSING, f"no run with a metrics.csv here in {ref_text}").tag(
                                 setting_text(d, a), claim.key, row, (row,)
                             )
                         )
                         continue
                     value = claim.value * mean(ref)
-                    what = f"{setting_text(d, a)}, {claim.key}: {row} ≥ {claim.value:g} × its {ref_text} run's"
-                    what += f" {mean(ref):.2f}"
-                out.append(diagnostic(what, get(row, d, a, m), value).tag(setting_text(d, a), claim.key, row, (row,)))
+                    compared = f"{row} ≥ {claim.value:g} × its {ref_text} run's {mean(ref):.2f}"
+                out.append(
+                    diagnostic(where, compared, get(row, d, a, m), value).tag(
+                        setting_text(d, a), claim.key, row, (row,)
+                    )
+                )
         return out
 
 
