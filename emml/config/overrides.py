@@ -43,13 +43,16 @@ def apply_overrides(cfg, overrides: dict, source: str = "--set"):
     return cfg
 
 
+_PLAIN = {kind: pydantic.TypeAdapter(kind) for kind in (bool, int, float, str)}
+"""pydantic's validators of the types a value set by name is held to (its field's current value's)."""
+
+
 def _typed(value, current, where: str):
     """``value`` held to the type of the field's current value by pydantic in strict mode (an int is accepted for a
     float, and made one); a None, list, table or config is left to `validate`."""
-    kind = type(current)
-    if kind not in (bool, int, float, str):
+    if type(current) not in _PLAIN:
         return value
     try:
-        return pydantic.TypeAdapter(kind).validate_python(value, strict=True)
+        return _PLAIN[type(current)].validate_python(value, strict=True)
     except pydantic.ValidationError:
-        raise ValueError(f"{where}: expected {WORDS[kind]}, got {value!r}") from None
+        raise ValueError(f"{where}: expected {WORDS[type(current)]}, got {value!r}") from None
