@@ -14,6 +14,7 @@ import ast
 import os
 import subprocess
 import sys
+import typing
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,6 +42,20 @@ def _cell(text: str) -> str:
     return " ".join(text.split()).replace("|", r"\|")
 
 
+def _code(text: str) -> str:
+    """``text`` as a code span (doubled backticks around one that holds a backtick)."""
+    return f"`` {text} ``" if "`" in text else f"`{text}`"
+
+
+def _named_types() -> str:
+    """The named types the fields are declared with (emml/config/checks.py) and what each accepts."""
+    sys.path.insert(0, str(ROOT))
+    from emml.config import checks
+
+    named = [(name, value) for name, value in vars(checks).items() if typing.get_origin(value) is typing.Annotated]
+    return "; ".join(f"`{name}`: {checks.allowed(value)}" for name, value in named)
+
+
 def config_page(path: Path) -> None:
     """The config reference: a section per dataclass of the config modules (`CONFIGS`), a row per field."""
     nodes = [node for module in CONFIGS for node in ast.parse(module.read_text()).body]
@@ -52,6 +67,9 @@ def config_page(path: Path) -> None:
         "a table row with "
         "`overrides`, a profile in `reproduce/profiles.toml`; every value is checked before any compute, naming the "
         "field. Which choices are the paper's and which are ours: [Fidelity](../fidelity.md).",
+        "",
+        "A field's type is its declaration, which the check holds its value to (pydantic, strict: an integer is a "
+        f"number too); `Literal[...]` lists its choices. The named types (emml/config/checks.py): {_named_types()}.",
     ]
     for node in nodes:
         if not isinstance(node, ast.ClassDef) or not any(
@@ -82,7 +100,8 @@ def config_page(path: Path) -> None:
             nxt = body[i + 1] if i + 1 < len(body) else None
             doc = nxt.value if isinstance(nxt, ast.Expr) else None
             text = doc.value if isinstance(doc, ast.Constant) and isinstance(doc.value, str) else ""
-            lines.append(f"| `{stmt.target.id}` | `{_cell(annotation)}` | `{_cell(default)}` | {_cell(text) or '—'} |")
+            cells = f"{_code(_cell(annotation))} | `{_cell(default)}`"
+            lines.append(f"| `{stmt.target.id}` | {cells} | {_cell(text) or '—'} |")
     path.write_text("\n".join(lines) + "\n")
 
 

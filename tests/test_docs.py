@@ -46,7 +46,7 @@ def test_the_docs_site_builds_strictly_with_its_generated_references(tmp_path):
     config = (tmp_path / "docs" / "reference" / "config.md").read_text()
     for section in ("## TrainConfig", "## DoomConfig", "## PPOConfig", "## ModelConfig"):
         assert section in config
-    assert "| `max_steps` | `int` | `210` | Episode limit in agent steps" in config  # a field's own docstring
+    assert "| `max_steps` | `Positive` | `210` | Episode limit in agent steps" in config  # a field's own docstring
     build = _strict_build(tmp_path)
     assert build.returncode == 0, build.stderr[-3000:]
     assert (tmp_path / "site" / "reference" / "cli" / "index.html").is_file()

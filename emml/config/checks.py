@@ -1,10 +1,19 @@
 """The value checks every config shares: each fails with a ValueError naming the field and what it accepts, before
-any compute. A leaf: it imports nothing of `emml`."""
+any compute. A config declares what each field accepts on its annotation (a type below, a `Literal` of its choices,
+bool, int, float, str) and `check` holds the values to it with pydantic. A leaf: it imports nothing of `emml`."""
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import re
+import types
+import typing
 from dataclasses import fields
+from typing import Annotated, Literal
+
+import pydantic
+from pydantic import Field
 
 PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 """A table or profile name: it becomes a folder or file name, so no path separator, no leading dot."""
@@ -22,20 +31,69 @@ training (50M frames, Doom Hard) and about a month at the fastest rate measured 
 on an H100, docs/throughput.md). A larger count is a typo (an extra zero, 1e20), and beyond 2^63 a step no longer
 fits MLflow's metric steps (issue 65: 10^20 was accepted and its run named 'warm1e+20')."""
 
+# What a field accepts, declared on its annotation: pydantic's constraints, and the words an error gives them.
+Positive = Annotated[int, Field(ge=1), "a positive integer (>= 1)"]
+Count = Annotated[int, Field(ge=0), ">= 0"]
+Frames = Annotated[int, Field(ge=0, le=MAX_FRAMES), f"a whole number of frames from 0 to {MAX_FRAMES:,} (MAX_FRAMES)"]
+PlainName = Annotated[
+    str,
+    Field(pattern=rf"^{PLAIN_NAME.pattern}$"),
+    "a plain name: letters, digits, '_', '.' or '-', starting with a letter or digit (no path separators)",
+]
+Words = Annotated[typing.Sequence[str], "a list of words"]
+Sentences = Annotated[typing.Sequence[str], "a list of sentences"]
+Fraction = Annotated[float, Field(ge=0, le=1), "a number in [0, 1]"]
+PositiveNumber = Annotated[float, Field(gt=0, allow_inf_nan=False), "a finite number > 0"]
+Weight = Annotated[float, Field(ge=0, allow_inf_nan=False), "a finite number >= 0"]
 
-def check_frames(name: str, value) -> None:
-    """Raise a ValueError naming ``name`` unless ``value`` is a whole number of frames from 0 to MAX_FRAMES."""
-    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_FRAMES:
-        raise ValueError(f"{name}={value!r} must be a whole number of frames from 0 to {MAX_FRAMES:,} (MAX_FRAMES)")
+WORDS = {bool: "true or false", int: "an integer", float: "a number", str: "a string", type(None): "None"}
+"""How an error names the values of a plain type (an int is a number too)."""
 
 
-def check_at_least(config, names: tuple[str, ...], minimum: int) -> None:
-    """Raise a ValueError naming the first of ``config``'s integer fields ``names`` below ``minimum`` (1: a positive
-    integer, 0: >= 0)."""
-    for name in names:
+def allowed(hint) -> str:
+    """What a declared type accepts, in words: a named type's own, a Literal's values, each type of a union."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is Annotated:
+        said = [m for m in hint.__metadata__ if isinstance(m, str)]
+        return said[-1] if said else allowed(args[0])
+    if origin is Literal:
+        return "one of " + ", ".join(map(repr, args))
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(map(allowed, args))
+    return WORDS.get(hint, f"a {getattr(hint, '__name__', hint)}")
+
+
+@functools.cache
+def _declared(cls: type) -> dict:
+    """``cls``'s fields by name: (annotation, its pydantic validator). None when an annotation does not resolve, no
+    validator for a type pydantic does not know (a plugin's options: their own ``check()`` checks them)."""
+    try:
+        hints = typing.get_type_hints(cls, include_extras=True)
+    except (NameError, TypeError):
+        return {}
+    declared = {}
+    for f in fields(cls):
+        with contextlib.suppress(pydantic.PydanticSchemaGenerationError):
+            declared[f.name] = (hints[f.name], pydantic.TypeAdapter(hints[f.name]))
+    return declared
+
+
+def check(config, label: str = "", names=None):
+    """``config`` (a config dataclass), each field's value (only ``names``' when given) held to its declared type by
+    pydantic in strict mode: a value is neither converted (an int is a number) nor replaced. A ValueError names the
+    first that is not, with its value and what the type accepts ('seed=-1 must be >= 0'; a Literal's choices as
+    `check_choice` names them)."""
+    for name, (hint, adapter) in _declared(type(config)).items():
+        if names is not None and name not in names:
+            continue
         value = getattr(config, name)
-        if value < minimum:
-            raise ValueError(f"{name}={value!r} must be " + ("a positive integer" if minimum == 1 else f">= {minimum}"))
+        try:
+            adapter.validate_python(value, strict=True)
+        except pydantic.ValidationError:
+            if typing.get_origin(hint) is Literal:
+                check_choice(label + name, value, typing.get_args(hint))
+            raise ValueError(f"{label}{name}={value!r} must be {allowed(hint)}") from None
+    return config
 
 
 def config_from_dict(cls, values: dict):

@@ -4,9 +4,9 @@ Appendix C), and which config class a difficulty needs. Every field has a docstr
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
-from typing import ClassVar
+from typing import ClassVar, Literal
 
-from emml.config.checks import check_at_least, check_choice
+from emml.config.checks import Positive, Sentences, Words, check, check_choice
 from emml.config.env_kinds import DOOM_ID, ENV_KINDS, HOUSE_ID, kinds_of
 
 RESOLUTIONS_16_9 = ((256, 144), (320, 180), (400, 225), (512, 288), (640, 360), (800, 450), (1024, 576))
@@ -22,9 +22,9 @@ class DoomConfig:
 
     difficulty: str = "easy"
     """'easy': agent fixed, objects at 5 fixed slots in view; 'hard': random agent pose and object positions."""
-    split: str = "train"
+    split: Literal["train", "test"] = "train"
     """'train' or 'test' instructions/questions (Table 7)."""
-    tasks: str = "both"
+    tasks: Literal["both", "sgn", "eqa"] = "both"
     """'both' (SGN and EQA, 50/50 per episode), 'sgn' or 'eqa' (single-task ablation, Table 3)."""
     height: int = 168
     """Observation height in pixels (Appendix A: 3×168×300)."""
@@ -36,9 +36,9 @@ class DoomConfig:
     target_in_obs: bool = False
     """With `aux_labels`, put the referent's cells in the observation too ('target'): for the 'target_mask'
     diagnostic control, the one model that reads them (the trainer and the evaluations turn it on for it)."""
-    max_steps: int = 210
+    max_steps: Positive = 210
     """Episode limit in agent steps (§5.1: 'maximum length of 210 time steps')."""
-    frame_skip: int = 5
+    frame_skip: Positive = 5
     """Engine tics per agent step (paper silent; the reference SGN environment repeats each action 5 tics)."""
     turn_degrees: float = 15.0
     """Turn per left/right step, in degrees (paper silent; our choice: 3°/tic × 5 tics, 24 steps a full turn)."""
@@ -59,23 +59,23 @@ class DoomConfig:
     episode)."""
     render: str = "auto"
     """ViZDoom render resolution 'WxH' (16:9); 'auto' takes the smallest one at least the observation size."""
-    interpolation: str = "linear"
+    interpolation: Literal["area", "linear", "nearest"] = "linear"
     """Resize filter from render to observation size: 'linear' (our choice: 5× faster than 'area', the reference
     env's cv2.INTER_AREA, and alike at the 0.94 scale of 320×180 → 300×168), 'area' or 'nearest'."""
-    label_grid: str = "receptive_field"
+    label_grid: Literal["receptive_field", "even"] = "receptive_field"
     """How label pixels meet the conv3 grid (paper silent): 'receptive_field', the cell whose receptive field is
     centred nearest (emml/config/geometry.py), or 'even', an even partition of the frame (off by up to one cell at
     the right and bottom edges, since conv3 has no padding)."""
-    max_words: int = 10
+    max_words: Positive = 10
     """Token sequence length (padded with 0)."""
-    vocabulary: tuple[str, ...] | str | None = None
+    vocabulary: Words | Literal[VOCABULARY_SOURCES] | None = None
     """The run's vocabulary (channel order); None builds the default, every word of the dataset; a name builds
     one from the dataset: 'all' (the default) or 'train_instructions' (the training instructions' words only:
     the transfer experiment, Table 4). The trainer pins it to the word list, saved with the run."""
-    aux_words: tuple[str, ...] | None = None
+    aux_words: Words | None = None
     """Words that get aux labels; None: every word but the superlatives (§3.2; function words get all-zero
     labels). The transfer experiment passes the training words only."""
-    instructions: tuple[str, ...] | None = None
+    instructions: Sentences | None = None
     """Restrict episodes to these sentences (must be in the chosen split); None: all of the split."""
     dataset: str = "doom"
     """Which tasks/<name>.toml."""
@@ -87,21 +87,10 @@ class DoomConfig:
 
     def validate(self) -> DoomConfig:
         check_choice("difficulty", self.difficulty, self.DIFFICULTIES)
-        check_choice("split", self.split, ("train", "test"))
-        check_choice("tasks", self.tasks, ("both", "sgn", "eqa"))
-        check_choice("interpolation", self.interpolation, ("area", "linear", "nearest"))
-        check_choice("label_grid", self.label_grid, ("receptive_field", "even"))
-        if isinstance(self.vocabulary, str):
-            check_choice("vocabulary", self.vocabulary, VOCABULARY_SOURCES)
-        elif self.vocabulary is not None and not all(isinstance(w, str) for w in self.vocabulary):
-            raise ValueError(
-                f"vocabulary={self.vocabulary!r} must be a list of words, or one of "
-                + ", ".join(map(repr, VOCABULARY_SOURCES))
-            )
         from emml.config.geometry import conv_output_size
 
         conv_output_size(self.height, self.width)  # raises naming height/width when too small
-        check_at_least(self, ("max_steps", "frame_skip", "max_words"), 1)
+        check(self)
         if self.target_in_obs and not self.aux_labels:
             raise ValueError("target_in_obs=True needs aux_labels=True: the referent's cells come from the labels")
         if self.render != "auto":
@@ -133,7 +122,7 @@ class HouseConfig(DoomConfig):
 
     difficulty: str = "house"
     """Always 'house' (one fixed house, Appendix C); kept so run names and code written for DoomConfig read it."""
-    max_steps: int = 420
+    max_steps: Positive = 420
     """Episode limit in agent steps (Appendix C: 'All episodes have a maximum length of 420 time steps')."""
     reach_distance: float = 8.0
     """An object is reached when the player's collision box comes within this many map units of the object's

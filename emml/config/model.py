@@ -5,9 +5,11 @@ field has a docstring with its source."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Annotated, ClassVar
 
-from emml.config.checks import check_frames
+from pydantic import Field
+
+from emml.config.checks import Frames, Positive, check
 from emml.config.model_options import check_model_options, model_option, option_fields
 
 SENTENCE_READOUTS: tuple[str, ...] = ("last", "mean")
@@ -40,16 +42,16 @@ class ModelConfig:
     """The fields that are no option a run sets (not a field): the model's name and its fusion's options
     (`option_fields`)."""
 
-    name: str = "dual_attention"
+    name: Annotated[str, Field(min_length=1), "the name of a fusion architecture"] = "dual_attention"
     """Fusion architecture, one of `emml.models.ARCHITECTURES`: a fusion class of the model registry,
     emml/models/registry.py (ablations are its options)."""
-    embed_dim: int = model_option(32)
+    embed_dim: Positive = model_option(32)
     """Word-embedding size (paper appendix: 32)."""
-    gru_text: int = model_option(32)
+    gru_text: Positive = model_option(32)
     """Hidden size of the sentence GRU (paper appendix: 32)."""
-    hidden: int = model_option(128)
+    hidden: Positive = model_option(128)
     """Hidden size of the policy's linear layer and GRU (paper appendix: 128)."""
-    time_dim: int = model_option(32)
+    time_dim: Positive = model_option(32)
     """Size of the learned time-step embedding (paper is silent; our choice)."""
     task_indicator: bool = model_option(True)
     """Feed the SGN/EQA task one-hot to the policy; False = 'w/o task indicator' ablation."""
@@ -66,7 +68,7 @@ class ModelConfig:
     non-negative but never 0, so that no gate channel can die. Measured in docs/fidelity.md (issue 34): under ReLU a
     channel whose pre-activation is negative for every question gets no gradient from the answer loss and its word
     can never be answered (seed 0: 'blue' with the last readout; 'torch', 'skullkey' and 'blue' with the mean)."""
-    answer_gate_frames: int = model_option(0, name="warm{}")
+    answer_gate_frames: Frames = model_option(0, name="warm{}")
     """The No Aux warm-up (issue 48, made one rule for every model by issue 61): for the run's first N frames the
     answer's gradient is kept off the image encoder (the conv) and every path from it, then the answer loss trains
     end to end as the paper has it; 0: off (the paper's loss from the start). Values are unchanged. Where the fusion
@@ -102,13 +104,7 @@ class ModelConfig:
         """The shared options' values: raise `ValueError` naming the offending field; return self when valid. The
         fusion's own options, and whether `name` is registered, are the model registry's check
         (`emml.models.registry.check_architecture`), made where a model is built or a run starts."""
-        if not isinstance(self.name, str) or not self.name:
-            raise ValueError(f"ModelConfig.name={self.name!r} must be the name of a fusion architecture")
-        for name in ("embed_dim", "gru_text", "hidden", "time_dim"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"ModelConfig.{name}={value!r} must be a positive integer (>= 1)")
-        check_frames("ModelConfig.answer_gate_frames", self.answer_gate_frames)  # 0: off
+        check(self, "ModelConfig.", ("name",))
         check_model_options(ModelConfig, {name: getattr(self, name) for name in option_fields(ModelConfig)})
         return self
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import Field, field, fields
 
-from emml.config.checks import PLAIN_NAME, check_choice
+from emml.config.checks import PLAIN_NAME, check, check_choice
 
 NAME_PART = "name_part"
 """Key of a model option's field metadata (`model_option`): the format of its part of the run name."""
@@ -41,55 +41,17 @@ def option_fields(options: type) -> dict[str, Field]:
     return {f.name: f for f in fields(options) if f.name not in skip}
 
 
-def _check_type(label: str, value, hint) -> None:
-    """Raise a ValueError naming ``label`` when ``value`` is not of the field's annotation ``hint`` (bool, int,
-    float — an int is accepted —, str, None, a Literal, or a union of them; any other annotation is not checked)."""
-    import types
-    import typing
-
-    args = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
-    what = []
-    for arg in args:
-        if arg is type(None) or arg is None:
-            ok, text = value is None, "None"
-        elif typing.get_origin(arg) is typing.Literal:
-            ok, text = value in typing.get_args(arg), "one of " + ", ".join(map(repr, typing.get_args(arg)))
-        elif arg is bool:
-            ok, text = type(value) is bool, "true or false"
-        elif arg is int:
-            ok, text = type(value) is int, "an integer"
-        elif arg is float:
-            ok, text = type(value) in (int, float), "a number"
-        elif arg is str:
-            ok, text = isinstance(value, str), "a string"
-        else:
-            return
-        if ok:
-            return
-        what.append(text)
-    raise ValueError(f"{label}={value!r} must be " + " or ".join(what))
-
-
 def check_model_options(options: type, values: dict, label: str = "ModelConfig"):
-    """``options`` (a declared options class) built from ``values``: each value checked against its field's type and
+    """``options`` (a declared options class) built from ``values``: each value held to its field's type (`check`) and
     `model_option` choices, then the class's own ``check()`` (ranges, options that need one another); a ValueError
     names the field ('ModelConfig.eq1_words=...'). Unknown names are the caller's to refuse (`emml.models.model_config`
     names the model and its options)."""
-    import typing
-
     declared = option_fields(options)
-    try:
-        hints = typing.get_type_hints(options)
-    except Exception:  # an annotation that does not resolve (a plugin's): its values are checked by its check() only
-        hints = {}
+    built = check(options(**values), f"{label}.", values)
     for name, value in values.items():
-        if name in hints:
-            _check_type(f"{label}.{name}", value, hints[name])
         allowed = declared[name].metadata.get(CHOICES)
         if allowed is not None:
             check_choice(f"{label}.{name}", value, allowed)
-    built = options(**values)
-    check = getattr(built, "check", None)
-    if callable(check):
-        check()
+    if callable(getattr(built, "check", None)):
+        built.check()
     return built

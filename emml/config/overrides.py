@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from dataclasses import fields
 
+import pydantic
+
+from emml.config.checks import WORDS
 from emml.config.env import match_env_class
 from emml.config.model import SHARED_MODEL_OPTIONS
 
@@ -40,21 +43,16 @@ def apply_overrides(cfg, overrides: dict, source: str = "--set"):
     return cfg
 
 
+_PLAIN = {kind: pydantic.TypeAdapter(kind) for kind in (bool, int, float, str)}
+"""pydantic's validators of the types a value set by name is held to (its field's current value's)."""
+
+
 def _typed(value, current, where: str):
-    """``value`` checked against the type of the field's current value (an int is accepted for a float)."""
-    if current is None or isinstance(current, (tuple, list, dict)):
+    """``value`` held to the type of the field's current value by pydantic in strict mode (an int is accepted for a
+    float, and made one); a None, list, table or config is left to `validate`."""
+    if type(current) not in _PLAIN:
         return value
-    if isinstance(current, bool):
-        ok, what = type(value) is bool, "true or false"
-    elif isinstance(current, int):
-        ok, what = type(value) is int, "an integer"
-    elif isinstance(current, float):
-        ok, what = type(value) in (int, float), "a number"
-        value = float(value) if ok else value
-    elif isinstance(current, str):
-        ok, what = isinstance(value, str), "a string"
-    else:
-        return value
-    if not ok:
-        raise ValueError(f"{where}: expected {what}, got {value!r}")
-    return value
+    try:
+        return _PLAIN[type(current)].validate_python(value, strict=True)
+    except pydantic.ValidationError:
+        raise ValueError(f"{where}: expected {WORDS[type(current)]}, got {value!r}") from None

@@ -12,11 +12,25 @@ and checks the options its fusion declares (`model_option`, `emml.models.Fusion.
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, field, fields
-from typing import ClassVar
+from dataclasses import asdict, dataclass, field
+from typing import Annotated, ClassVar, Literal
 
-from emml.config.checks import MAX_FRAMES, PLAIN_NAME, check_at_least, check_choice, check_frames, config_from_dict
+from pydantic import Field
+
+from emml.config.checks import (
+    MAX_FRAMES,
+    PLAIN_NAME,
+    Count,
+    Fraction,
+    Frames,
+    PlainName,
+    Positive,
+    PositiveNumber,
+    Weight,
+    check,
+    check_choice,
+    config_from_dict,
+)
 from emml.config.env import (
     ENV_CONFIGS,
     ENV_DIFFICULTIES,
@@ -50,9 +64,8 @@ __all__ = [  # the configs' one import point: what is defined here, and the name
     "TrainConfig",
     "MAX_FRAMES",
     "PLAIN_NAME",
-    "check_at_least",
+    "check",
     "check_choice",
-    "check_frames",
     "config_from_dict",
     "ENV_CONFIGS",
     "ENV_DIFFICULTIES",
@@ -103,69 +116,44 @@ word between the cells labelled 1 and those labelled 0."""
 class PPOConfig:
     """Hyper-parameters of the PPO update (paper appendix A unless noted)."""
 
-    clip_coef: float = 0.2
+    clip_coef: Annotated[PositiveNumber, Field(lt=1), "a number in (0, 1)"] = 0.2
     """Surrogate clipping epsilon (PPO Eq. 7). Paper: 0.2."""
-    gamma: float = 0.99
+    gamma: Fraction = 0.99
     """Discount factor. Paper: 0.99."""
-    gae_lambda: float = 0.95
+    gae_lambda: Fraction = 0.95
     """GAE lambda (Schulman et al. 2016). Paper silent -- our choice (PPO paper's Atari value)."""
-    epochs: int = 4
+    epochs: Positive = 4
     """Optimisation epochs per rollout. Paper: 4."""
-    minibatches: int = 1
+    minibatches: Positive = 1
     """Minibatches per epoch, split along the env axis so recurrent sequences stay whole. Paper: 1 ("single batch")."""
-    lr: float = 2.5e-4
+    lr: PositiveNumber = 2.5e-4
     """Adam learning rate. Paper: 2.5e-4 (constant; no annealing mentioned)."""
-    ent_coef: float = 0.01
+    ent_coef: Weight = 0.01
     """Entropy-bonus coefficient on the move distribution. Paper silent -- our choice (PPO paper's Atari value)."""
-    vf_coef: float = 0.5
+    vf_coef: Weight = 0.5
     """Value-loss coefficient (value loss is 0.5 * MSE). Paper silent -- our choice (CleanRL default)."""
-    max_grad_norm: float = 0.5
+    max_grad_norm: PositiveNumber = 0.5
     """Global gradient-norm clip. Paper silent -- our choice (CleanRL default)."""
     norm_adv: bool = True
     """Normalise advantages per minibatch to zero mean / unit std. Paper silent -- our choice (CleanRL default)."""
     clip_vloss: bool = False
     """Use PPO2-style clipped value loss. Paper silent -- our choice (off; Andrychowicz et al. 2021: no benefit)."""
-    answer_coef: float = 1.0
+    answer_coef: Weight = 1.0
     """Weight of the supervised answer cross-entropy. Paper silent on the weight -- our choice."""
-    aux_coef: float = 1.0
+    aux_coef: Weight = 1.0
     """Weight of the spatial auxiliary binary cross-entropy. Paper silent on the weight -- our choice."""
-    aux_balance: str = "none"
+    aux_balance: Literal[AUX_BALANCES] = "none"
     """How the aux cross-entropy weighs a word's cells (`AUX_BALANCES`): "none", the mean over every cell (the paper:
     'trained with cross-entropy loss', 'Auxiliary Task'), or "word" (opt-in), per word the mean over the cells
     labelled 1 and the mean over those labelled 0, halved: a small object's few cells weigh as much as the rest of
     the frame. Retraining a checkpoint's conv on the aux labels alone, it learned the keys no better than the plain
     mean (docs/fidelity.md, "The aux loss's weighting is not what holds them back")."""
-    adam_eps: float = 1e-5
+    adam_eps: PositiveNumber = 1e-5
     """Adam epsilon. Paper silent -- our choice (CleanRL/baselines PPO value)."""
 
     def validate(self) -> PPOConfig:
         """Raise ValueError naming the first out-of-range field; return self."""
-        positive = ("clip_coef", "lr", "max_grad_norm", "adam_eps")
-        non_negative = ("ent_coef", "vf_coef", "answer_coef", "aux_coef")
-        unit = ("gamma", "gae_lambda")
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "aux_balance":
-                check_choice("PPOConfig.aux_balance", v, AUX_BALANCES)
-                continue
-            if f.name in ("norm_adv", "clip_vloss"):
-                if not isinstance(v, bool):
-                    raise ValueError(f"PPOConfig.{f.name} must be a bool, got {v!r}")
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"PPOConfig.{f.name} must be a finite number, got {v!r}")
-            if f.name in ("epochs", "minibatches"):
-                if not isinstance(v, int) or v < 1:
-                    raise ValueError(f"PPOConfig.{f.name} must be an integer >= 1, got {v!r}")
-            elif f.name in positive and not v > 0:
-                raise ValueError(f"PPOConfig.{f.name} must be > 0, got {v!r}")
-            elif f.name in non_negative and not v >= 0:
-                raise ValueError(f"PPOConfig.{f.name} must be >= 0, got {v!r}")
-            elif f.name in unit and not 0.0 <= v <= 1.0:
-                raise ValueError(f"PPOConfig.{f.name} must be in [0, 1], got {v!r}")
-        if not self.clip_coef < 1.0:
-            raise ValueError(f"PPOConfig.clip_coef must be in (0, 1), got {self.clip_coef!r}")
-        return self
+        return check(self, "PPOConfig.")
 
 
 @dataclass
@@ -175,26 +163,26 @@ class TrainConfig:
     Defaults are the paper's protocol (Appendix A); profiles in reproduce/profiles.toml change cost, not
     protocol, and every report states its profile."""
 
-    model: str = "dual_attention"
+    model: Annotated[PlainName, "a model registry name (`emml models`)"] = "dual_attention"
     """Registry name of the model (`emml models`), ablations included."""
     aux: bool = False
     """Train with the auxiliary detection task (§3.2); turns on the env's aux labels."""
-    seed: int = 0
+    seed: Count = 0
     """Seeds Python, NumPy, torch and the envs (worker i gets seed + i)."""
-    frames: int = 10_000_000
+    frames: Frames = 10_000_000
     """Agent steps to train, summed over actors (§5.1: 10M Easy, 50M Hard); at least one update (num_envs ×
     num_steps), and rounded up to whole updates (10M is 9,766 updates of 1,024: 10,000,384 frames)."""
-    num_envs: int = 8
+    num_envs: Positive = 8
     """Parallel actors (Appendix A: 8)."""
-    num_steps: int = 128
+    num_steps: Positive = 128
     """Rollout horizon per actor and update (Appendix A: 128)."""
-    profile: str = "paper"
+    profile: PlainName = "paper"
     """Name of the profile the run came from (smoke, demo, quick, paper), recorded everywhere."""
-    eval_every: int = 0
+    eval_every: Frames = 0
     """Evaluate every this many frames for the curves; 0: only at the end."""
-    eval_episodes: int = 100
+    eval_episodes: Positive = 100
     """Greedy evaluation episodes per (task, split) of the evaluations during training (the curves)."""
-    final_eval_episodes: int = 500
+    final_eval_episodes: Positive = 500
     """Greedy evaluation episodes per (task, split) of the final evaluation, the score in results.json and the
     results table (paper silent). Larger than `eval_episodes`: one checkpoint's SGN train accuracy (GA quick seed
     0) ranged 0.51-0.71 over 18 disjoint blocks of 100 episodes, 0.54-0.61 over 5 blocks of 500 (docs/fidelity.md,
@@ -203,23 +191,23 @@ class TrainConfig:
     """Play the final evaluation and record the run's score (results.json, its results row). False: a measurement
     run (`emml bench train`'s temporary runs), trained and checkpointed only; an untrained agent's evaluation
     episodes run to the time limit and were most of a smoke bench's time."""
-    diagnose_episodes: int = 20
+    diagnose_episodes: Count = 20
     """SGN episodes behind the diagnostics logged at every evaluation (attention on target, detector AP; the actor's
     sensitivity reads 5× as many first steps: emml/eval/diagnose.py); 0: none."""
-    checkpoint_every: int = 10
+    checkpoint_every: Positive = 10
     """Write the checkpoint every this many updates (and at the end)."""
-    log_every: int = 10
+    log_every: Positive = 10
     """A log line every this many updates (metrics go to MLflow every update)."""
-    answer_supervision: str = "eqa_steps"
+    answer_supervision: Literal["eqa_steps", "answer_steps"] = "eqa_steps"
     """Which steps train the answer cross-entropy: 'eqa_steps' (every step of an EQA episode: the correct answer
     is fixed for the episode) or 'answer_steps' (only steps where the agent answered). Paper silent."""
     device: str = "cpu"
     """'cpu' or 'cuda'."""
-    precision: str = "fp32"
+    precision: Literal[PRECISIONS] = "fp32"
     """'fp32' (the paper's) or 'bf16': the conv stack's convolutions in bf16 in acting and the PPO update; the rest
     of the model, weights, losses and evaluation in fp32 (emml/rl/precision.py). bf16 is refused on a CPU
     without native bf16 arithmetic, where it runs slower."""
-    compile: str = "off"
+    compile: Literal[COMPILE] = "off"
     """torch.compile the conv stack and the fusion unit (emml/rl/compiled.py): the same model within float
     tolerance, ~10-20 s of compiling at start, then faster (2-core CPU, end to end: x1.03 at 84x150, x1.23 at
     168x300; docs/throughput.md). 'on' (refused before any compute where it cannot run: a CPU without a C++
@@ -230,7 +218,7 @@ class TrainConfig:
     graph instead of hundreds of kernels per call. The paper's single batch only (`ppo.minibatches` = 1). On a CPU
     the same fixed-tensor calls run uncaptured (no faster; what the CPU tests compare with the plain path). Off by
     default until measured on a GPU (docs/throughput.md)."""
-    threads: int = 0
+    threads: Count = 0
     """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
     asynchronous: bool = True
     """Env workers in processes (True) or in the learner process (False, for debugging)."""
@@ -242,15 +230,15 @@ class TrainConfig:
     """Envs hosted by each env worker process, stepped at once from one thread each (ViZDoom releases the GIL;
     `emml.envs.vector.GroupedDoomVectorEnv`): the same envs and seeds, fewer processes to wake at every step.
     Must divide num_envs / env_groups."""
-    acting_threads: int = 1
+    acting_threads: Count = 1
     """torch threads while acting (batches of num_envs/env_groups, one step): one is about as fast as two for
     such small batches and leaves the other cores to the env workers; 0: as many as the learner."""
-    max_engine_restarts: int = 3
+    max_engine_restarts: Count = 3
     """An env worker restarts its engine when it dies (the episode in flight is dropped and counted); this many
     deaths in a row, less than `engine_restart_window` steps apart, end the run with an EngineError."""
-    engine_restart_window: int = 1000
+    engine_restart_window: Count = 1000
     """Steps of a worker after which an engine death no longer counts as repeated."""
-    table: str = "adhoc"
+    table: PlainName = "adhoc"
     """MLflow experiment / results table the run belongs to."""
     run_root: str = "runs"
     """Where run directories (checkpoints, results.json) go, relative to the project root unless absolute."""
@@ -261,7 +249,7 @@ class TrainConfig:
     """The environment (its aux_labels follows `aux`): a HouseConfig when its difficulty is 'house'."""
     ppo: PPOConfig = field(default_factory=PPOConfig)
     """The PPO update's hyper-parameters (the paper's defaults)."""
-    model_options: dict = field(default_factory=dict)
+    model_options: Annotated[dict, "a table of model option names to values"] = field(default_factory=dict)
     """Overrides of the model's options: those every model shares (`ModelConfig`) and those its fusion declares
     (`emml.models.Fusion.options`); checked against the model's declared options where training starts
     (`emml.rl.hardware.check_runnable`, `emml.models.model_config`), before any compute."""
@@ -299,10 +287,7 @@ class TrainConfig:
     def validate(self) -> TrainConfig:
         """The fields' values, before any compute. The model's registry entry and this machine are checked where
         training starts (`emml.rl.hardware.check_runnable`)."""
-        if not isinstance(self.model, str) or not PLAIN_NAME.fullmatch(self.model):
-            raise ValueError(f"model={self.model!r} must be a model registry name (`emml models`)")
-        if not isinstance(self.model_options, dict):
-            raise ValueError(f"model_options={self.model_options!r} must be a table of model option names to values")
+        check(self)
         for key in self.model_options:
             if not isinstance(key, str) or not key.isidentifier() or key in ("name", "options"):
                 raise ValueError(
@@ -313,40 +298,21 @@ class TrainConfig:
         check_choice("env.difficulty", self.env.difficulty, ENV_DIFFICULTIES)
         self.env.validate()
         self.ppo.validate()
-        check_choice("answer_supervision", self.answer_supervision, ("eqa_steps", "answer_steps"))
         check_device_name(self.device)
-        positive = ("frames", "num_envs", "num_steps", "eval_episodes", "final_eval_episodes", "checkpoint_every")
-        check_at_least(self, (*positive, "log_every"), 1)
-        for name in ("frames", "eval_every"):
-            check_frames(name, getattr(self, name))
         if "answer_gate_frames" in self.model_options:  # here too: it names the run dir (warm<N>), made after this
-            check_frames("model_options.answer_gate_frames", self.model_options["answer_gate_frames"])
+            warm = ModelConfig(answer_gate_frames=self.model_options["answer_gate_frames"])
+            check(warm, "model_options.", ("answer_gate_frames",))
         if self.frames < self.frames_per_update:  # it used to be rounded up to one update, silently
             raise ValueError(
                 f"frames={self.frames!r} is less than one update (num_envs × num_steps = {self.frames_per_update}); "
                 f"the minimum is {self.frames_per_update}"
             )
-        if self.seed < 0:
-            raise ValueError(f"seed={self.seed!r} must be >= 0")
-        for name in ("table", "profile"):  # they name folders and files: run_root/<table>/…, <table>/<profile>.csv
-            value = getattr(self, name)
-            if not isinstance(value, str) or not PLAIN_NAME.fullmatch(value):
-                raise ValueError(
-                    f"{name}={value!r} must be a plain name: letters, digits, '_', '.' or '-', starting with a letter "
-                    "or digit (no path separators)"
-                )
         if self.env_groups < 1 or self.num_envs % self.env_groups:
             raise ValueError(f"env_groups={self.env_groups!r} must be a positive divisor of num_envs={self.num_envs}")
         group = self.num_envs // self.env_groups
         if self.envs_per_worker < 1 or group % self.envs_per_worker:
             k = self.envs_per_worker
             raise ValueError(f"envs_per_worker={k!r} must be a positive divisor of num_envs / env_groups = {group}")
-        if not isinstance(self.score, bool):
-            raise ValueError(f"score={self.score!r} must be true or false")
-        if self.compile not in COMPILE:
-            raise ValueError(f"compile={self.compile!r}: allowed values are {', '.join(COMPILE)}")
-        if not isinstance(self.cuda_graphs, bool):
-            raise ValueError(f"cuda_graphs={self.cuda_graphs!r} must be true or false")
         if self.cuda_graphs and self.ppo.minibatches != 1:
             raise ValueError(
                 f"cuda_graphs=true captures the paper's single batch: it needs ppo.minibatches=1, "
@@ -354,8 +320,6 @@ class TrainConfig:
             )
         if self.cuda_graphs and self.compile == "on" and self.device.startswith("cuda"):
             raise ValueError("cuda_graphs=true with compile='on' on CUDA is not measured: use compile='off' or 'auto'")
-        if self.precision not in PRECISIONS:
-            raise ValueError(f"precision={self.precision!r}: allowed values are {', '.join(PRECISIONS)}")
         control = self.model_options.get("control", "none")
         if control == "type_gate":
             raise ValueError(
@@ -364,8 +328,6 @@ class TrainConfig:
             )
         if control != "none" and not self.aux:
             raise ValueError(f"model_options.control={control!r} reads the aux labels: it needs aux=True")
-        counts = ("eval_every", "diagnose_episodes", "threads", "acting_threads", "max_engine_restarts")
-        check_at_least(self, (*counts, "engine_restart_window"), 0)
         return self
 
     @property

@@ -38,10 +38,12 @@ from __future__ import annotations
 
 import dataclasses
 from contextlib import contextmanager
+from typing import Literal
 
 import torch
 from torch import nn
 
+from emml.config.checks import Positive, PositiveNumber, check
 from emml.config.schema import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
 from emml.envs.vector import make_env
 from emml.eval.diagnose_eqa import gate_missing
@@ -78,44 +80,36 @@ class ProbeOptions:
     """How the probe samples its frames and trains its encoders (`emml probe-eqa`'s options); `validate` names the
     first bad one and what it allows, before a checkpoint is loaded."""
 
-    episodes: int = EPISODES
+    episodes: Positive = EPISODES
     """EQA episodes per question whose first frame is collected (the agent answers there)."""
     readouts: tuple[str, ...] = SENTENCE_READOUTS
     """x_sent readouts to retrain (`ModelConfig.sentence_readout` values), each once per seed; repeats count once."""
-    seeds: int = SEEDS
+    seeds: Positive = SEEDS
     """Encoders trained per readout, minibatch seeds 0..seeds-1."""
-    steps: int = STEPS
+    steps: Positive = STEPS
     """Adam steps per encoder."""
-    batch: int = BATCH
+    batch: Positive = BATCH
     """Frames per minibatch."""
-    lr: float = LR
+    lr: PositiveNumber = LR
     """Adam's learning rate."""
     seed: int = SEED
     """First reset seed of the collected episodes."""
-    eq1_words: str = "all"
+    eq1_words: Literal[EQ1_WORDS] = "all"
     """Words Eq. 1 sums the channels of: one of EQ1_WORDS."""
-    init: str = "checkpoint"
+    init: Literal[INITS] = "checkpoint"
     """Where the retrained GRU and Linear start: one of INITS."""
-    activation: str = "relu"
+    activation: Literal[SENTENCE_ACTIVATIONS] = "relu"
     """x_sent's activation on the retrained Linear (`ModelConfig.sentence_activation` values: relu, the paper's, or
     softplus)."""
 
     def validate(self) -> ProbeOptions:
         """These options with the readouts' repeats dropped; ValueError naming the first bad option."""
-        check_choice("eq1_words", self.eq1_words, EQ1_WORDS)
-        check_choice("init", self.init, INITS)
-        check_choice("activation", self.activation, SENTENCE_ACTIVATIONS)
-        for name in ("episodes", "seeds", "steps", "batch"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name}={value!r} must be an integer >= 1")
+        check(self)
         readouts = tuple(dict.fromkeys(self.readouts))
         if not readouts:
             raise ValueError("readouts=() names no readout; choose from " + ", ".join(map(repr, SENTENCE_READOUTS)))
         for readout in readouts:
             check_choice("readouts", readout, SENTENCE_READOUTS)
-        if not self.lr > 0:
-            raise ValueError(f"lr={self.lr!r} must be > 0")
         return dataclasses.replace(self, readouts=readouts)
 
 

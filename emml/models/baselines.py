@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
+from emml.config.checks import Positive
 from emml.config.schema import model_option
 from emml.models.fusion import Fusion, FusionOptions, FusionOutput, gated_attention
 
@@ -123,12 +124,8 @@ class FiLM(_Baseline):
 class PacmanOptions(FusionOptions):
     """PACMAN's option (`Pacman.options`): its window of frames."""
 
-    pacman_frames: int = model_option(5)
+    pacman_frames: Positive = model_option(5)
     """Frames in the PACMAN attention window, current frame included (paper: 5)."""
-
-    def check(self) -> None:
-        if self.pacman_frames < 1:
-            raise ValueError(f"ModelConfig.pacman_frames={self.pacman_frames!r} must be a positive integer (>= 1)")
 
 
 class Pacman(Fusion):

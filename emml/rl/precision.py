@@ -16,8 +16,6 @@ import contextlib
 import torch
 from torch import nn
 
-from emml.config.schema import PRECISIONS
-
 NATIVE_BF16_FLAGS = ("avx512_bf16", "amx_bf16", "bf16")
 """CPU flags (/proc/cpuinfo) that mean native bf16 arithmetic: x86 AVX-512 BF16, AMX, Arm BF16."""
 
@@ -45,10 +43,8 @@ def cpu_model() -> str:
 
 
 def check_precision(precision: str, device: str) -> None:
-    """Refuse, before any compute, a precision the device cannot run fast: names the field and the allowed values
-    (where training starts: emml/rl/hardware.py)."""
-    if precision not in PRECISIONS:
-        raise ValueError(f"precision={precision!r}: allowed values are {', '.join(PRECISIONS)}")
+    """Refuse, before any compute, a precision (validated: one of `PRECISIONS`) the device cannot run fast, naming
+    the field and what to use instead (where training starts: emml/rl/hardware.py)."""
     if precision == "fp32":
         return
     if device.startswith("cuda"):

@@ -44,7 +44,7 @@ def test_the_declared_options_spell_their_parts_in_declaration_order_when_not_de
     "values,message",
     [
         ({"scale": "big"}, "Mine.scale='big' must be a number or None"),
-        ({"mode": "c"}, "Mine.mode='c' must be one of 'a', 'b'"),
+        ({"mode": "c"}, "Mine.mode='c' is not allowed; choose one of 'a', 'b'"),
         ({"kind": "z"}, "Mine.kind='z' is not allowed; choose one of 'x', 'y'"),
         ({"on": 1}, "Mine.on=1 must be true or false"),
     ],

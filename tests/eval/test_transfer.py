@@ -233,7 +233,9 @@ def test_eval_settings_leave_out_splits_with_unknown_words():
 
     assert eval_settings(DoomConfig(tasks="sgn", vocabulary="train_instructions")) == [("sgn", "train", None)]
     assert len(eval_settings(DoomConfig())) == 4
-    with pytest.raises(ValueError, match="vocabulary='train_words' is not allowed"):
+    with pytest.raises(
+        ValueError, match="vocabulary='train_words' must be a list of words or one of 'all', 'train_instructions'"
+    ):
         DoomConfig(vocabulary="train_words").validate()
 
 

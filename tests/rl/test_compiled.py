@@ -50,7 +50,7 @@ def test_compiled_model_equals_the_plain_one_in_acting_and_in_the_update():
 
 
 def test_compile_names_its_values_and_refuses_a_cpu_without_a_compiler(monkeypatch):
-    with pytest.raises(ValueError, match="compile='yes': allowed values are off, on, auto"):
+    with pytest.raises(ValueError, match="compile='yes' is not allowed; choose one of 'off', 'on', 'auto'"):
         TrainConfig(compile="yes").validate()
     monkeypatch.setattr(compiled_module, "cpp_compiler", lambda: None)
     cfg = TrainConfig(compile="on").validate()  # the value is valid: the machine is asked where training starts

@@ -44,7 +44,7 @@ def test_bf16_is_refused_on_a_cpu_without_native_bf16(no_native_bf16, tmp_path):
 
 
 def test_unknown_precision_names_the_allowed_values():
-    with pytest.raises(ValueError, match=r"precision='fp16': allowed values are fp32, bf16"):
+    with pytest.raises(ValueError, match=r"precision='fp16' is not allowed; choose one of 'fp32', 'bf16'"):
         profile_config("smoke", "easy", {"precision": "fp16"}).validate()
 
 
