@@ -226,11 +226,14 @@ def _bold(ax, names: list[str], ref: str | None) -> None:
 
 def plot_field(table, profile: Profile, cells, out: Path) -> list[Path]:
     """`field_figure` written as reports/<table>-<profile>-rliable.png and .pdf; [] for a transfer table or when no
-    row has runs."""
+    setting has two rows with runs, and then a figure of that name left by an earlier report is removed (no page
+    links it; a reader would take it for the results' own)."""
+    paths = [out / f"{table.name}-{profile.name}-rliable.png", out / f"{table.name}-{profile.name}-rliable.pdf"]
     fig = field_figure(table, profile, cells)
     if fig is None:
+        for p in paths:
+            p.unlink(missing_ok=True)
         return []
-    paths = [out / f"{table.name}-{profile.name}-rliable.png", out / f"{table.name}-{profile.name}-rliable.pdf"]
     for p in paths:
         save(fig, p)
     plt.close(fig)

@@ -7,7 +7,7 @@ import pandas as pd
 from emml.config.profiles import profile_seeds
 from emml.experiments.tables import load_table
 from emml.report.cells import build_cells, paper_numbers, table_results
-from emml.report.field import field_figure
+from emml.report.field import field_figure, plot_field
 from emml.report.plan import plan_report
 from emml.report.savefig import PAGE_INCHES, outside
 from tests.report.test_tables import PROFILE, fake_results
@@ -43,4 +43,12 @@ def test_no_figure_where_no_setting_has_two_rows(tmp_path):
     plan = plan_report(table, PROFILE, tmp_path / "results")
     results = table_results(table, plan.profile, tmp_path / "results")
     assert isinstance(results, pd.DataFrame) and not results.empty
-    assert field_figure(table, plan.profile, build_cells(plan, results, paper_numbers("table3"))) is None
+    cells = build_cells(plan, results, paper_numbers("table3"))
+    assert field_figure(table, plan.profile, cells) is None
+    # an earlier report's figure of that name is removed, not left beside a page that no longer links it
+    stale = [tmp_path / f"table3-{PROFILE}-rliable.png", tmp_path / f"table3-{PROFILE}-rliable.pdf"]
+    other = tmp_path / f"table2-{PROFILE}-rliable.png"
+    for p in (*stale, other):
+        p.write_bytes(b"old")
+    assert plot_field(table, plan.profile, cells, tmp_path) == []
+    assert [p.exists() for p in (*stale, other)] == [False, False, True]
