@@ -10,6 +10,7 @@ import pytest
 
 from emml.experiments.launch import run_table
 from emml.experiments.slurm import job_store, packs
+from emml.runs.atomic import write_text
 from emml.runs.checkpoint import save_checkpoint
 from emml.runs.naming import run_name
 from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir
@@ -25,7 +26,7 @@ def resumable_train(cfg, quiet=False, parent_run_id=None):
     folder = run_dir(cfg)
     folder.mkdir(parents=True, exist_ok=True)
     progress, starts = folder / "progress.txt", folder / "starts.jsonl"
-    step = int(progress.read_text()) if progress.exists() else 0
+    step = int(progress.read_text()) if progress.exists() else 0  # a torn write would read '' here
     end = step + 3 if starts.exists() else None  # the first start never ends by itself
     start = {"from": step, "threads": cfg.threads, "store": os.environ.get("MLFLOW_TRACKING_URI")}
     with open(starts, "a") as f:
@@ -33,7 +34,7 @@ def resumable_train(cfg, quiet=False, parent_run_id=None):
     while end is None or step < end:
         time.sleep(0.05)
         step += 1
-        progress.write_text(str(step))
+        write_text(progress, str(step))  # whole or not at all, as a checkpoint: a stop mid-write leaves the last step
     payload = {"run_name": run_name(cfg), "table": cfg.table, "frames": cfg.frames, "seed": cfg.seed, "run_id": "x",
                "metrics": {"sgn_test": 0.5, "eqa_test": 0.25}}  # fmt: skip
     save_checkpoint(folder / CHECKPOINT, {"finished": True})
