@@ -230,7 +230,8 @@ def diagnose(
     else:
         result["attention_on_target"] = result["attention_mass_on_target"] = None
     z, y = np.stack(logits), np.stack(labels)
-    p = 1.0 / (1.0 + np.exp(-z))  # the detectors are sigmoid(conv3) whatever x_I reads (the aux task's predictions)
+    with np.errstate(over="ignore"):  # exp(-z) of a saturated channel overflows to inf: p is 0 there, as it should be
+        p = 1.0 / (1.0 + np.exp(-z))  # the detectors are sigmoid(conv3) whatever x_I reads (the aux task's predictions)
     per_word = {}
     for w in np.flatnonzero(aux_mask):
         ap = average_precision(p[:, w], y[:, w])
