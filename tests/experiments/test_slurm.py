@@ -59,8 +59,10 @@ def test_a_job_trains_its_pack_and_requeues_itself_at_its_time_limit(tracking, n
         only=only,
         pack=pack,
         cpus=4,
-        time_min=0.5,  # 30 s a job, USR2 at 10 s: the first start is stopped there
-        signal_delay_s=20,
+        # 60 s a job, USR2 at 30 s: the first start is stopped there; a later one has 30 s to start its processes and
+        # finish (with 10 s, a loaded machine's pack of 2 was stopped before its processes began, three times over)
+        time_min=1.0,
+        signal_delay_s=30,
         wait=True,
         run_root=tracking["run_root"],
         results_root=tracking["results_root"],
