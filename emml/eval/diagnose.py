@@ -55,6 +55,14 @@ SATURATION_WARNING = 0.5
 """The trainer warns in its log when at least this fraction of the channels is pinned (`x_image_saturated`)."""
 
 
+def _sigmoid(z: np.ndarray) -> np.ndarray:
+    """1 / (1 + exp(-z)), the same values, without numpy's 'overflow encountered in exp' where a saturated channel's
+    exp(-z) overflows to inf (the result is 0 there, as it should be; scipy's expit differs by 1 ulp and would reorder
+    near-ties in the detector AP)."""
+    with np.errstate(over="ignore"):
+        return 1.0 / (1.0 + np.exp(-z))
+
+
 def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid", counted: np.ndarray | None = None) -> dict:
     """How far x_I is from a constant code, on conv3 logits z of real frames (F, V, h, w), under the model's
     ``x_image`` ('sigmoid' or 'relu', `ModelConfig.x_image`): the fraction of the ``counted`` channels (bool (V,);
@@ -67,7 +75,7 @@ def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid", counted: np
     if counted.shape != (z.shape[1],) or not counted.any():
         raise ValueError(f"x_image_saturation: counted must be a bool ({z.shape[1]},) mask of at least one channel")
     if x_image == "sigmoid":
-        pinned, x = (np.abs(z) > SATURATED_LOGIT).all(axis=(0, 2, 3)), 1.0 / (1.0 + np.exp(-z))
+        pinned, x = (np.abs(z) > SATURATED_LOGIT).all(axis=(0, 2, 3)), _sigmoid(z)
     elif x_image == "relu":
         pinned, x = (z <= 0).all(axis=(0, 2, 3)), np.maximum(z, 0.0)
     else:
@@ -230,8 +238,7 @@ def diagnose(
     else:
         result["attention_on_target"] = result["attention_mass_on_target"] = None
     z, y = np.stack(logits), np.stack(labels)
-    with np.errstate(over="ignore"):  # exp(-z) of a saturated channel overflows to inf: p is 0 there, as it should be
-        p = 1.0 / (1.0 + np.exp(-z))  # the detectors are sigmoid(conv3) whatever x_I reads (the aux task's predictions)
+    p = _sigmoid(z)  # the detectors are sigmoid(conv3) whatever x_I reads (the aux task's predictions)
     per_word = {}
     for w in np.flatnonzero(aux_mask):
         ap = average_precision(p[:, w], y[:, w])
