@@ -53,6 +53,21 @@ def begin_segment(directory: str | Path, git_sha: str, frames: int, now: str | N
     return kept
 
 
+def last_started(directory: str | Path) -> str:
+    """When the run in ``directory`` last began training, UTC ISO 8601: its last noted session (segments.json), else
+    results.json's ``started_at`` (a run from before segments were noted); "" when neither says (an older run)."""
+    from emml.runs.rundir import RESULTS
+
+    directory = Path(directory)
+    times = [s.get("started_at") for s in _noted(directory)]
+    if not times:
+        try:
+            times = [json.loads((directory / RESULTS).read_text()).get("started_at")]
+        except (OSError, ValueError, AttributeError):
+            times = []
+    return max((t for t in times if isinstance(t, str)), default="")
+
+
 def run_segments(directory: str | Path, frames: int, git_sha: str) -> list[dict]:
     """results.json's ``segments`` for a run that ends at ``frames`` under ``git_sha``: each noted session with the
     frames it trained ([from, to): to the next session's start, the last to ``frames``); one segment of ``git_sha``

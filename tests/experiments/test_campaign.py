@@ -253,6 +253,35 @@ def test_wall_time_fills_each_steps_slots_in_order_and_steps_follow_each_other()
     assert wall_seconds(rows, 8, node=True) == 2 * (20 + 7)  # from the GPU-node estimates
 
 
+def test_the_speed_is_the_median_of_the_latest_runs_own_medians(tmp_path):
+    """One run's many points do not outvote the others, and a run trained long ago (older, slower code) is left out
+    once three later ones of the same model and domain are there; the same model elsewhere is not read."""
+    import json
+
+    from emml.config.schema import TrainConfig
+    from emml.experiments.campaign.progress import _Speed
+
+    def run(name, started, fps, eval_s, points=1):
+        directory = tmp_path / "runs" / "table2" / f"{name}-smoke"
+        directory.mkdir(parents=True)
+        lines = [f"{64 * (i + 1)},charts/fps,{fps}\n{64 * (i + 1)},perf/eval_s,{eval_s}" for i in range(points)]
+        (directory / "metrics.csv").write_text("step,key,value\n" + "\n".join(lines) + "\n")
+        segments = [{"git_sha": "abc", "from_frame": 0, "started_at": started}] if started else []
+        (directory / "segments.json").write_text(json.dumps({"segments": segments}))
+
+    run("ga-easy-noaux-s9", "2026-01-01T00:00:00+00:00", 10.0, 100.0, points=50)  # the oldest, last by name
+    run("ga-easy-aux-s1", "2026-11-01T00:00:00+00:00", 300.0, 3.0)
+    run("ga-easy-noaux-s0", "2026-11-02T00:00:00+00:00", 200.0, 4.0)
+    run("ga-easy-aux-s2", "2026-11-03T00:00:00+00:00", 100.0, 5.0)
+    run("ga-hard-aux-s0", "2026-11-04T00:00:00+00:00", 1.0, 1000.0)  # another domain
+    cfg = TrainConfig(model="ga", profile="smoke", run_root=str(tmp_path / "runs"))
+    # pooled points: 10; the last three by name: 100; all four runs' medians: 150
+    assert _Speed().measured(cfg) == (200.0, 4.0)
+    hard = TrainConfig(model="ga", profile="smoke", run_root=str(tmp_path / "runs"))
+    hard.env.difficulty = "hard"
+    assert _Speed().measured(hard) == (1.0, 1000.0)
+
+
 def test_cli_status_says_how_many_runs_at_a_time_and_refuses_a_device_by_name(tracking):
     from typer.testing import CliRunner
 

@@ -13,6 +13,7 @@ from emml.runs.segments import (
     UNKNOWN,
     begin_segment,
     commits,
+    last_started,
     read_run_segments,
     run_segments,
 )
@@ -25,6 +26,18 @@ def test_each_session_is_a_segment_ending_where_the_next_began(tmp_path):
         {"git_sha": "aaa", "frames": [0, 400_384], "started_at": "t0"},
         {"git_sha": "bbb", "frames": [400_384, 1_500_160], "started_at": "t1"},
     ]
+
+
+def test_a_run_last_started_at_its_latest_session_else_its_results_else_never(tmp_path):
+    noted, older, unknown = tmp_path / "noted", tmp_path / "older", tmp_path / "unknown"
+    begin_segment(noted, "aaa", 0, now="2026-11-01T00:00:00+00:00")
+    begin_segment(noted, "bbb", 400_384, now="2026-11-02T00:00:00+00:00")
+    older.mkdir()
+    (older / RESULTS).write_text(json.dumps({"started_at": "2026-10-01T00:00:00+00:00"}))
+    unknown.mkdir()
+    assert last_started(noted) == "2026-11-02T00:00:00+00:00"
+    assert last_started(older) == "2026-10-01T00:00:00+00:00"
+    assert last_started(unknown) == "" < last_started(older) < last_started(noted)
 
 
 def test_a_session_resumed_from_a_frame_replaces_the_sessions_noted_from_it_on(tmp_path):

@@ -132,16 +132,23 @@ def _frames_logged(metrics: Path) -> int:
     return max(steps, default=0)
 
 
+RECENT_RUNS = 3
+"""Runs an estimate reads: the most recently trained of the closest kind. The loop's speed changed over the campaign
+(issue 'loop at half the model's speed') and a run slowed by a benchmark beside it is one of several: each run's own
+median, then their median."""
+
+
 class _Speed:
-    """This machine's measured cost of a profile: training frames/s (median `charts/fps` of its runs here) and the
-    seconds of one evaluation (median `perf/eval_s`), read from the run dirs' metrics mirrors of the closest runs:
-    same model and domain first."""
+    """This machine's measured cost of a profile: training frames/s and the seconds of one evaluation, each the median
+    over the `RECENT_RUNS` most recently trained closest runs of that run's own median (`charts/fps`, `perf/eval_s`
+    in its metrics mirror): same model and domain first."""
 
     def __init__(self):
         self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
 
     def measured(self, cfg) -> tuple[float | None, float | None]:
         from emml.runs.rundir import METRICS
+        from emml.runs.segments import last_started
 
         difficulty = cfg.env.difficulty
         key = (cfg.profile, cfg.model, difficulty)
@@ -155,14 +162,14 @@ class _Speed:
                 files = sorted(root.glob(f"*/{pattern}-{cfg.profile}/{METRICS}"))
                 if files:
                     break
+            files.sort(key=lambda path: (last_started(path.parent), str(path)))  # the latest last; stable by name
             fps, evals = [], []
-            for path in files[-6:]:  # the most recent few: enough for a median, cheap to read
+            for path in files[-RECENT_RUNS:]:
                 points = points_or_none(path, "not used to estimate the time left")  # damaged: named once
-                for _, name, value in points or []:
-                    if name == "charts/fps":
-                        fps.append(value)
-                    elif name == "perf/eval_s":
-                        evals.append(value)
+                for values, name in ((fps, "charts/fps"), (evals, "perf/eval_s")):
+                    mine = [value for _, key_, value in points or [] if key_ == name]
+                    if mine:
+                        values.append(statistics.median(mine))
             self._cache[key] = (
                 statistics.median(fps) if fps else None,
                 statistics.median(evals) if evals else None,
