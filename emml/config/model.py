@@ -24,6 +24,10 @@ ANSWER_GRADS: tuple[str, ...] = ("all", "gate", "centered")
 """Values of Dual-Attention's option `answer_grad` (`emml.models.fusion.DualAttentionOptions`): Eq. 5's answer loss
 trains the conv and x_sent (the paper's, end to end), x_sent only, or both with its gradient into x_I centred over
 the cells."""
+ANSWER_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
+"""Values of the baselines' option `answer_activation` (`emml.models.baselines.BaselineOptions`, which declares it;
+here for the command line, which imports no torch): the activation on their answer head's logits, the appendix's
+ReLU or softplus (never 0)."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")

@@ -23,6 +23,11 @@ Per question of each EQA split the run is scored on, ``episodes`` greedy episode
   over object channels, and the mean over episodes on the correct answer's channel (the channel that must win
   Eq. 5). None for a model without a GA2 gate.
 
+* ``closed_answers`` — the answer words whose answer logit was exactly 0 on every frame played, in every split: a
+  ReLU that no gradient reaches (the baselines' head softmax(ReLU(Linear(x_S))), appendix "Baseline details"; in
+  Dual-Attention x_sent's, Eq. 4-5), so the word loses to every positive logit and is not answered again;
+  ``answer_peak`` each answer word's largest logit over those frames.
+
 ``splits`` holds, per split, the mean over its questions of accuracy, steps and attention on the referent (each
 question once), the last rows of the text table.
 """
@@ -148,12 +153,13 @@ def _detectors(records: list[dict], x_ref: list[np.ndarray], words, dataset) -> 
     }
 
 
-def _play(model, cfg: DoomConfig, plan, device, batch: int) -> tuple[list[dict], list[bool]]:
+def _play(model, cfg: DoomConfig, plan, device, batch: int, peak: np.ndarray) -> tuple[list[dict], list[bool]]:
     """Play ``plan`` greedily (`emml.eval.evaluate.play`); per planned episode, its last step's record (the answering
-    step when it answered) and its success."""
+    step when it answered) and its success. ``peak`` (V,) is raised to each answer logit's largest value seen."""
     records: dict[int, dict] = {}
 
     def on_step(k, env, out, i):
+        np.maximum(peak, out.answer_logits[0, i].float().cpu().numpy(), out=peak)
         ep = env.episode
         rec = {
             "answered": int(out.logits[0, i].argmax()) == ANSWER,
@@ -202,6 +208,7 @@ def diagnose_eqa(
     groups = dataset.word_groups
     content = {w for g in ("colors", "objects", "sizes", "superlatives") for w in groups[g]}
     result["channels"] = [w for w in words if w in content]  # the text table's gate columns
+    peak = np.full(len(words), -np.inf, dtype=np.float32)
     with playing(model, env_cfg, 0):  # eval mode for the gates read below too; restored on the way out
         for split, chosen in settings:
             questions = chosen or tuple(s.text for s in dataset.select("eqa", split))
@@ -210,7 +217,7 @@ def diagnose_eqa(
             )
             # every episode its own seed: the same seeds under every question would tie their scenes together
             plan = [(seed + k, {"sentence": questions[k // episodes]}) for k in range(len(questions) * episodes)]
-            records, outcomes = _play(model, cfg, plan, device, batch)
+            records, outcomes = _play(model, cfg, plan, device, batch, peak)
             for q_index, question in enumerate(questions):
                 ks = range(q_index * episodes, (q_index + 1) * episodes)
                 gate = None
@@ -224,6 +231,9 @@ def diagnose_eqa(
     if result["questions"] and result["questions"][0]["attended"] is None:
         result["attention_note"] = "no spatial attention x_spat in this model: attention columns n/a"
     result["splits"] = split_means(result["questions"])
+    answers = [w for w in dataset.answer_words() if w in words]
+    result["answer_peak"] = {w: float(f"{peak[words.index(w)]:.3g}") for w in answers}  # 3 significant: > 0 stays
+    result["closed_answers"] = [w for w in answers if peak[words.index(w)] == 0.0]
     return result
 
 
@@ -277,6 +287,12 @@ def eqa_table(result: dict) -> str:
         lines.append(
             f"{split:<5}  {'mean over its ' + str(m['questions']) + ' questions':<{width}}  {m['accuracy']:4.2f}  "
             f"{m['steps']:5.1f}  {'':<32}  {'':<42}  {_num(m['attention_on_referent']):>6}"
+        )
+    closed = result.get("closed_answers")
+    if closed:
+        lines.append(
+            f"Closed answer words (logit exactly 0 on every frame played; a ReLU no gradient reaches): "
+            f"{', '.join(closed)}"
         )
     if rows[0]["ga1_at_referent"] is not None:
         lines += [

@@ -194,6 +194,16 @@ PAPER: tuple[PaperValue, ...] = (
         lambda c: c["model.name"] != "image_only",
     ),
     PaperValue(
+        "baseline answer head",
+        ("model.answer_activation",),
+        lambda c: ("relu",),
+        "App. 'Baseline details': 'a linear layer f with ReLU activations followed by softmax'",
+        lambda v: {"relu": "softmax(ReLU(Linear(x_S)))", "softplus": "softmax(softplus(Linear(x_S))) (never 0)"}.get(
+            v[0], v[0]
+        ),
+        lambda c: "model.answer_activation" in c,
+    ),
+    PaperValue(
         "Eq. 1 gates with",
         ("model.eq1_words",),
         lambda c: ("all",),

@@ -11,22 +11,45 @@ import torch
 from torch import Tensor, nn
 
 from emml.config.checks import Positive
+from emml.config.model import ANSWER_ACTIVATIONS
 from emml.config.schema import model_option
 from emml.models.fusion import Fusion, FusionOptions, FusionOutput, gated_attention
+
+
+@dataclass
+class BaselineOptions(FusionOptions):
+    """The option of the baselines with the appendix's answer head (Text only, Image only, Concat, GA, FiLM)."""
+
+    answer_activation: str = model_option("relu", name="head{}", choices=ANSWER_ACTIVATIONS)
+    """The activation on the answer head's logits (appendix, "Baseline details": "a linear layer f with ReLU
+    activations followed by softmax"): 'relu', the paper's, the default; or, opt-in, 'softplus', as non-negative but
+    never 0. Measured in docs/fidelity.md ("The baselines' answer head"): under ReLU a logit whose Linear output is
+    negative on every frame gets no gradient from the answer loss, and its word is never answered again (Concat No
+    Aux seed 0: 5 of the 9 answer words; Text only Aux: 'red' and 'blue'). Run name: 'head<activation>'."""
 
 
 class AnswerHead(nn.Module):
     """Baseline answer head f: answer logits = ReLU(Linear(x_S)), x_Ans = softmax(logits).
 
-    Appendix "Baseline details": x_Ans = sigma(f(x_S; theta_Lin)), f linear + ReLU.
+    Appendix "Baseline details": x_Ans = sigma(f(x_S; theta_Lin)), f linear + ReLU; softplus in ReLU's place under
+    `BaselineOptions.answer_activation`.
     """
 
     def __init__(self, state_dim: int, vocab_size: int) -> None:
         super().__init__()
         self.linear = nn.Linear(state_dim, vocab_size)
+        self.activation = "relu"
+
+    def use(self, activation: str) -> AnswerHead:
+        """Put ``activation`` (one of `ANSWER_ACTIVATIONS`) on the logits; returns self."""
+        if activation not in ANSWER_ACTIVATIONS:
+            raise ValueError(f"answer_activation={activation!r} must be one of {', '.join(ANSWER_ACTIVATIONS)}")
+        self.activation = activation
+        return self
 
     def forward(self, state: Tensor) -> Tensor:
-        return torch.relu(self.linear(state))
+        z = self.linear(state)
+        return torch.relu(z) if self.activation == "relu" else nn.functional.softplus(z)
 
 
 class _Baseline(Fusion):
@@ -37,11 +60,18 @@ class _Baseline(Fusion):
     the conv, while the policy reads x_S as always."""
 
     answer_warmup = True
+    options = BaselineOptions
 
     def __init__(self, vocab_size: int, state_dim: int) -> None:
         super().__init__()
         self.state_dim = state_dim
         self.answer = AnswerHead(state_dim, vocab_size)
+
+    @classmethod
+    def from_config(cls, cfg, vocab_size: int, height: int, width: int) -> Fusion:
+        fusion = cls(vocab_size, height, width)
+        fusion.answer.use(cfg.options.answer_activation)  # no parameter drawn: a seed's weights as before
+        return fusion
 
     def state(self, x_image: Tensor, x_bow: Tensor | None, x_sent: Tensor | None) -> Tensor:
         raise NotImplementedError

@@ -153,3 +153,23 @@ def test_a_model_without_gate_or_attention_is_reported_not_an_error(no_leftovers
     assert all(m["attention_on_referent"] is None for m in result["splits"].values())  # n/a, not 0
     sgn_only = dataclasses.replace(cfg, tasks="sgn", instructions=None)
     assert diagnose_eqa(_model(cfg), sgn_only, episodes=1)["questions"] == []
+
+
+def test_an_answer_word_whose_relu_logit_is_0_on_every_frame_is_named_closed(no_leftovers):
+    """The baselines' head softmax(ReLU(Linear(x_S))): a word whose Linear output is below 0 on every frame has logit
+    exactly 0 and no gradient; the diagnostics name it (and only it), and under softplus nothing is closed."""
+    cfg = _env_cfg()
+    answers = list(load_dataset("doom").answer_words())
+    found = {}
+    for activation in ("relu", "softplus"):
+        model = _model(cfg, "image_only", answer_activation=activation)
+        bias = model.fusion.answer.linear.bias
+        with torch.no_grad():
+            for w in answers:
+                bias[cfg.vocabulary.index(w)] = -100.0 if w == "blue" else 100.0
+        found[activation] = diagnose_eqa(model, cfg, episodes=1, seed=500)
+    closed = found["relu"]
+    assert closed["closed_answers"] == ["blue"] and closed["answer_peak"]["blue"] == 0.0
+    assert "Closed answer words (logit exactly 0 on every frame played" in eqa_table(closed)
+    assert found["softplus"]["closed_answers"] == [] and found["softplus"]["answer_peak"]["blue"] > 0
+    assert "Closed answer words" not in eqa_table(found["softplus"])

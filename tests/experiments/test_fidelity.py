@@ -92,6 +92,19 @@ def test_an_opt_in_model_option_is_named_where_a_run_uses_it(options, absent, na
     assert named in fidelity.deviations(fidelity.resolve(saved))
 
 
+def test_the_baselines_answer_head_is_named_where_a_baseline_run_uses_softplus():
+    def named(model, **options):
+        saved = profile_config("quick", "easy", model=model, aux=True).to_dict()
+        saved["model_options"] = options
+        return [d for d in fidelity.deviations(fidelity.resolve(saved)) if d.startswith("baseline answer head")]
+
+    assert named("concat") == [] and named("dual_attention") == [] and named("pacman") == []
+    assert named("text_only", answer_activation="softplus") == [
+        "baseline answer head softmax(softplus(Linear(x_S))) (never 0) (paper softmax(ReLU(Linear(x_S))), App. "
+        "'Baseline details': 'a linear layer f with ReLU activations followed by softmax')"
+    ]
+
+
 def test_our_choices_follow_the_config():
     saved = profile_config("paper", model="dual_attention", aux=True).to_dict()
     choices = fidelity.choices(fidelity.resolve(saved))

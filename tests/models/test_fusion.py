@@ -307,3 +307,34 @@ def test_eq1_over_the_content_words_drops_the_function_words_channels_from_the_a
     with pytest.raises(RuntimeError, match="eq1_words='all'"):
         DualAttention(5, 1, 2).read_words(torch.ones(5))
     assert "eq1_mask" not in DualAttention(5, 1, 2).state_dict()  # the paper's unit: checkpoints unchanged
+
+
+def test_a_baseline_answer_channel_dead_under_relu_learns_again_under_softplus():
+    """The appendix's head softmax(ReLU(Linear(x_S))): a logit whose Linear output is negative on every frame gets no
+    gradient from the answer loss (its word is never answered again); under the opt-in softplus it does. The option
+    is the baselines' own, named in the run, checked by name, and draws no parameter (a seed's weights unchanged)."""
+    from emml.config.profiles import profile_config
+    from emml.models import build_model, model_config
+    from emml.runs.naming import run_name
+
+    def seeded(**options):
+        torch.manual_seed(0)
+        return build_model("concat", 5, 36, 36, 30, **options)
+
+    paper, soft = seeded(), seeded(answer_activation="softplus")
+    for a, b in zip(paper.state_dict().values(), soft.state_dict().values(), strict=True):
+        torch.testing.assert_close(a, b)
+    x_s = torch.rand(8, paper.fusion.state_dim)
+    for model in (paper, soft):
+        head = model.fusion.answer
+        with torch.no_grad():
+            head.linear.bias[2] = -10.0  # answer word 2: below 0 on every input
+        loss = torch.nn.functional.cross_entropy(head(x_s), torch.full((8,), 2))
+        (grad,) = torch.autograd.grad(loss, head.linear.bias)
+        assert (grad[2] == 0) == (model is paper), head.activation
+    named = profile_config("smoke", "easy", {"model": "concat", "model_options.answer_activation": "softplus"})
+    assert run_name(named) == "concat-easy-noaux-headsoftplus-s0-smoke"
+    with pytest.raises(ValueError, match=r"answer_activation='tanh' is not allowed; choose one of 'relu', 'softplus'"):
+        model_config("concat", answer_activation="tanh")
+    with pytest.raises(ValueError, match=r"answer_activation"):
+        model_config("dual_attention", answer_activation="softplus")  # Eq. 5 is not this head
