@@ -36,4 +36,6 @@ def test_gru_sequence_equals_the_cell_loop_outputs_and_gradients(seed):
     grads = torch.autograd.grad((out * weights).sum(), [x, h, *cell.parameters()])
     torch.testing.assert_close(out, ref, rtol=1e-5, atol=1e-6)
     for got, want in zip(grads, ref_grads):
-        torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-5)
+        # float32 sums over 128 steps x 8 in another order: single-threaded, seed 0 differs by 2e-5 in one weight
+        # of W_ih; a wrong gradient is off by orders more
+        torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-4)

@@ -326,7 +326,7 @@ def test_model_table():
         assert isinstance(r["parameters"], int) and r["parameters"] > 0
         assert r["description"] and "{" not in r["description"]
     options = {r["name"]: r["options"] for r in rows}  # each fusion's own, with the entry's values
-    assert options["ga"] == {} and options["pacman"] == {"pacman_frames": 5}
+    assert options["ga"] == {"answer_activation": "relu"} and options["pacman"] == {"pacman_frames": 5}
     assert options["da_no_sa"]["spatial_attention"] is False and options["dual_attention"]["answer_grad"] == "all"
 
 
