@@ -56,14 +56,14 @@ def begin_segment(directory: str | Path, git_sha: str, frames: int, now: str | N
 def last_started(directory: str | Path) -> str:
     """When the run in ``directory`` last began training, UTC ISO 8601: its last noted session (segments.json), else
     results.json's ``started_at`` (a run from before segments were noted); "" when neither says (an older run)."""
-    from emml.runs.rundir import RESULTS
+    from emml.runs.rundir import RunDirError, read_results
 
     directory = Path(directory)
     times = [s.get("started_at") for s in _noted(directory)]
     if not times:
         try:
-            times = [json.loads((directory / RESULTS).read_text()).get("started_at")]
-        except (OSError, ValueError, AttributeError):
+            times = [read_results(directory).get("started_at")]
+        except RunDirError:  # absent or damaged (named where a report reads it): no time
             times = []
     return max((t for t in times if isinstance(t, str)), default="")
 

@@ -33,7 +33,9 @@ def test_a_run_last_started_at_its_latest_session_else_its_results_else_never(tm
     begin_segment(noted, "aaa", 0, now="2026-11-01T00:00:00+00:00")
     begin_segment(noted, "bbb", 400_384, now="2026-11-02T00:00:00+00:00")
     older.mkdir()
-    (older / RESULTS).write_text(json.dumps({"started_at": "2026-10-01T00:00:00+00:00"}))
+    (older / RESULTS).write_text(
+        json.dumps({"run_id": "r", "table": "table2", "started_at": "2026-10-01T00:00:00+00:00"})
+    )
     unknown.mkdir()
     assert last_started(noted) == "2026-11-02T00:00:00+00:00"
     assert last_started(older) == "2026-10-01T00:00:00+00:00"
