@@ -182,12 +182,20 @@ def rescore_runs(
         None, help="Folder of the results CSVs whose rows are rewritten (default: the run's, from its checkpoint)."
     ),
     device: str = device_option(),
+    questions: bool = typer.Option(
+        False,
+        "--questions",
+        help="Only count EQA per question: replay the row's final-evaluation EQA episodes (its eval_seed and "
+        "eval_episodes), check they reproduce its eqa_train/eqa_test exactly, and write the counts to results.json "
+        "and <profile>-questions.csv; the results row is not changed (--episodes, --seed and --record are unused).",
+    ),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """Score finished runs again with the final-evaluation protocol.
 
     Each run's results.json and results row are rewritten with the new score; its training provenance is kept,
-    and scored_sha, eval_episodes and eval_seed are recorded. A run already scored so is only re-recorded."""
+    and scored_sha, eval_episodes and eval_seed are recorded. A run already scored so is only re-recorded.
+    With --questions, EQA's successes per question are counted instead, the score left as it is."""
     from emml.config.schema import TrainConfig
     from emml.eval.rescore import NoProvenance, NotFinished, check_finished, rescore, training_record
     from emml.runs.checkpoint import load_checkpoint
@@ -206,6 +214,9 @@ def rescore_runs(
         except (NotFinished, NoProvenance) as e:
             _fail(str(e))
     _own_engines()
+    if questions:
+        _rescore_questions(runs, results_root, device, force, as_json)
+        return
     data, lines = [], []
     for run in runs:
         if not as_json:
@@ -226,6 +237,40 @@ def rescore_runs(
 
 def _score(value) -> str:
     return "-" if value is None else f"{value:.3f}"
+
+
+def _rescore_questions(runs: list[Path], results_root: str | None, device: str, force: bool, as_json: bool) -> None:
+    """`emml rescore --questions`: each run in turn (emml.eval.rescore.rescore_questions); a run whose replay does not
+    reproduce its row is named and skipped (nothing written for it), and the command then exits 1."""
+    from emml.eval.rescore import NotReproduced, rescore_questions
+    from emml.runs.runlock import RunLocked
+
+    data, failed = [], []
+    for run in runs:
+        if not as_json:
+            typer.echo(f"counting EQA per question of {run}…", err=True)
+        try:
+            r = rescore_questions(run, results_root=results_root, device=device, force=force)
+        except NotReproduced as e:
+            typer.secho(f"error: {e}", fg=typer.colors.RED, err=True)
+            failed.append(str(run))
+            continue
+        except RunLocked as e:  # being trained: its score is not final
+            _fail(str(e))
+        totals = {
+            s: (sum(c["successes"] for c in q.values()), sum(c["episodes"] for c in q.values()))
+            for s, q in r.questions.items()
+        }
+        item = {"run_dir": str(r.run_dir), "played": r.played, "seconds": round(r.seconds, 1), "csv": str(r.csv)}
+        data.append({**item, "questions": r.questions})
+        if not as_json:
+            sums = ", ".join(f"{s} {k}/{n} = {k / n:.3f}" for s, (k, n) in totals.items())
+            how = f"replayed in {r.seconds:.0f} s" if r.played else "already counted"
+            typer.echo(f"{r.run_name}: {sums} over {sum(map(len, r.questions.values()))} questions ({how}); {r.csv}")
+    if as_json:
+        _echo({"runs": data, "not_reproduced": failed}, True, "")
+    if failed:
+        raise typer.Exit(1)
 
 
 def transfer(

@@ -6,21 +6,47 @@ git_sha, run_id); the row adds the code that scored it (`scored_sha`), the episo
 Runs finished before issue 33 were scored over the profile's `eval_episodes` (quick: 100), too few to compare
 runs (docs/fidelity.md, "Trainer"). Re-scoring is idempotent: a run whose results.json already holds the asked
 protocol is not played again, its row is only (re)recorded (`--force` plays it again).
+
+Per question (issue 81, `rescore_questions`, `emml rescore --questions`): a run finished before its evaluation counted
+EQA per question gets the counts by replaying its final evaluation's EQA episodes (its row's eval_seed and
+eval_episodes), checked against its row: the counts of each EQA setting must sum to the row's eqa_train / eqa_test
+exactly, else `NotReproduced` and nothing is written. Its row is never changed; results.json gains "questions" and
+results/<table>/<profile>-questions.csv the run's rows (emml/runs/results.py).
 """
 
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
+from emml.config.profiles import refuse_committed
 from emml.config.schema import TrainConfig
 from emml.runs.checkpoint import load_checkpoint
 from emml.runs.naming import run_name
-from emml.runs.results import BOOLEAN, INTEGER, LATE_INTEGER, TEXT, read_results
-from emml.runs.rundir import CHECKPOINT, EVAL_SEED, RESULTS, git_sha, results_csv, run_identity, save_results
+from emml.runs.results import (
+    BOOLEAN,
+    INTEGER,
+    LATE_INTEGER,
+    TEXT,
+    questions_path,
+    read_questions,
+    read_results,
+    upsert_questions,
+)
+from emml.runs.rundir import (
+    CHECKPOINT,
+    EVAL_SEED,
+    RESULTS,
+    git_sha,
+    results_csv,
+    run_identity,
+    save_results,
+    write_json,
+)
 from emml.runs.runlock import hold_run
 
 
@@ -30,6 +56,11 @@ class NotFinished(ValueError):
 
 class NoProvenance(ValueError):
     """The run has neither a results.json nor a results-table row of this training to take its provenance from."""
+
+
+class NotReproduced(ValueError):
+    """Replayed, a run's EQA episodes do not sum to its row's score: its per-question counts would not be of the
+    episodes that made the row, so none is written (the message names the run, the setting and both numbers)."""
 
 
 @dataclass
@@ -86,6 +117,9 @@ def rescore(
                 "scored_sha": git_sha(),
                 "metrics": {**payload["metrics"], **scores},  # other columns (Table 4's transfer scores) stay
             }
+            payload.pop("questions", None)  # counts of the old protocol's episodes are not this score's
+            if getattr(scores, "questions", None):
+                payload["questions"] = scores.questions
         if played or record:
             save_results(rdir, payload, cfg, record=record)
     return Rescored(rdir, before, _protocol(payload), played, results_csv(cfg) if record else None)
@@ -147,3 +181,99 @@ def _same_training(record: dict, ckpt: dict, where: Path) -> None:
 
 def _protocol(payload: dict) -> dict:
     return {**payload["metrics"], "eval_episodes": payload.get("eval_episodes"), "eval_seed": payload.get("eval_seed")}
+
+
+@dataclass
+class QuestionsRescored:
+    """One run's EQA per question, replayed (`rescore_questions`)."""
+
+    run_dir: Path
+    """The run directory."""
+    run_name: str
+    """Its name: its rows' key in the results table and the per-question file."""
+    questions: dict
+    """{'eqa_test': {question: {'successes': k, 'episodes': n}}}: the counts, which sum to the row's scores."""
+    played: bool
+    """False when the per-question file already held this training's counts (nothing played, nothing written)."""
+    seconds: float
+    """Wall-clock seconds the replay took (0 when not played)."""
+    csv: Path
+    """The per-question file (results/<table>/<profile>-questions.csv)."""
+
+
+def rescore_questions(
+    run: Path, results_root: str | None = None, device: str = "cpu", force: bool = False
+) -> QuestionsRescored:
+    """Count EQA's successes per question for the finished run at ``run`` by replaying its final evaluation's EQA
+    episodes (its results row's eval_seed, default `EVAL_SEED`, and eval_episodes; the same envs in lockstep as
+    `evaluate`). Each EQA setting's counts must reproduce the row's score exactly (`NotReproduced` otherwise, nothing
+    written); then results.json gains "questions" and the per-question file the run's rows. The results row is not
+    written. A run whose counts for this training (run_id) are in the file already is not played (``force``: it is)."""
+    from emml.eval.evaluate import PER_QUESTION, evaluate_checkpoint
+
+    rdir = Path(run) if Path(run).is_dir() else Path(run).parent
+    if not (rdir / CHECKPOINT).is_file():
+        raise FileNotFoundError(f"{run}: no run directory with a {CHECKPOINT}")
+    with hold_run(rdir):  # no training of this run meanwhile (emml/runs/runlock.py)
+        ckpt = load_checkpoint(rdir / CHECKPOINT)
+        cfg = TrainConfig.from_dict(ckpt["config"])
+        if results_root is not None:
+            cfg.results_root = results_root
+        check_finished(rdir, ckpt, cfg)
+        name, table = run_name(cfg), results_csv(cfg)
+        row = _row(table, name, ckpt)
+        out = questions_path(table)
+        refuse_committed(cfg.profile, out, "per-question results CSV")  # smoke numbers are not results
+        kept = read_questions(out)
+        kept = kept[(kept["run_name"] == name) & (kept["run_id"] == str(ckpt["run_id"]))]
+        if not kept.empty and not force:
+            return QuestionsRescored(rdir, name, _nested(kept), False, 0.0, out)
+        episodes = int(row["eval_episodes"])
+        seed = int(row["eval_seed"]) if pd.notna(row.get("eval_seed")) else EVAL_SEED
+        start = time.perf_counter()
+        scores = evaluate_checkpoint(rdir / CHECKPOINT, episodes, seed, device=device, tasks=PER_QUESTION)
+        seconds = time.perf_counter() - start
+        check_reproduced(name, scores.questions, row, episodes)
+        if (rdir / RESULTS).exists():
+            payload = training_record(rdir, ckpt, cfg)  # read now: keys written meanwhile are kept
+            write_json(rdir / RESULTS, {**payload, "questions": scores.questions})
+        upsert_questions(out, name, str(ckpt["run_id"]), scores.questions)
+    return QuestionsRescored(rdir, name, scores.questions, True, seconds, out)
+
+
+def check_reproduced(name: str, questions: dict, row: dict, episodes: int) -> None:
+    """NotReproduced unless, for each per-question setting the row scores, the counts cover ``episodes`` episodes
+    and their successes over them equal the row's value (to 1e-9; one episode of 500 is 2e-3)."""
+    wrong = []
+    for setting, counts in questions.items():
+        if setting not in row or pd.isna(row[setting]):
+            wrong.append(f"{setting}: replayed, but the row has no {setting}")
+            continue
+        k = sum(c["successes"] for c in counts.values())
+        n = sum(c["episodes"] for c in counts.values())
+        if n != episodes or abs(k / n - float(row[setting])) > 1e-9:
+            wrong.append(
+                f"{setting} per question sums to {k}/{n} = {k / n:.4f}, its row reads {float(row[setting]):.4f}"
+            )
+    if wrong:
+        raise NotReproduced(f"{name}: {'; '.join(wrong)}: its per-question counts are not written")
+
+
+def _row(table: Path, name: str, ckpt: dict) -> dict:
+    """The run's results row, of this checkpoint's training (run_id, frames), else NoProvenance."""
+    rows = read_results(table)
+    rows = rows[rows["run_name"] == name]
+    if rows.empty:
+        raise NoProvenance(f"{table} has no row {name!r}: no score to count per question")
+    row = rows.iloc[0].to_dict()
+    _same_training(row, ckpt, table)
+    return row
+
+
+def _nested(rows: pd.DataFrame) -> dict:
+    """Per-question rows of one run back to `Scores.questions`' shape."""
+    out: dict = {}
+    for r in rows.itertuples():
+        counts = {"successes": int(r.successes), "episodes": int(r.episodes)}
+        out.setdefault(f"{r.task}_{r.split}", {})[r.question] = counts
+    return out

@@ -272,6 +272,8 @@ class Trainer:
     def _write_results(self, metrics: dict, frames: int) -> None:
         times = {"started_at": self.started_at, "ended_at": utc_now()} if self.started_at else {"ended_at": utc_now()}
         payload = results_payload(self.cfg, metrics, frames, self.git_sha, self.tracker.run_id, times)
+        if getattr(metrics, "questions", None):  # EQA per question (emml.eval.evaluate.Scores, issue 81)
+            payload["questions"] = metrics.questions
         save_results(self.dir, payload, self.cfg)
         self.tracker.set_tags(score_tags(payload))  # as an imported run has them (emml/runs/import_runs.py)
 

@@ -1,4 +1,7 @@
-"""The results tables: results/<table>/<profile>.csv, one row per finished run, with its provenance.
+"""The results tables: results/<table>/<profile>.csv, one row per finished run, with its provenance; and beside
+each, results/<table>/<profile>-questions.csv: EQA's successes per question of each run's final evaluation (issue 81),
+long format, one row per (run, task, split, question) with the columns `QUESTION_COLUMNS`. Both are written whole
+under a lock (`upsert_result`, `upsert_questions`): a writer replaces its own run's rows, never another's.
 
 Every column's type is declared here, for the writer and every reader: pandas' type inference turns a git sha
 such as ``12e0077`` into the float 1.2e+78, and provenance that cannot be read back is provenance lost.
@@ -153,4 +156,74 @@ def upsert_result(path: str | Path, row: dict) -> Path:
         table = pd.concat([table, new], ignore_index=True) if not table.empty else new
         with replacing(path) as tmp:
             table.sort_values("run_name").to_csv(tmp, index=False)
+    return path
+
+
+# --- per question (issue 81) ---------------------------------------------------------------------------------------
+QUESTION_COLUMNS = ("run_name", "run_id", "task", "split", "question", "successes", "episodes")
+"""The per-question file's columns: the run (its name, and the training its counts are of: a row whose run_id is not
+the results row's is of an earlier training), the setting, the question's text, and its successes of its episodes in
+the final evaluation (`emml.eval.evaluate.Scores.questions`)."""
+QUESTIONS_SUFFIX = "-questions"
+"""results/<table>/<profile>``-questions``.csv: the per-question file beside a results table."""
+
+
+def questions_path(results: str | Path) -> Path:
+    """The per-question file beside the results table ``results`` (<profile>.csv → <profile>-questions.csv)."""
+    results = Path(results)
+    return results.with_name(f"{results.stem}{QUESTIONS_SUFFIX}.csv")
+
+
+def read_questions(path: str | Path) -> pd.DataFrame:
+    """A per-question file, typed (successes and episodes integers, 0 ≤ successes ≤ episodes); an empty frame with
+    `QUESTION_COLUMNS` if absent. ResultsError naming the file (and the line) otherwise."""
+    path = Path(path)
+    if not path.exists():
+        return pd.DataFrame(
+            {c: pd.Series(dtype=int if c in ("successes", "episodes") else str) for c in QUESTION_COLUMNS}
+        )
+    df = _read_csv(path)
+    missing = [c for c in QUESTION_COLUMNS if c not in df.columns]
+    if missing:
+        raise ResultsError(
+            f"{path}: line 1: no column {', '.join(map(repr, missing))} (needs {', '.join(QUESTION_COLUMNS)})"
+        )
+    for col in ("successes", "episodes"):
+        df[col] = _convert(df[col], int, "an integer", path, col)
+    bad = ~df["successes"].between(0, df["episodes"])
+    if bad.any():
+        i = int(bad.to_numpy().argmax())
+        row = df.iloc[i]
+        raise ResultsError(
+            f"{path}: line {i + 2}: successes must lie between 0 and episodes, found {row['successes']} of "
+            f"{row['episodes']}"
+        )
+    return df
+
+
+def question_rows(run_name: str, run_id: str, questions: dict[str, dict[str, dict[str, int]]]) -> pd.DataFrame:
+    """The per-question file's rows of one run from `Scores.questions` ({'eqa_test': {question: {'successes': k,
+    'episodes': n}}}); a setting not named '<task>_<split>' is a ValueError naming it."""
+    rows = []
+    for setting, counts in questions.items():
+        task, _, split = setting.partition("_")
+        if split not in ("train", "test"):
+            raise ValueError(f"questions: setting {setting!r} is not '<task>_<split>' with split 'train' or 'test'")
+        for question, c in counts.items():
+            rows.append((run_name, str(run_id), task, split, question, int(c["successes"]), int(c["episodes"])))
+    return pd.DataFrame(rows, columns=list(QUESTION_COLUMNS))
+
+
+def upsert_questions(path: str | Path, run_name: str, run_id: str, questions: dict) -> Path:
+    """Replace (or add) the rows of run ``run_name`` in the per-question file ``path`` by ``questions``
+    (`question_rows`), sorted, written atomically under the file's lock: another run's rows are never lost."""
+    path = Path(path)
+    new = question_rows(run_name, run_id, questions)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with waiting_lock(path.with_suffix(".csv.lock")):
+        table = read_questions(path)
+        table = table[table["run_name"] != run_name]
+        table = pd.concat([table, new], ignore_index=True) if not table.empty else new
+        with replacing(path) as tmp:
+            table.sort_values(["run_name", "task", "split", "question"]).to_csv(tmp, index=False)
     return path

@@ -297,20 +297,23 @@ def utc_ms(text: str) -> int:
     return int(when.timestamp() * 1000)
 
 
-JSON_ONLY = ("segments",)
+JSON_ONLY = ("segments", "questions")
 """Keys of results.json that are not columns of the results row (as `TIMES`: a pinned campaign's reader from before
-them would read an unknown column as a metric): the commits a run trained under (emml/runs/segments.py)."""
+them would read an unknown column as a metric): the commits a run trained under (emml/runs/segments.py); EQA's counts
+per question (emml.eval.evaluate.Scores.questions), whose rows go to the per-question file (emml/runs/results.py)."""
 
 
 def record_result(payload: dict, cfg: TrainConfig) -> Path:
     """Upsert the run's row (keyed by run name) in its results CSV (emml.runs.results): results.json's keys but the
     metrics, config, `TIMES` and `JSON_ONLY`, then `ROW_ONLY`, then the metrics."""
     from emml.config.profiles import refuse_committed
-    from emml.runs.results import upsert_result
+    from emml.runs.results import questions_path, upsert_questions, upsert_result
 
     refuse_committed(cfg.profile, results_csv(cfg), "results CSV")  # smoke numbers are not results
     row = {k: v for k, v in payload.items() if k not in ("metrics", "config", *TIMES, *JSON_ONLY)}
     row.update(tasks=cfg.env.tasks, shaping=cfg.env.shaping, precision=cfg.precision, **payload["metrics"])
+    if payload.get("questions"):  # EQA per question, beside the table (emml.runs.results, issue 81)
+        upsert_questions(questions_path(results_csv(cfg)), payload["run_name"], payload["run_id"], payload["questions"])
     return upsert_result(results_csv(cfg), row)
 
 

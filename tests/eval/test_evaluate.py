@@ -1,11 +1,22 @@
-"""The envelope of every greedy play (emml.eval.evaluate.playing)."""
+"""The envelope of every greedy play (emml.eval.evaluate.playing); EQA counted per question (issue 81): each episode
+under the question its reset drew, the counts summing to the accuracy."""
 
 from __future__ import annotations
 
+import dataclasses
+from types import SimpleNamespace
+
+import numpy as np
 import pytest
+import torch
 from torch import nn
 
-from emml.eval.evaluate import playing
+from emml.config.schema import DoomConfig
+from emml.envs.vector import make_env
+from emml.eval.evaluate import evaluate, play, playing, question_counts
+from emml.tasks.language import Vocabulary, load_dataset
+from tests.conftest import SMOKE
+from tests.fakes import ScriptedModel
 
 
 class _Env:
@@ -39,3 +50,96 @@ def test_an_eval_mode_model_stays_in_eval_mode():
     with playing(model, "cfg", 1, make=lambda cfg: _Env(cfg, [])) as (env,):
         assert env.cfg == "cfg"
     assert not model.training
+
+
+# --- EQA per question (issue 81) -----------------------------------------------------------------------------------
+class _FakeEnv:
+    """No engine: episode ``seed`` asks question ``q{seed % 3}``, lasts ``1 + seed % 4`` moves and succeeds when
+    its seed is even; lengths differ, so the lockstep hands the envs the plan's episodes out of step."""
+
+    def reset(self, seed, options=None):
+        self.seed, self.t = seed, 0
+        return {"time": np.zeros((), dtype=np.int64)}, {"text": f"q{seed % 3}", "success": False}
+
+    def step(self, action):
+        self.t += 1
+        done = self.t >= 1 + self.seed % 4
+        return {"time": np.zeros((), dtype=np.int64)}, 0.0, done, False, {"success": done and self.seed % 2 == 0}
+
+    def close(self):
+        pass
+
+
+class _Answers(ScriptedModel):
+    """Answers word ``word`` at once, every episode (a blind 'best answer' policy when ``word`` is the prior's)."""
+
+    def __init__(self, words: list[str], word: str):
+        super().__init__()
+        self.n, self.word = len(words), words.index(word)
+
+    def forward(self, obs, state, episode_start):
+        t, b = obs["time"].shape
+        logits, answer = torch.zeros(t, b, 4), torch.zeros(t, b, self.n)
+        logits[..., 3] = 1.0  # 'answer' (emml/envs/doom.py's last move)
+        answer[..., self.word] = 1.0
+        return SimpleNamespace(logits=logits, answer_logits=answer), state
+
+
+def test_play_names_each_planned_episode_s_sentence_in_plan_order():
+    plan = [(s, None) for s in (7, 4, 9, 2, 5, 6, 3)]
+    sentences = []
+    outcomes = play(_Answers(["a"], "a"), [_FakeEnv(), _FakeEnv(), _FakeEnv()], plan, "cpu", sentences=sentences)
+    assert sentences == [f"q{s % 3}" for s, _ in plan]
+    assert outcomes == [s % 2 == 0 for s, _ in plan]
+
+
+def test_question_counts_group_the_episodes_by_question_sorted():
+    counts = question_counts(["b", "a", "b", "b", "a"], [True, False, False, True, False])
+    assert counts == {"a": {"successes": 0, "episodes": 2}, "b": {"successes": 2, "episodes": 3}}
+    assert list(counts) == ["a", "b"]
+    with pytest.raises(ValueError, match="2 sentences for 1 outcomes"):
+        question_counts(["a", "b"], [True])
+
+
+QUESTIONS = ("what color is the pillar", "which object is red in color", "what color is the torch")
+"""Two training questions and one test question (emml/tasks/doom.toml)."""
+
+
+def test_evaluate_counts_each_question_s_episodes_as_the_env_draws_them(no_leftovers):
+    words = Vocabulary.from_dataset(load_dataset("doom")).words
+    cfg = DoomConfig(**SMOKE, tasks="both", instructions=QUESTIONS, vocabulary=words, max_steps=4)
+    model = _Answers(list(words), "pillar")
+    episodes, seed = 9, 900
+    scores = evaluate(model, cfg, episodes, seed=seed)
+    assert set(scores) == {"eqa_train", "eqa_test"} and set(scores.questions) == {"eqa_train", "eqa_test"}
+    for split in ("train", "test"):
+        # the oracle: each seed's question and answer, read from one env's reset; 'pillar' succeeds iff the answer
+        expected: dict = {}
+        env = make_env(
+            dataclasses.replace(
+                cfg, tasks="eqa", split=split, instructions=tuple(q for q in QUESTIONS if split_of(q) == split)
+            )
+        )
+        try:
+            for i in range(episodes):
+                info = env.reset(seed=seed + i)[1]
+                c = expected.setdefault(info["text"], {"successes": 0, "episodes": 0})
+                c["episodes"] += 1
+                c["successes"] += env.unwrapped.episode.answer == "pillar"
+        finally:
+            env.close()
+        assert scores.questions[f"eqa_{split}"] == dict(sorted(expected.items()))
+        total = scores.questions[f"eqa_{split}"].values()
+        assert sum(c["successes"] for c in total) / sum(c["episodes"] for c in total) == scores[f"eqa_{split}"]
+    train = scores.questions["eqa_train"]
+    assert len(train) == 2 and train["what color is the pillar"]["successes"] == 0  # its answers are colours
+    red = train["which object is red in color"]
+    assert 0 < red["successes"] < red["episodes"]  # seeds 900-908: 2 of its 8 episodes ask about a red pillar
+    only = evaluate(model, cfg, episodes, seed=seed, tasks=("eqa",))
+    assert only == scores and only.questions == scores.questions
+    with pytest.raises(ValueError, match="allowed are \\['eqa', 'sgn'\\]"):
+        evaluate(model, cfg, episodes, tasks=("nav",))
+
+
+def split_of(question: str) -> str:
+    return load_dataset("doom").find(question).split

@@ -1,6 +1,7 @@
 """Re-scoring a finished run (issue 33): the checkpoint played again over the final evaluation's episodes, its
 results.json and results row rewritten with the training provenance kept; unfinished runs and runs without
-provenance are refused before anything is played or written."""
+provenance are refused before anything is played or written. EQA per question (issue 81): the trainer keeps the
+counts, a replay of an older run finds the same ones, and one that does not reproduce the row writes nothing."""
 
 import json
 
@@ -10,11 +11,11 @@ from typer.testing import CliRunner
 from emml.cli import app
 from emml.config.profiles import profile_config
 from emml.eval.evaluate import evaluate_checkpoint
-from emml.eval.rescore import NoProvenance, NotFinished, rescore
+from emml.eval.rescore import NoProvenance, NotFinished, NotReproduced, check_reproduced, rescore, rescore_questions
 from emml.rl.trainer import train
 from emml.runs.checkpoint import load_checkpoint, save_checkpoint
 from emml.runs.naming import run_name
-from emml.runs.results import read_results
+from emml.runs.results import questions_path, read_questions, read_results
 from emml.runs.rundir import CHECKPOINT, RESULTS, results_csv
 
 
@@ -93,3 +94,84 @@ def test_an_unfinished_run_is_refused_before_anything_is_played(tracking, monkey
     out = CliRunner().invoke(app, ["rescore", str(result.run_dir), "--episodes", "2"])
     assert out.exit_code == 2 and "unfinished run (frame 64 of 64)" in out.output
     assert (result.run_dir / RESULTS).read_text() == results and results_csv(cfg).read_text() == table
+
+
+# --- EQA per question (issue 81) -----------------------------------------------------------------------------------
+def _counted_run(tracking, seed: int):
+    """A finished smoke run whose final evaluation played 4 episodes per setting, then stripped of its per-question
+    counts (results.json's "questions", the per-question file), as a run finished before they were kept."""
+    over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "table": "test"}
+    over |= {"frames": 64, "eval_episodes": 1, "final_eval_episodes": 4, "diagnose_episodes": 0}
+    cfg = profile_config("smoke", "easy", over, seed=seed)
+    result = train(cfg, quiet=True)
+    path = result.run_dir / RESULTS
+    trained = json.loads(path.read_text())
+    path.write_text(json.dumps({k: v for k, v in trained.items() if k != "questions"}))
+    questions_path(results_csv(cfg)).unlink()
+    return cfg, result, trained
+
+
+def _totals(questions: dict) -> dict:
+    return {
+        s: (sum(c["successes"] for c in q.values()), sum(c["episodes"] for c in q.values()))
+        for s, q in questions.items()
+    }
+
+
+def test_the_trainer_keeps_eqa_per_question_and_a_replay_finds_the_same_counts(tracking, monkeypatch, no_leftovers):
+    cfg, result, trained = _counted_run(tracking, seed=3)
+    # the trainer's final evaluation: counts per question in results.json, summing to its scores
+    assert set(trained["questions"]) == {"eqa_train", "eqa_test"}
+    for setting, (k, n) in _totals(trained["questions"]).items():
+        assert n == 4 and k / n == trained["metrics"][setting]
+    row_before = results_csv(cfg).read_bytes()
+
+    r = rescore_questions(result.run_dir)
+    assert r.played and r.questions == trained["questions"]  # the same episodes, the same counts
+    assert json.loads((result.run_dir / RESULTS).read_text()) == trained  # results.json as the trainer wrote it
+    assert results_csv(cfg).read_bytes() == row_before  # the results row is not touched
+    rows = read_questions(questions_path(results_csv(cfg)))
+    assert set(rows["run_name"]) == {run_name(cfg)} and set(rows["run_id"]) == {trained["run_id"]}
+    assert rows.groupby("split")["episodes"].sum().to_dict() == {"test": 4, "train": 4}
+
+    monkeypatch.setattr("emml.eval.evaluate.evaluate_checkpoint", lambda *a, **k: pytest.fail("played"))
+    again = rescore_questions(result.run_dir)  # counted already for this training: not played
+    assert not again.played and again.questions == trained["questions"]
+
+
+def test_a_replay_that_does_not_reproduce_the_row_writes_nothing(tracking, no_leftovers):
+    cfg, result, trained = _counted_run(tracking, seed=4)
+    table = results_csv(cfg)
+    rows = read_results(table)
+    k, n = _totals(trained["questions"])["eqa_test"]
+    rows.loc[0, "eqa_test"] = (k + 1) / n if k < n else (k - 1) / n  # one episode off: another evaluation's row
+    rows.to_csv(table, index=False)
+    before = (result.run_dir / RESULTS).read_text()
+    with pytest.raises(NotReproduced, match=f"{run_name(cfg)}: eqa_test per question sums to {k}/4"):
+        rescore_questions(result.run_dir)
+    assert (result.run_dir / RESULTS).read_text() == before and not questions_path(table).exists()
+    out = CliRunner().invoke(app, ["rescore", "--questions", str(result.run_dir)])
+    assert out.exit_code == 1 and "eqa_test per question sums to" in out.output and "not written" in out.output
+    assert not questions_path(table).exists()
+
+
+def test_check_reproduced_compares_every_setting_with_its_row():
+    counts = {"eqa_test": {"a": {"successes": 1, "episodes": 2}, "b": {"successes": 2, "episodes": 2}}}
+    check_reproduced("r", counts, {"eqa_test": 0.75}, 4)
+    with pytest.raises(NotReproduced, match="r: eqa_test per question sums to 3/4 = 0.7500, its row reads 0.5000"):
+        check_reproduced("r", counts, {"eqa_test": 0.5}, 4)
+    with pytest.raises(NotReproduced, match="3/4"):  # the right rate over other episodes is not this evaluation
+        check_reproduced("r", counts, {"eqa_test": 0.75}, 8)
+    with pytest.raises(NotReproduced, match="the row has no eqa_test"):
+        check_reproduced("r", counts, {"eqa_train": 0.75}, 4)
+
+
+def test_a_full_rescore_replaces_the_counts_with_those_of_its_episodes(tracking, no_leftovers):
+    cfg, result, trained = _counted_run(tracking, seed=5)
+    rescore(result.run_dir, episodes=6, seed=10_050)
+    after = json.loads((result.run_dir / RESULTS).read_text())
+    for setting, (k, n) in _totals(after["questions"]).items():
+        assert n == 6 and k / n == after["metrics"][setting]
+    rows = read_questions(questions_path(results_csv(cfg)))
+    assert rows.groupby("split")["episodes"].sum().to_dict() == {"test": 6, "train": 6}
+    assert "questions" not in read_results(results_csv(cfg)).columns  # results.json's only (rundir.JSON_ONLY)
