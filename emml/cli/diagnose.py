@@ -34,6 +34,15 @@ def diagnose(
     split: Splits = typer.Option("both", help="The SGN splits of --sgn-outcomes."),
     control: Control | None = typer.Option(None, help="Play under a diagnostic control: " + _CONTROLS + "."),
     seed: int = typer.Option(20_000, help="Seed of the first episode (episode i plays seed + i)."),
+    gate: bool = typer.Option(
+        False,
+        "--gate",
+        help="Only the GA2 gate on the EQA test questions whose subject is unseen (no engine; every other figure "
+        "left out): its mass on the answer's attribute and the answer channels it shuts (issue 82).",
+    ),
+    record: bool = typer.Option(
+        False, "--record", help="With --gate: append its diag/gate_* figures to the finished run's metrics.csv."
+    ),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """Why a model does or does not follow instructions.
@@ -41,13 +50,19 @@ def diagnose(
     SGN: how often the attention lands on the target, each word detector's average precision, how much the first
     move depends on where the target stands, and whether x_I collapsed to a constant code. EQA, per question: its
     accuracy, answers, where the attention sits and the GA2 gate per channel. With --sgn-outcomes, per SGN
-    instruction: its success and how its episodes end (target, which wrong object, time-out)."""
+    instruction: its success and how its episodes end (target, which wrong object, time-out). With --gate, only the GA2
+    gate on the EQA test questions whose subject no training question names (no engine; issue 82), and with --record
+    its diag/gate_* figures appended to the finished run's metrics.csv at its last frame."""
     from emml.eval.diagnose import diagnose_checkpoint, summary_line
     from emml.eval.diagnose_eqa import eqa_table
     from emml.eval.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
     from emml.tasks.language import check_choice
 
     _check_checkpoint(checkpoint)
+    if record and not gate:
+        _fail("--record appends the gate figures: only with --gate")
+    if gate:
+        return _gate(checkpoint, record, as_json)
     _own_engines()
     try:
         check_choice("split", split, ("train", "test", "both"))
@@ -78,6 +93,34 @@ def diagnose(
     if "sgn_outcomes" in result:
         lines += ([""] if lines else []) + [sgn_table(result["sgn_outcomes"])]
     _echo(result, as_json, "\n".join(lines))
+
+
+def _gate(checkpoint: Path, record: bool, as_json: bool) -> None:
+    """`emml diagnose --gate [--record]`: the question gate's figures (emml/eval/diagnose_gate.py), read from the
+    checkpoint's x_sent alone; with ``record``, appended to the finished run's metrics.csv at its last frame."""
+    from emml.eval.diagnose_gate import diagnose_gate, gate_table, record_gate
+    from emml.runs.rundir import load_model
+    from emml.runs.runlock import RunLocked
+
+    try:
+        if record:
+            out = record_gate(checkpoint.parent)
+            result = out["result"]
+        else:
+            model, cfg = load_model(checkpoint)
+            result = diagnose_gate(model, cfg.env)
+    except (ValueError, RunLocked) as e:  # a run not finished, a run being trained
+        _fail(str(e))
+    text = gate_table(result)
+    if record:
+        written = out["written"]
+        text += f"\n{checkpoint.parent / 'metrics.csv'}: " + (
+            f"{len(written)} figures appended at frame {out['frames']:,} ({', '.join(written)})"
+            if written
+            else f"nothing appended (the figures are there at frame {out['frames']:,}, or the model has none)"
+        )
+        result = {**result, "recorded": {k: out[k] for k in ("frames", "figures", "written")}}
+    _echo(result, as_json, text)
 
 
 def _saturation_line(result: dict) -> str:

@@ -44,6 +44,8 @@ ATTRIBUTE_GROUP = {"color": "colors", "object": "objects", "size": "sizes"}
 SCALARS = ("gate_on_attribute", "gate_on_color", "gate_on_object", "gate_on_size", "gate_dead")
 """The figures logged as diag/<name> at each evaluation (`gate_metrics`), those the run has (a dataset whose test
 questions ask no size has no ``gate_on_size``)."""
+ATTRIBUTE_SCALARS = tuple(f"gate_on_{a}" for a in ATTRIBUTE_GROUP)
+"""The per-attribute means among `SCALARS`."""
 
 
 @dataclass(frozen=True)
@@ -180,5 +182,64 @@ def gate_metrics(model, cfg, device="cpu") -> dict[str, float]:
     test; {} otherwise (a figure that is None is left out)."""
     if not cfg.diagnose_episodes:
         return {}
-    result = diagnose_gate(model, cfg.env, device)
+    return scalars(diagnose_gate(model, cfg.env, device))
+
+
+def scalars(result: dict) -> dict[str, float]:
+    """The figures of a `diagnose_gate` result that a run's curve holds, as diag/<name> keys (None left out)."""
     return {f"diag/{k}": float(result[k]) for k in SCALARS if result.get(k) is not None}
+
+
+def gate_table(result: dict) -> str:
+    """`emml diagnose --gate`'s text: the figures, then per unseen-subject question its fraction on the answer's
+    attribute and the gate's largest content channels."""
+    if not result:
+        return "no GA2 gate figures: the model has no GA2 gate (Eq. 4), or the run is not scored on EQA test"
+    by = ", ".join(f"{k.removeprefix('gate_on_')} {result[k]:.2f}" for k in ATTRIBUTE_SCALARS if k in result)
+    dead = result["gate_dead_words"]
+    lines = [
+        "GA2 gate (Eq. 4) on the EQA test questions whose subject no training question names: mass on the answer's "
+        f"attribute {result['gate_on_attribute']:.2f} ({by}); answer channels shut on every question: "
+        f"{result['gate_dead']}" + (f" ({', '.join(dead)})" if dead else "")
+    ]
+    width = max(len(q) for q in result["gate_questions"])
+    for q, v in result["gate_questions"].items():
+        top = sorted(result["gate_channels"][q].items(), key=lambda kv: -kv[1])[:4]
+        lines.append(
+            f"  {q:<{width}}  unseen {'/'.join(v['unseen']):<6}  on its {v['attribute']:<6} {v['on_attribute']:.2f}"
+            f"  largest: {', '.join(f'{w} {g:.1f}' for w, g in top)}"
+        )
+    return "\n".join(lines)
+
+
+def record_gate(run_dir) -> dict:
+    """Append the gate figures of a finished run's final checkpoint to its metrics mirror (metrics.csv) at the
+    checkpoint's frame, the run's last, through the mirror's writer (`emml.runs.mirror.append_mirror`), holding the
+    run's lock; a key already there at that frame is not written again. Returns {'frames', 'figures' (the diag/*
+    values), 'written' (the keys appended), 'result' (`diagnose_gate`'s)}. ValueError naming the run when its
+    checkpoint is not finished (a run in flight writes its own)."""
+    from pathlib import Path
+
+    from emml.runs.checkpoint import load_checkpoint
+    from emml.runs.mirror import append_mirror, read_mirror
+    from emml.runs.rundir import CHECKPOINT, METRICS, load_model
+    from emml.runs.runlock import hold_run
+
+    rdir = Path(run_dir)
+    rdir = rdir.parent if rdir.name == CHECKPOINT else rdir
+    with hold_run(rdir):  # no training of this run meanwhile (emml/runs/runlock.py)
+        ckpt = load_checkpoint(rdir / CHECKPOINT)
+        if not ckpt.get("finished"):
+            raise ValueError(
+                f"{rdir}: its checkpoint is not finished (frame {ckpt.get('frames', 0):,}); only a finished run's "
+                "metrics.csv is appended to (a run in flight logs the gate at its evaluations)"
+            )
+        frames = int(ckpt["frames"])
+        model, cfg = load_model(rdir / CHECKPOINT)
+        result = diagnose_gate(model, cfg.env)
+        figures = scalars(result)
+        there = {key for step, key, _ in read_mirror(rdir / METRICS) if step == frames}
+        fresh = {k: v for k, v in figures.items() if k not in there}
+        if fresh:
+            append_mirror(rdir / METRICS, fresh, frames)
+    return {"frames": frames, "figures": figures, "written": sorted(fresh), "result": result}

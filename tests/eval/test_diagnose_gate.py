@@ -15,6 +15,8 @@ from emml.eval.diagnose_gate import (
     dead_channels,
     diagnose_gate,
     gate_metrics,
+    record_gate,
+    scalars,
     unseen_subjects,
 )
 from emml.models import build_model
@@ -172,3 +174,47 @@ def test_the_trainer_logs_the_figures_under_diag_with_diagnostics_on_only():
     assert logged["diag/gate_dead"] == len(DS.answer_words()) - 3
     assert "diag/gate_on_size" not in logged  # no test question asks a size
     assert gate_metrics(model, dataclasses.replace(cfg, diagnose_episodes=0)) == {}
+
+
+def _run_dir(tmp_path, name="dual_attention", finished=True, **options):
+    """A run dir as the trainer leaves it: a checkpoint (its model, config and vocabulary) and a metrics mirror."""
+    from emml.runs.checkpoint import save_checkpoint
+
+    cfg = TrainConfig(model=name, env=_env(), model_options=options)
+    model = _model(name=name, **options)
+    rdir = tmp_path / "run"
+    save_checkpoint(
+        rdir / "checkpoint.pt",
+        {"model": model.state_dict(), "config": cfg.to_dict(), "frames": 3200, "vocabulary": list(WORDS),
+         "finished": finished},
+    )  # fmt: skip
+    (rdir / "metrics.csv").write_text("step,key,value\n1600,eval/eqa_test,0.25\n3200,eval/eqa_test,0.5\n")
+    return rdir, model
+
+
+def test_a_finished_run_gets_its_figures_appended_at_its_last_frame_once(tmp_path):
+    from emml.runs.mirror import read_mirror
+
+    rdir, model = _run_dir(tmp_path)
+    before = (rdir / "metrics.csv").read_text()
+    out = record_gate(rdir)
+    expected = scalars(diagnose_gate(model, _env()))
+    assert out["frames"] == 3200 and out["figures"] == pytest.approx(expected)
+    assert set(out["written"]) == set(expected) >= {"diag/gate_on_attribute", "diag/gate_dead"}
+    after = (rdir / "metrics.csv").read_text()
+    assert after.startswith(before)  # append only: every line there before stays
+    points = read_mirror(rdir / "metrics.csv")
+    assert {k: v for s, k, v in points if k.startswith("diag/")} == pytest.approx(expected)
+    assert {s for s, k, _ in points if k.startswith("diag/")} == {3200}
+    again = record_gate(rdir / "checkpoint.pt")
+    assert again["written"] == [] and (rdir / "metrics.csv").read_text() == after
+
+
+def test_a_run_in_flight_or_without_a_gate_gets_nothing(tmp_path):
+    rdir, _ = _run_dir(tmp_path, finished=False)
+    before = (rdir / "metrics.csv").read_text()
+    with pytest.raises(ValueError, match="not finished"):
+        record_gate(rdir)
+    assert (rdir / "metrics.csv").read_text() == before
+    rdir, _ = _run_dir(tmp_path / "concat", name="concat")
+    assert record_gate(rdir)["written"] == [] and (rdir / "metrics.csv").read_text() == before
