@@ -32,7 +32,9 @@ from emml.experiments.claims.evidence import (
 )
 from emml.experiments.metrics import TRAIN_COLUMNS, train_of
 from emml.report.chance import BLIND_MODEL, blind_prior, paper_prior
+from emml.report.claims_settle import Curves, borrow, literal, next_seed, settle_all, settle_costs, spreads
 from emml.report.plan import ReportPlan, plan_report
+from emml.runs.rundir import METRICS, path_of
 
 __all__ = [
     "BUDGET",
@@ -76,6 +78,19 @@ class Decision:
     """The campaign step that trains each missing run, and its cost (emml.experiments.campaign.status)."""
     owners: dict = field(default_factory=dict)
     """Missing run name → the table whose run dir and results hold it (Table 3's DA Multi-Task: table2)."""
+    apart: bool = False
+    """The paper's own table fails the claim's rule (`decide_paper`): shown apart, not counted in the tallies."""
+    settle: list[str] = field(default_factory=list)
+    """The runs that would settle a provisional reversal, each with its campaign step and cost where known."""
+    literal: list[dict] = field(default_factory=list)
+    """Beside a No Aux cell trained under the warm-up: the paper-literal run's number (row, setting, metric, run,
+    value)."""
+
+    @property
+    def held(self) -> str:
+        """'14 of 15 hold': the comparisons present (a 'most' one counts its rows)."""
+        present = [c for c in self.checks if c.outcome != MISSING]
+        return f"{sum(c.outcome == HOLDS for c in present)} of {len(present)} hold" if present else ""
 
     @property
     def label(self) -> str:
@@ -95,6 +110,14 @@ class Evidence:
     missing: list[str] = field(default_factory=list)
     owners: dict = field(default_factory=dict)
     frames: set = field(default_factory=set)
+    chance: Chance | None = None
+    """What the scores are held against (a kind that compares tasks reads it: 'harder')."""
+    curves: Curves | None = None
+    """Each run's evaluation curves (ours; None for the paper's tables: their reversals are not weighed for being
+    settled)."""
+    seconds: dict = field(default_factory=dict)
+    """Run name → the run that would give its cell its next seed ('table2/…-s1-quick')."""
+    literal: list[dict] = field(default_factory=list)
 
 
 def _isnan(v) -> bool:
@@ -135,7 +158,8 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
     columns = set(table.metrics.values())
     blind = {r.label for r in table.rows if r.model == BLIND_MODEL}
     involved = kind.involved(claim, table)
-    ev = Evidence()
+    ev = Evidence(chance=chance)
+    paths = {}
     for where in kind.wheres(claim):
         for m in claim.metrics:
             cell_metric = m if m in columns else m.replace("_train", "_test")  # a train twin reads the test cell's runs
@@ -151,9 +175,9 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
                             continue
                         value = float(row[m])
                     train, bar = _learning(row, m, c.difficulty, c.row in blind, chance)
-                    score = Score(
-                        name, int(row["seed"]), value, int(row["eval_episodes"]) * per, int(row["frames"]), train, bar
-                    )
+                    episodes = int(row["eval_episodes"]) * per
+                    score = Score(name, int(row["seed"]), value, episodes, int(row["frames"]), train, bar, metric=m)
+                    paths[name] = path_of(run_root, planned[name].spec.table, name) / METRICS
                     if kind.curve:
                         score = _curve_score(claim, m, planned[name], run_root, score, row, chance)
                         if score is None:
@@ -168,6 +192,8 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
                         shown[score.seed] = f"{value:.3f}"
                     found.append(score)
                 ev.scores[(c.row, c.difficulty, c.aux, m)] = found
+                second = next_seed(plan, c.row, c.difficulty, c.aux, c.metric, [s.run for s in found])
+                ev.seconds.update({s.run: second for s in found})
                 for run in plan.cell_runs(c.row, c.difficulty, c.aux, c.metric):
                     name = run.name
                     ev.owners[name] = run.spec.table
@@ -181,8 +207,14 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
                         "values": {s.seed: s.value for s in found},
                         "shown": shown,
                         "declared": c.expected,
+                        "runs": [s.run for s in found],
+                        "column": m,
                     }
                 )
+    ev.curves = Curves(paths)
+    if not kind.curve:  # a one-seed cell borrows the spread of its row's nearest cell with two seeds or more
+        ev.scores = borrow(ev.scores, spreads(claim, cells, rows, columns, involved), _setting)
+        ev.literal = literal(ev.evidence, plan)
     return ev
 
 
@@ -200,7 +232,7 @@ def paper_evidence(claim, chance: Chance | None = None) -> Evidence:
     lookup = {(r.row, r.difficulty, r.aux, r.metric): float(r.value) for r in paper_numbers(table.name).itertuples()}
     printed = {row for (row, *_) in lookup}  # our Table 4 has rows the paper's has not: they are not its claim's
     involved = kind.involved(claim, table) & printed
-    ev = Evidence()
+    ev = Evidence(chance=chance)
     for where in kind.wheres(claim):
         for m in claim.metrics:
             for d, a, metric in table.columns():
@@ -210,7 +242,7 @@ def paper_evidence(claim, chance: Chance | None = None) -> Evidence:
                     continue
                 for row in (r.label for r in table.rows if r.label in involved):
                     value = None if kind.curve else lookup.get((row, d, a, m))
-                    bar = -math.inf if row in blind else chance.bar(m, d)
+                    bar = -math.inf if row in blind else chance.bar(train_of(task_of(m)).name, d)
                     found = [] if value is None else [Score(PAPER, 0, value, PAPER_EPISODES, 0, value, bar)]
                     ev.scores[(row, d, a, m)] = found
                     if value is None:
@@ -236,7 +268,9 @@ def judge(claim, ev: Evidence, source: str) -> Decision:
     table = load_table(claim.table)
     order_ = {k: i for i, k in enumerate(claim.metrics)}
     keys = sorted({(d, a, m) for (_, d, a, m) in ev.scores}, key=lambda k: (order_[k[2]], k[0], not k[1]))
-    checks = kind.checks(claim, table, keys, lambda row, d, a, m: ev.scores.get((row, d, a, m), []))
+    checks = kind.checks(claim, table, keys, lambda row, d, a, m: ev.scores.get((row, d, a, m), []), ev.chance)
+    if ev.curves is not None:  # ours: a reversal is contradicted only when settled (the paper's numbers are printed)
+        checks = settle_all(checks, ev.curves, ev.seconds)
     present = [c.seeds for c in checks if c.outcome != MISSING]
     st = status(checks, kind.single_subject)
     return Decision(
@@ -254,6 +288,7 @@ def judge(claim, ev: Evidence, source: str) -> Decision:
         sorted(ev.frames),
         min(present) if present else 0,
         owners=ev.owners,
+        literal=ev.literal,
     )
 
 
@@ -293,7 +328,6 @@ def _curve_score(claim, metric: str, run, run_root, score: Score, row: dict, cha
     the file is not here or stops short of the run's frames (a crossing after it cannot be ruled out)."""
     from emml.report.efficiency import run_efficiency
     from emml.runs.records import points_or_none
-    from emml.runs.rundir import METRICS, path_of
 
     spec = run.spec  # a planned run (emml/report/plan.py): its name spelled once
     if claim.kind_of.reads == "crossing":
@@ -309,9 +343,11 @@ def _curve_score(claim, metric: str, run, run_root, score: Score, row: dict, cha
     points = sorted((step, v) for step, key, v in mirror or [] if key == claim.key)
     if not points:
         return None
-    # learned: either training split above its bar (the figure is about the conv both tasks read)
+    # learned: either training split above its bar (the figure is about the conv both tasks read); a run with no
+    # training score has none (left out of 'learned', issue 85 item 4), never a placeholder margin
     margins = [float(row[m]) - chance.bar(m, spec.difficulty) for m in TRAIN_COLUMNS if not _isnan(row.get(m))]
-    return Score(score.run, score.seed, points[-1][1], 0, points[-1][0], max(margins, default=-1.0), 0.0)
+    train = max(margins) if margins else None
+    return Score(score.run, score.seed, points[-1][1], 0, points[-1][0], train, 0.0, metric=claim.key)
 
 
 def _phrase(checks: list[Check]) -> str:
@@ -389,8 +425,10 @@ def costs_of(d: Decision, costs: dict[tuple[str, str], str]) -> list[str]:
 
 def decide_all(profile: Profile | str, results_root=None, costs: dict | None = None, run_root=None) -> list[Decision]:
     """Every claim of reproduce/claims.toml decided from `profile`'s results (and its runs' metrics.csv under
-    `run_root`), in the file's order; with `costs` (campaign_costs), each missing run's step. Each table is planned
-    once for all its claims."""
+    `run_root`), in the file's order; with `costs` (campaign_costs), each missing run's step, and the step of each
+    run that would settle a provisional reversal. A claim whose rule the paper's own table fails is marked `apart`
+    (issue 81 item 4: not counted among the reproduction's verdicts). Each table is planned once for all its
+    claims."""
     from emml.experiments.claims import load_claims
 
     profile = resolve_profile(profile)
@@ -401,6 +439,8 @@ def decide_all(profile: Profile | str, results_root=None, costs: dict | None = N
         d = decide(claim, profile, results_root, run_root, chance, plans)
         if costs is not None:
             d.costs = costs_of(d, costs)
+        d.settle = settle_costs(d.checks, costs or {})
+        d.apart = decide_paper(claim).status not in (SUPPORTED, UNTESTABLE)  # the paper's table fails it: apart
         out.append(d)
     return out
 

@@ -15,12 +15,14 @@ the paper's own tables (its numbers as one seed each), so a rule the paper's own
   row's error is the larger of the between-seed spread (with two seeds or more: sample variance / seeds, as Welch's
   test) and the binomial error of its success rates (p(1-p)/N per seed, N its evaluation episodes); one seed:
   binomial only, and the status says 'on 1 seed'.
+- A reversal of ours is 'contradicted' only when a second seed and more frames would not overturn it (issue 81:
+  emml/experiments/claims/settle.py sets `Check.unsettled`); otherwise the claim's status is one of PROVISIONAL.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -34,9 +36,19 @@ SUPPORTED, CONTRADICTED, INCONCLUSIVE, BUDGET, UNTESTABLE = (
     "not supported at this budget",
     "untestable yet",
 )
-STATUSES = (SUPPORTED, CONTRADICTED, INCONCLUSIVE, BUDGET, UNTESTABLE)
+ONE_SEED, CLOSING, UNKNOWN_FLAT = (
+    "reversed on 1 seed",
+    "reversed, still closing at this budget",
+    "reversed, flatness unknown",
+)
+PROVISIONAL = (ONE_SEED, CLOSING, UNKNOWN_FLAT)
+"""A reversal a second seed or more frames could overturn (issue 81 item 3, emml/experiments/claims/settle.py), in
+the order a claim's status names them: a row on one seed with no spread to borrow that keeps it reversed; the gap
+still closing over the last third of the evaluations; no curve here to say whether it is."""
+STATUSES = (SUPPORTED, CONTRADICTED, *PROVISIONAL, INCONCLUSIVE, BUDGET, UNTESTABLE)
 """INCONCLUSIVE: the rows learned, and a gap is within the error; BUDGET: the row the claim puts higher has not
-learned its training split (its loss says nothing against the paper at this budget)."""
+learned its training split (its loss says nothing against the paper at this budget); CONTRADICTED: a reversal that
+is settled (`Check.unsettled` empty); PROVISIONAL: every reversal is not."""
 HOLDS, REVERSED, UNCLEAR, MISSING = "holds", "reversed", "unclear", "missing"
 Z = 1.645
 """A gap counts when it exceeds Z standard errors of the difference of the two means: a one-sided test at 95% (each
@@ -104,15 +116,47 @@ class Score:
     blind row, whose score is the chance line itself."""
     every: int = 0
     """'faster': the largest gap between the run's evaluations in frames (a crossing is known to that resolution)."""
+    metric: str = ""
+    """What `value` reads: a results column (its curve is `eval/<metric>` in metrics.csv) or a diag/* key; '' for a
+    crossing or the paper's tables (no curve)."""
+    chance: float | None = None
+    """`value` is the rate above this chance, (rate − chance) / (1 − chance) (kind 'harder', which compares two
+    tasks: `above_chance`); None: the rate itself."""
+    borrowed: float = 0.0
+    """A between-seed variance (of the rate) borrowed from the nearest cell of the same row with two seeds or more,
+    for a row of one seed (`settle`); 0: none found. Read only when a reversal is weighed for being settled."""
+    borrowed_from: str = ""
+    """Where `borrowed` comes from, for the page ('Text only, Easy · Aux: 2 seeds')."""
+
+    @property
+    def rate(self) -> float:
+        """The success rate itself (`value` undone of `chance`)."""
+        return self.value if self.chance is None else self.chance + self.value * (1 - self.chance)
+
+    @property
+    def scale(self) -> float:
+        """What a rate's deviation is multiplied by in `value`: 1 / (1 − chance), or 1."""
+        return 1.0 if self.chance is None else 1.0 / (1.0 - self.chance)
+
+
+def above_chance(scores: list[Score], chance: float) -> list[Score]:
+    """Each score as its rate above ``chance``: (rate − chance) / (1 − chance), 0 at chance and 1 at a perfect score
+    (issue 81 item 4: a rule that compares two tasks compares how far each is above its own task's chance); the
+    training score and its bar stay as they are ('learned' is read on the training split's own rate)."""
+    if not 0 <= chance < 1:
+        raise ValueError(f"chance={chance!r}: must be in [0, 1) to measure a rate above it")
+    return [replace(s, value=(s.value - chance) / (1 - chance), chance=chance) for s in scores]
 
 
 def learned(scores: list[Score]) -> bool:
-    """Whether the row learned its training split: the mean of its seeds' training scores above the bar (every seed
-    the row has); a row whose runs report no training score is read on its cell's own values."""
-    if not scores:
+    """Whether the row learned its training split: the mean training score of the seeds that have one above the
+    bar; a run without a training score is left out, not averaged in (issue 85 item 4), and a row none of whose runs
+    has one has not shown it learned. The paper's tables, which give no training score, pass the cell's own value
+    as it (emml/report/claims.py, `paper_evidence`)."""
+    known = [s for s in scores if s.train is not None]
+    if not known:
         return False
-    train = [s.train if s.train is not None else s.value for s in scores]
-    return float(np.mean(train)) > max(s.bar for s in scores)
+    return float(np.mean([s.train for s in known])) > max(s.bar for s in known)
 
 
 @dataclass
@@ -141,6 +185,28 @@ class Check:
     """The row the claim puts higher."""
     rows: tuple[str, ...] = ()
     """The table rows the comparison reads (the page shows them when it decides against the claim)."""
+    low: list[Score] = field(default_factory=list)
+    """The scores of the other row (the lower one of 'order', the row compared with the reference of 'level'); []
+    for a threshold."""
+    against: float | None = None
+    """How far the means lie beyond the rule's boundary against the claim: −gap ('order'), |difference| − margin
+    ('level'), value − mean ('threshold'); REVERSED is `against` > Z × the standard error. None: a rule without an
+    error term ('faster', 'diagnostic', 'most')."""
+    orient: float = 1.0
+    """The sign that turns high − low (per evaluation point) into a gap that grows towards the claim: −1 for a
+    'level' row below its reference (its difference closes as it rises), else +1."""
+    floor: float | None = None
+    """'threshold': the value the row's curve is held against (its low side is this constant)."""
+    parts: list[Check] = field(default_factory=list)
+    """'most': the rows' own comparisons it counts."""
+    unsettled: str = ""
+    """For a REVERSED check, the provisional status that holds it back from 'contradicted' (one of PROVISIONAL:
+    emml/experiments/claims/settle.py); '' when it is settled or was never weighed (the paper's own tables)."""
+    settlement: str = ""
+    """Why it is settled or not, for the page: the seeds, a borrowed spread, the gap's slope over the last third of
+    the evaluations with its interval."""
+    settle_by: list[str] = field(default_factory=list)
+    """What would settle it: the missing seeds' runs ('table2/text_only-easy-aux-s1-quick') or 'more frames'."""
 
     @property
     def what(self) -> str:
@@ -158,18 +224,24 @@ def mean(scores: list[Score]) -> float:
     return float(np.mean([s.value for s in scores]))
 
 
-def variance_of_mean(scores: list[Score]) -> float:
+def variance_of_mean(scores: list[Score], borrow: bool = False) -> float:
     """The squared standard error of a row's mean: the larger of the between-seed sample variance and the mean
-    binomial variance of one seed's rate, over the seeds (one seed: binomial only)."""
+    binomial variance of one seed's rate, over the seeds (one seed: binomial only; with ``borrow``, its `borrowed`
+    between-seed variance in the spread's place). A value above chance (`Score.chance`) has both scaled by
+    1 / (1 − chance)²."""
     n = len(scores)
-    binomial = float(np.mean([s.value * (1 - s.value) / max(s.episodes, 1) for s in scores]))
-    spread = float(np.var([s.value for s in scores], ddof=1)) if n > 1 else 0.0
+    binomial = float(np.mean([s.rate * (1 - s.rate) / max(s.episodes, 1) * s.scale**2 for s in scores]))
+    if n > 1:
+        spread = float(np.var([s.value for s in scores], ddof=1))
+    else:
+        spread = scores[0].borrowed * scores[0].scale ** 2 if borrow else 0.0
     return max(spread, binomial) / n
 
 
-def gap_error(a: list[Score], b: list[Score]) -> float:
-    """The standard error of mean(a) - mean(b), the rows independent (Welch)."""
-    return math.sqrt(variance_of_mean(a) + variance_of_mean(b))
+def gap_error(a: list[Score], b: list[Score], borrow: bool = False) -> float:
+    """The standard error of mean(a) - mean(b), the rows independent (Welch); a row may be [] (a threshold's
+    constant). ``borrow``: one-seed rows read their borrowed spread (`variance_of_mean`)."""
+    return math.sqrt(sum(variance_of_mean(r, borrow) for r in (a, b) if r))
 
 
 def seeds_text(scores: list[Score]) -> str:
@@ -207,7 +279,16 @@ def order(where: str, compared: str, hi: list[Score], lo: list[Score]) -> Check:
     if unlearned:
         detail += "; the higher row has not learned its training split"
     return Check(
-        where, compared, outcome, detail, unlearned, min(len(hi), len(lo)), hi, f"{mean(hi):.2f} vs {mean(lo):.2f}"
+        where,
+        compared,
+        outcome,
+        detail,
+        unlearned,
+        min(len(hi), len(lo)),
+        hi,
+        f"{mean(hi):.2f} vs {mean(lo):.2f}",
+        low=lo,
+        against=-gap,
     )
 
 
@@ -231,7 +312,17 @@ def level(where: str, compared: str, row: list[Score], ref: list[Score], margin:
     if unlearned:
         detail += "; the reference row has not learned its training split"
     return Check(
-        where, compared, outcome, detail, unlearned, min(len(row), len(ref)), ref, f"{mean(row):.2f} vs {mean(ref):.2f}"
+        where,
+        compared,
+        outcome,
+        detail,
+        unlearned,
+        min(len(row), len(ref)),
+        ref,
+        f"{mean(row):.2f} vs {mean(ref):.2f}",
+        low=row,
+        against=abs(diff) - margin,
+        orient=-1.0 if diff < 0 else 1.0,
     )
 
 
@@ -246,7 +337,18 @@ def threshold(where: str, compared: str, row: list[Score], value: float) -> Chec
     detail = f"{seeds_text(row)}: mean {m:.3f} against {value:g}, standard error {se:.3f} ({_error_text(row)})"
     if unlearned:
         detail += "; the row has not learned its training split"
-    return Check(where, compared, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:g}")
+    return Check(
+        where,
+        compared,
+        outcome,
+        detail,
+        unlearned,
+        len(row),
+        row,
+        f"{m:.2f} vs {value:g}",
+        against=value - m,
+        floor=value,
+    )
 
 
 def frames_text(frames: int | None, last: int) -> str:
@@ -290,7 +392,8 @@ def faster(where: str, compared: str, fast: list[Score], slow: list[Score]) -> C
     detail = f"{frames_list(f)} against {frames_list(s_)} (evaluations up to {max(apart):,} frames apart)"
     if never:
         detail += "; the faster row never crosses by its last evaluation"
-    return Check(where, compared, outcome, detail, never, len(f), fast, f"{_median_frames(f)} vs {_median_frames(s_)}")
+    numbers = f"{_median_frames(f)} vs {_median_frames(s_)}"
+    return Check(where, compared, outcome, detail, never, len(f), fast, numbers, low=slow)
 
 
 def diagnostic(where: str, compared: str, row: list[Score], value: float) -> Check:
@@ -305,7 +408,7 @@ def diagnostic(where: str, compared: str, row: list[Score], value: float) -> Che
     detail += f" against {value:.3g}"
     if unlearned:
         detail += "; the run has not learned its training split"
-    return Check(where, compared, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:.2g}")
+    return Check(where, compared, outcome, detail, unlearned, len(row), row, f"{m:.2f} vs {value:.2g}", floor=value)
 
 
 def most(where: str, compared: str, checks: list[Check], unlearned_rows: int) -> Check:
@@ -331,18 +434,23 @@ def most(where: str, compared: str, checks: list[Check], unlearned_rows: int) ->
         seeds,
         [],
         f"in {held} of {len(checks)} rows",
+        parts=list(checks),
     )
 
 
 def status(checks: list[Check], single_subject: bool = True) -> str:
-    """The claim's status from its comparisons: contradicted when a row that learned loses by the rule; not
-    supported at this budget when a row the claim puts higher has not learned and does not win (with
-    `single_subject`, the claim's one subject row unlearned anywhere, cells missing or not); untestable while a cell
-    is empty; supported when every comparison holds; otherwise not supported within the error (the rows learned,
-    a gap is inside Z standard errors)."""
+    """The claim's status from its comparisons: contradicted when a row that learned loses by the rule and the
+    reversal is settled (`Check.unsettled` empty: emml/experiments/claims/settle.py); else, while such a reversal
+    is not settled, the first of PROVISIONAL any of them has; not supported at this budget when a row the claim puts
+    higher has not learned and does not win (with `single_subject`, the claim's one subject row unlearned anywhere,
+    cells missing or not); untestable while a cell is empty; supported when every comparison holds; otherwise not
+    supported within the error (the rows learned, a gap is inside Z standard errors)."""
     outcomes = [c.outcome for c in checks]
-    if any(c.outcome == REVERSED and not c.chance for c in checks):
+    reversed_ = [c for c in checks if c.outcome == REVERSED and not c.chance]
+    if any(not c.unsettled for c in reversed_):
         return CONTRADICTED
+    if reversed_:
+        return next(p for p in PROVISIONAL if any(c.unsettled == p for c in reversed_))
     if any(
         c.chance and (c.outcome in (REVERSED, UNCLEAR) or (single_subject and c.outcome == MISSING)) for c in checks
     ):

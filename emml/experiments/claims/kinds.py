@@ -10,8 +10,10 @@ from dataclasses import replace
 
 from emml.experiments.claims.evidence import (
     MISSING,
+    Chance,
     Check,
     Score,
+    above_chance,
     diagnostic,
     faster,
     learned,
@@ -76,8 +78,9 @@ class Kind:
         """How the evidence names what it reads."""
         return metric_text(metric)
 
-    def checks(self, claim, table, keys: list[tuple], get: Get) -> list[Check]:
-        """The comparisons, one per (difficulty, aux, metric) key of the claim's cells."""
+    def checks(self, claim, table, keys: list[tuple], get: Get, chance: Chance | None = None) -> list[Check]:
+        """The comparisons, one per (difficulty, aux, metric) key of the claim's cells (``chance``: what the scores
+        are held against, for a kind that compares tasks; the others read it through each score's bar)."""
         out = []
         for d, a, m in keys:
             out += [
@@ -171,7 +174,7 @@ class AuxHelps(Kind):
     rule = "**aux_helps**: per row and difficulty, the row with aux above the same row without, by the ordering rule."
     single_subject = False
 
-    def checks(self, claim, table, keys, get):
+    def checks(self, claim, table, keys, get, chance=None):
         out = []
         for row in claim.rows:
             for d, m in dict.fromkeys((d, m) for (d, _, m) in keys):
@@ -185,27 +188,29 @@ class Harder(Kind):
     name = "harder"
     metric_count = 2
     rule = (
-        "**harder** ('EQA is more challenging than SGN'): per setting, each row's first metric against its second, "
-        "by the ordering rule on the same runs; it holds where more than half of all the rows hold (the paper: 'most "
-        "models'), is reversed where more than half are reversed, and waits while a row has no run; it is excused "
-        "(not supported at this budget) only when more than half of the rows have not learned their training split "
-        "of the task the claim puts higher."
+        "**harder** ('EQA is more challenging than SGN'): per setting, each row's first metric against its second "
+        "on the same runs, each read above its own task's chance, (score − chance) / (1 − chance) (a raw EQA rate "
+        "and a raw SGN rate are not comparable: chance differs), by the ordering rule; it holds where more than half "
+        "of all the rows hold (the paper: 'most models'), is reversed where more than half are reversed, and waits "
+        "while a row has no run; it is excused (not supported at this budget) only when more than half of the rows "
+        "have not learned their training split of the task the claim puts higher."
     )
 
     def involved(self, claim, table) -> set[str]:
         return set(claim.rows)
 
-    def checks(self, claim, table, keys, get):
+    def checks(self, claim, table, keys, get, chance=None):
         hard, easy = claim.metrics
+        chance = chance if chance is not None else Chance()
+
+        def above(row: str, d: str, a: bool, m: str) -> list[Score]:
+            return above_chance(get(row, d, a, m), chance.of(m, d))
+
         out = []
         for d, a in dict.fromkeys((d, a) for (d, a, _) in keys):
+            compared = f"{metric_text(easy)} > {metric_text(hard)}, above chance"
             per_row = [  # each row's own comparison, read by `most` (no setting of its own)
-                replace(
-                    order(
-                        row, f"{metric_text(easy)} > {metric_text(hard)}", get(row, d, a, easy), get(row, d, a, hard)
-                    ),
-                    rows=(row,),
-                )
+                replace(order(row, compared, above(row, d, a, easy), above(row, d, a, hard)), rows=(row,))
                 for row in claim.rows
             ]
             unlearned = sum(not learned(get(row, d, a, easy)) for row in claim.rows if get(row, d, a, easy))
@@ -262,7 +267,7 @@ class Diagnostic(Kind):
     def metric_label(self, claim, metric):
         return claim.key
 
-    def checks(self, claim, table, keys, get):
+    def checks(self, claim, table, keys, get, chance=None):
         out = []
         for d, a, m in keys:
             if any(claim.where.get(k) not in (None, v) for k, v in (("difficulty", d), ("aux", a))):

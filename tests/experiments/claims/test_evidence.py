@@ -84,9 +84,16 @@ def test_learned_reads_every_seed_of_the_row():
     assert order("w", "x", row[:1], [s(0.5)]).chance  # unlearned: excused
 
 
-def test_a_row_without_a_training_score_is_read_on_its_cell():
-    assert learned([Score("paper", 0, 0.58, 500, 0, None, 0.43)])
-    assert not learned([Score("paper", 0, 0.40, 500, 0, None, 0.43)])
+def test_a_run_without_a_training_score_is_left_out_of_learned_not_averaged_in():
+    """Issue 85 item 4: seed 0 has no training score, seed 1 trains to 0.5 against the bar 0.43: the row learned
+    (0.5 > 0.43). A placeholder averaged in (−1.0, as a curve score once gave: (−1.0 + 0.5) / 2 = −0.25; or the
+    cell's own 0.2: 0.35) would say it had not. A row with no training score at all has not shown it learned (its
+    test value is no stand-in: the paper's tables pass theirs as the training score explicitly)."""
+    row = [Score("r0", 0, 0.2, 500, 0, None, 0.43), Score("r1", 1, 0.2, 500, 0, 0.5, 0.43)]
+    assert learned(row)
+    assert not learned(row[:1])
+    assert not learned([Score("r", 0, 0.58, 500, 0, None, 0.43)])
+    assert learned([Score("paper", 0, 0.58, 500, 0, 0.58, 0.43)])
 
 
 def test_the_blind_row_is_never_excused():

@@ -196,6 +196,29 @@ def test_harder_is_excused_only_when_most_rows_have_not_learned():
     assert decide(harder_claim(), harder_cells(eqa, unlearned=tuple(ROWS[:3]))) == CONTRADICTED
 
 
+def test_harder_compares_each_task_above_its_own_chance_not_raw_rates():
+    """SGN 0.6 (chance 0.2) against EQA 0.7 (chance 0.5), every row, 500 episodes. Raw, EQA is above: gap −0.1,
+    se sqrt((0.24 + 0.21) / 500) = 0.030, reversed. Above chance, SGN (0.6 − 0.2) / 0.8 = 0.5 against EQA
+    (0.7 − 0.5) / 0.5 = 0.4: gap +0.1, se sqrt(0.24 / 500 / 0.8² + 0.21 / 500 / 0.5²) = 0.049, 1.645 se = 0.081: holds
+    in every row. Comparing raw rates (or one chance for both tasks) reverses it; an error term left unscaled by
+    1 / (1 − chance) (se 0.030) would still hold, so a second case sits between: EQA 0.72, above chance 0.44, gap
+    0.06, inside 1.645 × 0.050 but outside 1.645 × 0.030."""
+    from emml.experiments.claims.evidence import Chance
+
+    chance = Chance({("easy", "sgn_test"): 0.2, ("easy", "eqa_test"): 0.5}, "made up")
+    cells = harder_cells({row: 0.7 for row in ROWS}, sgn=0.6)
+    keys = [("easy", True, "eqa_test"), ("easy", True, "sgn_test")]
+
+    def outcome(cells):
+        (c,) = KINDS["harder"].checks(harder_claim(), TABLE2, keys, lambda r, d, a, m: cells.get((r, d, a, m), []), chance)
+        return c
+
+    c = outcome(cells)
+    assert c.outcome == "holds" and c.numbers == "in 7 of 7 rows"
+    assert c.parts[0].numbers == "0.50 vs 0.40"
+    assert outcome(harder_cells({row: 0.72 for row in ROWS}, sgn=0.6)).outcome == "unclear"
+
+
 def test_harder_waits_for_a_row_with_no_run():
     eqa = {row: 0.5 for row in ROWS}
     assert decide(harder_claim(), harder_cells(eqa, drop=("GA",))) == UNTESTABLE
@@ -350,7 +373,10 @@ def test_harder_names_the_setting_and_each_rows_comparison():
     (c,) = checks(harder_claim(), harder_cells(eqa))
     assert named([c]) == [("Easy · Aux: EQA test below SGN test", "Easy · Aux", "", "most rows", ())]
     assert c.numbers == "in 4 of 7 rows"
-    assert c.detail.startswith("Text only: SGN test > EQA test: holds, 0.80 vs 0.50; Image only: SGN test > EQA test")
+    # each above its task's uniform chance (no chance given): SGN (0.8 − 0.2) / 0.8, EQA (0.5 − 1/3) / (2/3)
+    assert c.detail.startswith(
+        "Text only: SGN test > EQA test, above chance: holds, 0.75 vs 0.25; Image only: SGN test > EQA test"
+    )
     assert c.detail.endswith("(0 of 7 rows have not learned their training split)")
     (c,) = checks(harder_claim(), harder_cells(eqa, unlearned=tuple(ROWS[:3])))
     assert c.detail.endswith("(3 of 7 rows have not learned their training split)") and not c.chance
