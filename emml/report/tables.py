@@ -139,7 +139,7 @@ def report_table(
 
     Planned once (issue 64): the profile resolved and every run's config and name made once (`plan_report`, the
     launch's own `plan_runs`); every part of the page reads that plan."""
-    from emml.report import deviations, efficiency
+    from emml.report import deviations, efficiency, questions
     from emml.report.aggregate import summary
     from emml.report.commits import commits_note
     from emml.report.field import plot_field
@@ -178,6 +178,7 @@ def report_table(
     if names:
         prior = blind_prior(prof, plan.results_root)  # 'leaves chance': above what a blind model scores here
         md += [efficiency.markdown(efficiency.table_efficiency(plan, names, prior), chance=prior)]
+    md += questions.section(path, cells, results)  # EQA test per question beside its blind ceiling (issue 81)
     md += [f"Results: `{shown}`", ""]
     write_text(md_path, "\n".join(md), then=RERUN)  # whole or not at all (emml/runs/atomic.py)
     write_text(tex_path, tex_table(plan, cells, results, devs), then=RERUN)
