@@ -75,25 +75,31 @@ class Chance:
     """What a model that sees no frame scores, per (difficulty, task_split) ('sgn_test', 'eqa_train', ...)."""
 
     values: dict = field(default_factory=dict)
-    """(difficulty, 'eqa_test') → the blind row's mean over its seeds and aux settings; absent: the metric's declared
-    uniform floor."""
+    """(difficulty, 'eqa_test') → chance there: the task's blind ceiling (emml/report/chance.py, a mapping computed
+    when read) or a blind row's measured score; absent: the metric's declared uniform floor."""
     source: str = "the uniform chance"
-    """Where the values come from, for the page ('Table 2's Text only row, quick profile')."""
+    """Where the values come from, for the page ('the best fixed answer per question, enumerated ...')."""
+    exact: bool = False
+    """The values are the task's exact ceiling (emml/tasks/ceiling.py), taken as they are, below the uniform floor
+    too (the House's colour questions: 1/4 of four colours); False: measured scores, never below the floor (a blind
+    run's noise)."""
 
     def of(self, metric: str, difficulty: str) -> float:
-        """Chance for a results column in a difficulty: the blind row's score on the column its declaration names,
-        never below its declared uniform floor."""
+        """Chance for a results column in a difficulty: the value of the column its declaration names (if measured,
+        never below its declared uniform floor); the floor where there is none."""
         declared = _metric(metric)
         value = self.values.get((difficulty, declared.chance))
         floor = declared.uniform
-        return floor if value is None else max(floor, float(value))
+        if value is None:
+            return floor
+        return float(value) if self.exact else max(floor, float(value))
 
     def bar(self, metric: str, difficulty: str) -> float:
         """The score a run must exceed to have left chance: chance + LEAVE."""
         return self.of(metric, difficulty) + LEAVE
 
     def measured(self, metric: str, difficulty: str) -> bool:
-        """Whether chance there is the blind row's measured score (not the uniform floor alone)."""
+        """Whether chance there is a value given (the ceiling, or a blind row's score), not the uniform floor."""
         return (difficulty, _metric(metric).chance) in self.values
 
 
