@@ -4,7 +4,9 @@
 files. If the Python owner dies without `close()`, the engine keeps running and the files stay. So every engine
 started here is recorded with its pid and instance id, and `end_engine` closes the game, kills the pid if it
 still lives and removes its shm files. An atexit hook ends what is left on normal exit, and
-`install_signal_handlers` turns SIGTERM into SystemExit so that `finally` blocks and context managers run.
+`install_signal_handlers` (emml/runs/stops.py) turns SIGTERM into SystemExit so that `finally` blocks and context
+managers run. Each engine runs in a session (and process group) of its own: a terminal's Ctrl-C reaches its owner,
+never the engine, which ViZDoom crashes on while it starts (issue 85); the owner ends it by pid.
 """
 
 from __future__ import annotations
@@ -23,6 +25,10 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+# how a stop (Ctrl-C, SIGTERM, SIGHUP) is raised and held back lives in emml/runs/stops.py; these names stay here for
+# the modules and tests that import them from the engines' module
+from emml.runs.stops import install_signal_handlers, stop_after  # noqa: F401
 
 SHM_DIR = "/dev/shm"
 
@@ -85,6 +91,7 @@ def engine_home() -> Path:
 
 
 LAUNCHER = """#!/bin/sh
+trap '' INT
 cd "{home}" || exit 1
 instance=- prev=
 for a in "$@"; do [ "$prev" = +viz_instance_id ] && instance=$a; prev=$a; done
@@ -93,12 +100,24 @@ rest=${{stat##*) }}
 start=$(echo $rest | cut -d' ' -f20)
 record="{records}/$PPID-$$"
 mkdir -p "{records}" && echo "$start $instance" > "$record.tmp" && mv "$record.tmp" "$record"
-exec "{binary}" "$@"
+exec {setsid}"{binary}" "$@"
 """
 """The engine's launcher. It records the engine (``<owner pid>-<engine pid>``: start time, /proc/PID/stat field 22,
 and instance id, as `_record` writes them) before it ``exec``s the engine, which keeps the pid and the start time:
 an owner killed with SIGKILL while ``game.init()`` runs, before `start_engine` could record what it forked, leaves
-an engine `sweep_orphans` still finds (one such engine was left on this machine, session 12)."""
+an engine `sweep_orphans` still finds (one such engine was left on this machine, session 12). ``{setsid}``:
+util-linux's ``setsid`` (`setsid_prefix`), which puts the engine in a session and process group of its own and
+``exec``s it (no fork: the launcher is no group leader), so that a terminal's Ctrl-C, sent to the owner's process
+group, never reaches it. Until then the launcher is in that group: ``trap '' INT`` ignores a Ctrl-C there (and
+discards one that came while `start_engine` held it back), which killed the launcher, and the owner's ``init()``
+with a segfault (issue 85: Ctrl-C as an evaluation starts its engines)."""
+
+
+def setsid_prefix() -> str:
+    """``"<path of setsid>" `` where util-linux's ``setsid`` is installed, else "" (the engine then shares its owner's
+    process group, as before issue 85)."""
+    found = shutil.which("setsid")
+    return f'"{found}" ' if found else ""
 
 
 def engine_launcher(binary: str) -> Path:
@@ -106,7 +125,7 @@ def engine_launcher(binary: str) -> Path:
     and name the library and :func:`start_engine` expect), recorded first (`LAUNCHER`). Written once per content,
     atomically."""
     home = engine_home()
-    script = LAUNCHER.format(home=home, records=records_dir(), binary=binary)
+    script = LAUNCHER.format(home=home, records=records_dir(), binary=binary, setsid=setsid_prefix())
     path = home / f"vizdoom-{hashlib.sha1(script.encode()).hexdigest()[:12]}.sh"
     if not path.exists():
         fd, tmp = tempfile.mkstemp(dir=home, suffix=".tmp")
@@ -119,7 +138,9 @@ def engine_launcher(binary: str) -> Path:
 
 def start_engine(game) -> Engine:
     """``game.init()`` (the engine running in :func:`engine_home`) and record the engine it forked. Raises
-    EngineError on failure."""
+    EngineError on failure. A Ctrl-C is held back during ``init()``: the process it forks keeps the mask until the
+    launcher's ``trap '' INT`` (`LAUNCHER`), so that no Ctrl-C kills the launcher, which crashed ``init()`` with a
+    segfault (issue 85: 5 of 7 `emml train`, 7 of 7 `emml eval`); the owner gets it when ``init()`` returns."""
     before = set(_children_named("vizdoom"))
     binary = game.get_vizdoom_path()
     if not binary.endswith(".sh"):
@@ -129,7 +150,8 @@ def start_engine(game) -> Engine:
             binary = os.path.join(os.path.dirname(vizdoom.__file__), "vizdoom")
         game.set_vizdoom_path(str(engine_launcher(binary)))
     try:
-        game.init()
+        with _ctrl_c_held():  # until init() returns (its fork inherits the mask up to the launcher's trap)
+            game.init()
     except Exception as e:  # vizdoom raises its own exception types
         _drop_dead_records()  # what the launcher recorded of an engine that did not start
         raise EngineError(f"ViZDoom failed to start: {e}") from e
@@ -144,6 +166,17 @@ def start_engine(game) -> Engine:
             _LIVE[pid] = engine
         _record(engine)
     return engine
+
+
+@contextlib.contextmanager
+def _ctrl_c_held():
+    """SIGINT blocked in this thread for the block, delivered after it (SIGTERM is not: an engine that inherited it
+    blocked would ignore a SIGTERM for good)."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def records_dir() -> Path:
@@ -357,40 +390,3 @@ def private_mp_tempdir() -> Path:
         finally:
             tempfile.tempdir = saved
     return mine
-
-
-_deferring = 0
-"""How many `stop_after` blocks the main thread is inside: while > 0, SIGTERM/SIGHUP wait for the outermost to end."""
-_pending: int | None = None
-"""The signal that arrived inside a `stop_after` block, raised as SystemExit when it ends."""
-
-
-def _raise_exit(signum, frame):
-    global _pending
-    if _deferring:
-        _pending = signum
-        return
-    raise SystemExit(128 + signum)
-
-
-@contextlib.contextmanager
-def stop_after():
-    """A block a SIGTERM/SIGHUP does not cut short: the stop (SystemExit, as `install_signal_handlers` raises it)
-    comes when the block ends. The trainer's PPO update runs in one, so that a stopped run keeps it whole
-    (emml/rl/trainer.py, `checkpoint_on_stop`) instead of losing every update since its last checkpoint."""
-    global _deferring, _pending
-    _deferring += 1
-    try:
-        yield
-    finally:
-        _deferring -= 1
-        if not _deferring and _pending is not None:
-            signum, _pending = _pending, None
-            raise SystemExit(128 + signum)
-
-
-def install_signal_handlers() -> None:
-    """SIGTERM (and SIGHUP) raise SystemExit in the main thread, so cleanup code runs as on Ctrl-C."""
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGHUP):
-            signal.signal(sig, _raise_exit)

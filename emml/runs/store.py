@@ -6,19 +6,26 @@ and ``import emml`` must stay fast.
   (a shared ``mlflow server``) is a matter of the ``MLFLOW_TRACKING_URI`` environment variable.
 * Writes go through ``MlflowClient.log_batch``, which splits them into calls of MLflow's limits; SQLite "database is
   locked" errors (many concurrent writers) are retried with backoff (`retry`).
+* Once the process is stopping (Ctrl-C, SIGTERM: emml/runs/stops.py), a call to the store gets `STOP_GRACE_S` more
+  seconds and is then given up (`StoreGaveUp`): a store locked by another process, whose every try waits MLflow's
+  20 s busy timeout, held a stopped training for 3 minutes (issue 85). From the main thread each try runs in a
+  helper thread that the main thread waits on, so that it can be given up, and never cut in the middle.
 * :func:`metric_history` returns full curves (``search_runs`` only keeps the latest value per metric).
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import random
+import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
 from emml.config.paths import project_root
+from emml.runs.stops import stop_requested
 
 T = TypeVar("T")
 
@@ -45,10 +52,25 @@ def sqlite_path(uri: str) -> Path | None:
     return Path(path).resolve()
 
 
+class _RaisedAnyway(logging.Filter):
+    """Drops MLflow's log of a database error it raises anyway: ``mlflow.store.db.utils`` logs every sqlalchemy
+    OperationalError (database locked, disk full) with its traceback, ~40 lines, before raising it as the
+    MlflowException the caller handles; the project says it in one line (issue 85: a full disk during `emml
+    import-runs` printed 95 lines of it before its own line, a locked store ~1,600)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not str(record.msg).startswith("SQLAlchemy database error.")
+
+
+_FILTER = _RaisedAnyway()
+
+
 def client(uri: str | None = None):
-    """MlflowClient for ``uri`` (default `tracking_uri`); creates the sqlite file's directory if missing."""
+    """MlflowClient for ``uri`` (default `tracking_uri`); creates the sqlite file's directory if missing. MLflow's log
+    of the errors it raises is kept out of the output (`_RaisedAnyway`)."""
     from mlflow import MlflowClient
 
+    logging.getLogger("mlflow.store.db.utils").addFilter(_FILTER)  # once: a filter is added only if not there
     uri = uri or tracking_uri()
     db = sqlite_path(uri)
     if db is not None:
@@ -61,15 +83,75 @@ def _is_lock_error(exc: BaseException) -> bool:
     return "database is locked" in text or "database table is locked" in text
 
 
+STOP_GRACE_S = 3.0
+"""Seconds a call to the store may still take once the process is stopping, counted from the stop or from the call's
+start, whichever is later: the in-flight write and then the run's end (KILLED) each get this long, within the 8 s a
+campaign's pool gives a stopped run (emml/experiments/pool.py, STOP_GRACE_S)."""
+POLL_S = 0.05
+"""How often the main thread looks whether a call running in its helper thread is to be given up."""
+
+
+class StoreGaveUp(RuntimeError):
+    """The store did not answer within `STOP_GRACE_S` of a stop: the call is given up (its helper thread left to
+    finish or not; the process is ending)."""
+
+
+def _give_up_if_stopping(started: float) -> None:
+    stop = stop_requested()
+    if stop is not None and time.monotonic() > max(stop, started) + STOP_GRACE_S:
+        raise StoreGaveUp(
+            f"the MLflow store ({tracking_uri()}) did not answer within {STOP_GRACE_S:g} s of the stop "
+            "(locked or busy): given up"
+        )
+
+
+def _attempt(fn: Callable[[], T], started: float) -> T:
+    """``fn()``; from the main thread, run in a daemon helper thread that is given up (`StoreGaveUp`) once the process
+    has been stopping for `STOP_GRACE_S` (a signal the main thread gets meanwhile never cuts the write itself)."""
+    if threading.current_thread() is not threading.main_thread():
+        return fn()
+    box: dict = {}
+
+    def call():
+        try:
+            box["value"] = fn()
+        except BaseException as e:  # noqa: BLE001 - raised again in the main thread
+            box["error"] = e
+
+    helper = threading.Thread(target=call, name="emml-store-call", daemon=True)
+    helper.start()
+    while True:
+        helper.join(POLL_S)
+        if not helper.is_alive():
+            break
+        _give_up_if_stopping(started)
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def _wait(seconds: float, started: float) -> None:
+    """Sleep ``seconds`` between tries, given up as `_attempt` is."""
+    end = time.monotonic() + seconds
+    while (left := end - time.monotonic()) > 0:
+        _give_up_if_stopping(started)
+        time.sleep(min(left, POLL_S))
+    _give_up_if_stopping(started)
+
+
 def retry(fn: Callable[[], T], attempts: int = 8, base_delay: float = 0.1) -> T:
-    """Call ``fn``; retry SQLite lock errors with jittered exponential backoff."""
+    """Call ``fn``; retry SQLite lock errors with jittered exponential backoff. Once the process is stopping, given up
+    `STOP_GRACE_S` after the stop (or this call's start, if later) with `StoreGaveUp`."""
+    started = time.monotonic()
     for i in range(attempts):
         try:
-            return fn()
+            return _attempt(fn, started)
+        except StoreGaveUp:
+            raise
         except Exception as exc:  # mlflow wraps sqlalchemy errors in MlflowException
             if not _is_lock_error(exc) or i == attempts - 1:
                 raise
-            time.sleep(base_delay * (2**i) * (0.5 + random.random()))
+            _wait(base_delay * (2**i) * (0.5 + random.random()), started)
     raise AssertionError("unreachable")
 
 

@@ -25,11 +25,12 @@ from pathlib import Path
 from typing import Any
 
 from emml.config.paths import checkout_root
-from emml.runs import store
+from emml.runs import pending_ends, store
 from emml.runs.mirror import append_mirror, export_mirror, read_mirror
 from emml.runs.portable import ROOTS, portable, root_name
 from emml.runs.provenance import NOTE, experiment_note, source_tags
-from emml.runs.store import MAX_PARAM_LEN, MAX_TAG_LEN, retry
+from emml.runs.stops import note_stop
+from emml.runs.store import MAX_PARAM_LEN, MAX_TAG_LEN, StoreGaveUp, retry
 
 __all__ = ["Tracker", "display_name", "flatten", "parent_run", "set_run_status", "stored_run", "tag_strings"]
 
@@ -171,6 +172,7 @@ class Tracker:
         elsewhere (a run dir's record); default now. Returns the run id. A failure once the run exists (its params, a
         replay) ends it FAILED.
         """
+        self._apply_pending_ends()
         try:
             return self._start(experiment, run_name, tags, params, run_id, parent_run_id, start_time)
         except BaseException as e:  # once created or set RUNNING, the run must not stay RUNNING forever
@@ -204,6 +206,7 @@ class Tracker:
         else:  # this store's run of the run dir: trained here, or imported (emml import-runs) or resumed before
             run = retry(lambda: self._client.get_run(stored))
             self._run_id = run.info.run_id
+            pending_ends.drop_end(self._uri, stored)  # resumed: its status is set here, not by a record of its stop
             retry(lambda: self._client.update_run(stored, status="RUNNING"))
             existing = run.data.params
             changed = sorted(k for k, v in flat.items() if k in existing and existing[k] != v)
@@ -214,6 +217,14 @@ class Tracker:
                 self.set_tags(tags)
         store.log_batch(self._client, self.run_id, params=[Param(k, v) for k, v in flat.items()])
         return self.run_id
+
+    def _apply_pending_ends(self) -> None:
+        """Write the ends recorded by processes that stopped while this store was locked (`pending_ends.apply_ends`);
+        a store that fails here is warned about, and the start goes on (it meets the same store next)."""
+        try:
+            pending_ends.apply_ends(self._uri, self._client)
+        except Exception as e:  # noqa: BLE001 - a start is not refused over another run's status
+            warnings.warn(f"pending MLflow run ends not written: {type(e).__name__}: {e}", stacklevel=3)
 
     def has_run(self, run_id: str) -> bool:
         """Whether this store holds run ``run_id``."""
@@ -254,16 +265,33 @@ class Tracker:
         """Mark the run terminated with ``status`` (FINISHED, FAILED or KILLED), at ``end_time`` (ms; default now)."""
         if status not in STATUSES:
             raise ValueError(f"status must be one of {STATUSES}, got {status!r}")
-        retry(lambda: self._client.set_terminated(self.run_id, status=status, end_time=end_time))
+        end_time = end_time if end_time is not None else int(time.time() * 1000)
+        try:
+            retry(lambda: self._client.set_terminated(self.run_id, status=status, end_time=end_time))
+        except StoreGaveUp:  # a stopping process and a locked store: the next start writes it (pending_ends)
+            run_dir = self._mirror.parent if self._mirror is not None else None
+            pending_ends.record_end(self._uri, self.run_id, status, end_time, run_dir)
+            raise
 
     def abort(self, exc: BaseException) -> None:
         """End the run after ``exc``, never leaving it RUNNING: KILLED for Ctrl-C or a termination signal
         (SystemExit, emml.envs.engine.install_signal_handlers), else FAILED; nothing if no run was started. A store
-        that fails too (the same full disk) is warned about, so that ``exc``, the cause, is what the caller sees."""
+        that fails too (the same full disk) is warned about, so that ``exc``, the cause, is what the caller sees; a
+        store that does not answer within seconds of a stop is given up, the run's end recorded for the next start
+        (emml/runs/pending_ends.py)."""
+        stopped = isinstance(exc, (KeyboardInterrupt, SystemExit))
+        if stopped:
+            note_stop()  # the store gets seconds, not minutes, from now (emml/runs/store.py, STOP_GRACE_S)
         if self._run_id is None:
             return
         try:
-            self.finish("KILLED" if isinstance(exc, (KeyboardInterrupt, SystemExit)) else "FAILED")
+            self.finish("KILLED" if stopped else "FAILED")
+        except StoreGaveUp as e:
+            warnings.warn(
+                f"MLflow run {self._run_id} left RUNNING: {e}; it is marked {'KILLED' if stopped else 'FAILED'} at "
+                "the next start against this store",
+                stacklevel=2,
+            )
         except Exception as e:  # noqa: BLE001 - the original error matters more
             warnings.warn(f"MLflow run {self._run_id} could not be marked ended: {type(e).__name__}: {e}", stacklevel=2)
 

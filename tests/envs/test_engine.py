@@ -172,3 +172,22 @@ def test_a_sigterm_inside_stop_after_stops_when_the_block_ends():
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
+
+
+def test_an_engine_runs_in_a_process_group_of_its_own_and_ignores_the_terminals_ctrl_c(no_leftovers):
+    """Issue 85: the engines shared the terminal's process group, and a Ctrl-C reaching one (or its launcher) as it
+    started crashed it and its owner (-11). Now the engine is the leader of a session of its own (util-linux setsid,
+    no fork: same pid), a Ctrl-C sent to its owner's group does not reach it, and its owner ends it by pid."""
+    from emml.envs.doom import DoomEnv
+    from emml.envs.engine import live_engines
+
+    env = DoomEnv(height=60, width=108)
+    try:
+        env.reset(seed=0)
+        pid = env._engine.pid
+        assert os.getpgid(pid) == pid == os.getsid(pid) and os.getpgid(pid) != os.getpgid(0)
+        assert env._engine.pid == pid and pid in live_engines()  # recorded under the pid setsid kept
+        env.step(env.action_space.sample())  # the engine answers (started whole through setsid)
+    finally:
+        env.close()
+    assert not os.path.exists(f"/proc/{pid}")
