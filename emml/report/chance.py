@@ -1,64 +1,76 @@
-"""Chance as a blind model scores it here (issue 60): the Text only row, which sees no frame, per difficulty, task
-and split, read from a profile's results (Table 2 for Doom, Table 5 for the House) or from the paper's own tables.
-The claims page, the sample-efficiency tables and the curves' chance lines all read it (emml/experiments/claims/
-evidence.py: `Chance`, never below the uniform chance)."""
+"""Chance from the task (issue 81, item 1): the best a model that sees no frame can score, per difficulty, task and
+split, enumerated from the episode generator (emml/tasks/ceiling.py): the best fixed answer per question (EQA), the
+best fixed object slot per instruction (SGN), weighted as the env draws the sentences. No run is read: the Text only
+row is a row like any other. The claims page (ours and the paper's own tables alike), the sample-efficiency tables
+and the curves' chance lines all read it (emml/experiments/claims/evidence.py: `Chance`)."""
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
-import numpy as np
-
+from emml.config.env_kinds import ENV_KINDS
 from emml.config.profiles import Profile
 from emml.experiments.claims.evidence import Chance
-from emml.experiments.metrics import CHANCE_COLUMNS, label
+from emml.experiments.metrics import BY_NAME, CHANCE_COLUMNS, label
+from emml.tasks.ceiling import split_ceiling
 
 BLIND_MODEL = "text_only"
-"""The model that sees no frame: its score is the answer and target prior a blind agent can learn here."""
-BLIND_TABLES = ("table2", "table5")
-"""The tables that hold a blind row (Doom Easy and Hard; the House)."""
+"""The model that sees no frame (the claims mark its row: its score is no evidence of having learned)."""
 COLUMNS = CHANCE_COLUMNS
-"""The columns a blind prior is measured on: each metric's declared `chance` (emml/experiments/metrics.py)."""
+"""The columns chance is given for: each metric's declared `chance` (emml/experiments/metrics.py)."""
+SOURCE = (
+    "the best fixed answer per question (EQA) and the best fixed object slot per instruction (SGN), enumerated from "
+    "the episode generator (emml/tasks/ceiling.py)"
+)
+"""What chance is, as the pages say it."""
 
 
-def blind_prior(profile: Profile, results_root: str | Path | None = None) -> Chance:
-    """The profile's Text only runs, mean over seeds and aux settings per difficulty and column; a column with no
-    finished blind run falls back to the uniform chance (`Chance.of`). Read from the blind tables' own results CSVs
-    (their Text only rows are their own, never borrowed): no table is loaded, no run named."""
-    from emml.report.cells import results_path
-    from emml.runs.results import read_results
+class CeilingValues(Mapping):
+    """(difficulty, chance column) → the split's blind ceiling (`split_ceiling`), for every env kind and column,
+    each computed when first read (the House's enumeration takes seconds; a page about Doom never pays it)."""
 
-    values: dict = {}
-    seeds: dict = {}
-    for name in BLIND_TABLES:
-        results = read_results(results_path(name, profile, results_root))
-        if results.empty or "model" not in results:
-            continue
-        blind = results[results["model"] == BLIND_MODEL]
-        for difficulty, group in blind.groupby("difficulty"):
-            for column in COLUMNS:
-                found = group[column].dropna() if column in group else []
-                if len(found):
-                    values[(difficulty, column)] = float(np.mean(found))
-                    seeds[difficulty] = len(group)
-    runs = ", ".join(f"{d}: {n} run{'s' if n != 1 else ''}" for d, n in sorted(seeds.items())) or "none yet"
-    return Chance(values, f"the mean score of this profile's Text only runs ({runs})")
+    def __init__(self) -> None:
+        self._keys = tuple((d, c) for d in ENV_KINDS for c in COLUMNS)
+
+    def __getitem__(self, key) -> float:
+        if key not in self._keys:
+            raise KeyError(key)
+        difficulty, column = key
+        return split_ceiling(difficulty, BY_NAME[column].task, BY_NAME[column].split)
+
+    def __contains__(self, key) -> bool:
+        return key in self._keys  # without computing it (Mapping's own would read the value)
+
+    def __iter__(self) -> Iterator:
+        return iter(self._keys)
+
+    def __len__(self) -> int:
+        return len(self._keys)
+
+
+@functools.cache
+def task_ceiling() -> Chance:
+    """The chance every score is held against: the best a model that sees no frame can score, per difficulty and
+    column, enumerated from the episode generator; exact (no uniform floor under it)."""
+    return Chance(CeilingValues(), SOURCE, exact=True)
+
+
+def blind_prior(profile: Profile | None = None, results_root: str | Path | None = None) -> Chance:
+    """The chance a profile's results are held against (the claims, the tables' 'leaves chance'): the task's
+    ceiling (`task_ceiling`). It depends on the task only; the arguments name the results it is read for."""
+    return task_ceiling()
 
 
 def paper_prior() -> Chance:
-    """The paper's own Text only rows (its Tables 2 and 5), mean over aux settings per difficulty and column."""
-    from emml.report.cells import paper_numbers
-
-    pooled: dict = {}
-    for name in BLIND_TABLES:
-        paper = paper_numbers(name)
-        for r in paper[paper["row"] == "Text only"].itertuples():
-            pooled.setdefault((r.difficulty, r.metric), []).append(float(r.value))
-    return Chance({k: float(np.mean(v)) for k, v in pooled.items()}, "the paper's Text only rows (Tables 2 and 5)")
+    """The chance the paper's own tables are held against: the same task's ceiling (same task, same rule for both
+    sides; the paper's Text only rows are a row like any other)."""
+    return task_ceiling()
 
 
 def chance_text(chance: Chance, difficulties: tuple[str, ...] = ("easy", "hard", "house")) -> str:
-    """'Easy: SGN test 0.20, EQA test 0.45 (measured), ...' for a page."""
+    """'Easy: SGN test 0.20, EQA test 0.56, ...' for a page ('(uniform)' where no value is given)."""
     from emml.config.env_kinds import env_label
 
     parts = []

@@ -109,7 +109,7 @@ def plot_table(
 
     from emml.report import deviations
     from emml.report.cells import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, table_results
-    from emml.report.chance import blind_prior
+    from emml.report.chance import task_ceiling
     from emml.report.plan import plan_report
     from emml.report.tables import reports_dir
     from emml.runs.records import points_or_none
@@ -123,7 +123,7 @@ def plot_table(
     if table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
     results = table_results(table, prof, plan.results_root)  # its own rows, and those it borrows (Table 3's DA)
-    prior = blind_prior(prof, plan.results_root)
+    prior = task_ceiling()  # the task's blind ceiling, enumerated (emml/tasks/ceiling.py), not a run's score
     run_ids = dict(zip(results["run_name"], results["run_id"]))
     paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
     metrics = list(dict.fromkeys(table.metrics.values()))
@@ -209,7 +209,7 @@ def plot_table(
                 value = paper.get((row, difficulty, aux, metric))
                 if value not in (None, ""):
                     ax.plot([1.0], [float(value)], marker="<", ms=5, color=color, transform=edge, clip_on=False)
-            line = prior.of(curve_key(metric)[0].removeprefix("eval/"), difficulty)  # a blind model's score here
+            line = prior.of(curve_key(metric)[0].removeprefix("eval/"), difficulty)  # the best blind score here
             ax.axhline(line, color="grey", lw=0.8, ls=":")
             label = curve_key(metric)[1]
             title = f"{label}: {DIFFICULTY_LABELS.get(difficulty, difficulty)}, {AUX_LABELS[aux]}"
@@ -222,7 +222,7 @@ def plot_table(
                 ax.tick_params(labelleft=False)
             for handle, text in zip(*ax.get_legend_handles_labels()):
                 legend.setdefault(text, handle)
-            legend.setdefault(f"blind chance {line:.2f}", Line2D([], [], color="grey", lw=0.8, ls=":"))
+            legend.setdefault(f"blind ceiling {line:.2f}", Line2D([], [], color="grey", lw=0.8, ls=":"))
             if any(paper.get((row, difficulty, aux, metric)) for _, row, _ in lines):
                 legend.setdefault("paper (its frames)", Line2D([], [], color="grey", marker="<", ls=""))
     longest = max(len(t) for t in legend)
@@ -231,8 +231,8 @@ def plot_table(
     note = "" if profile == "paper" else f" Profile '{profile}' is not the paper's protocol: its deviations below."
     title = (
         f"{name} [{profile}]: greedy accuracy (the table's metric, periodic evaluation), seed mean, 95% bootstrap "
-        f"band; the paper's number marked at the right edge; dotted: chance, what a blind model (Text only) scores "
-        f"here.{note}"
+        f"band; the paper's number marked at the right edge; dotted: chance, the best a model that sees no frame can "
+        f"score (enumerated from the task).{note}"
     )
     fig.suptitle(wrap(title, PAGE_INCHES - 0.1, plt.rcParams["figure.titlesize"]))
     if footer:

@@ -19,7 +19,8 @@ from emml.experiments.metrics import BY_NAME, CURVE_METRICS, label
 
 __all__ = ["LEAVE", "frames_text", "first_crossing", "run_efficiency", "table_efficiency", "markdown"]
 UNIFORM_CHANCE = Chance()
-"""Chance without a blind run to read: the uniform floor (SGN 0.2, EQA 1/3; emml/experiments/claims/evidence.py)."""
+"""The uniform floor (SGN 0.2, EQA 1/3; emml/experiments/claims/evidence.py): a crossing asked for without a
+difficulty (`first_crossing`); a run's and a table's crossings read the task's blind ceiling (`task_ceiling`)."""
 MARKS = ("chance", "0.5", "0.9")
 """The crossings per metric: leaving chance (above chance + LEAVE), reaching 0.5, reaching 0.9."""
 
@@ -81,10 +82,11 @@ def curves(path: Path) -> dict[str, list[tuple[int, float]]] | None:
 
 def run_efficiency(spec, name: str, run_root: str | Path, chance: Chance | None = None) -> RunEfficiency:
     """The crossings of one declared run (a RunSpec, its run name ``name`` as planned) from its run dir under
-    `run_root`; 'leaves chance' above `chance` (the profile's blind prior, emml/report/chance.py; default the uniform
-    chance) + LEAVE."""
-    chance = chance if chance is not None else UNIFORM_CHANCE
+    `run_root`; 'leaves chance' above `chance` (default the task's blind ceiling, emml/report/chance.py) + LEAVE."""
+    from emml.report.chance import task_ceiling
     from emml.runs.rundir import METRICS, path_of
+
+    chance = chance if chance is not None else task_ceiling()
 
     eff = RunEfficiency(name, spec.row, spec.difficulty, spec.aux, spec.seed)
     path = path_of(run_root, spec.table, name) / METRICS
@@ -104,11 +106,10 @@ def run_efficiency(spec, name: str, run_root: str | Path, chance: Chance | None 
 
 def table_efficiency(plan, names: list[str], chance: Chance | None = None) -> list[RunEfficiency]:
     """The crossings of the named runs of the plan's table (the runs its page shows), in the table's run order, from
-    their run dirs under the plan's run_root; chance: the profile's blind prior (emml/report/chance.py) unless
-    given."""
-    from emml.report.chance import blind_prior
+    their run dirs under the plan's run_root; chance: the task's blind ceiling (emml/report/chance.py) unless given."""
+    from emml.report.chance import task_ceiling
 
-    chance = chance if chance is not None else blind_prior(plan.profile, plan.results_root)
+    chance = chance if chance is not None else task_ceiling()
     wanted = set(names)
     return [run_efficiency(r.spec, r.name, plan.run_root, chance) for r in plan.runs if r.name in wanted]
 
@@ -121,9 +122,9 @@ def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS
     if not runs:
         return ""
     shown = [m for m in metrics if any(m in r.crossings for r in runs)]
-    from emml.report.chance import chance_text
+    from emml.report.chance import chance_text, task_ceiling
 
-    chance = chance if chance is not None else UNIFORM_CHANCE
+    chance = chance if chance is not None else task_ceiling()
     every = sorted({r.every for r in runs if r.every})
     cadence = ", ".join(f"{e:,}" for e in every) or "—"
     difficulties = tuple(dict.fromkeys(r.difficulty for r in runs))
@@ -131,7 +132,7 @@ def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS
         "### Sample efficiency",
         "",
         "Frames at which each run's greedy accuracy (its periodic evaluation in `metrics.csv`) first leaves chance "
-        f"(above chance + {LEAVE:.2f}; chance is what a blind model scores here, {chance.source}: "
+        f"(above chance + {LEAVE:.2f}; chance is the best a model that sees no frame can score, {chance.source}: "
         f"{chance_text(chance, difficulties)}), then reaches 0.5 and 0.9, as 'leaves chance / 0.5 / 0.9'; >F: not by "
         f"its last evaluation at F frames. Evaluations at most {cadence} frames apart: a crossing is known to that "
         "resolution.",

@@ -180,3 +180,37 @@ def test_the_figure_is_a_page_wide_nothing_cut_x_in_m_frames_dual_attention_over
         assert ticks and max(ticks) <= 6, ticks  # millions: at most 5M frames here
         width = {line.get_label(): line.get_linewidth() for line in ax.get_lines()}
         assert width["Dual-Attention"] > max(w for k, w in width.items() if k in ("GA", "FiLM", "Concat"))
+
+
+def test_the_dotted_chance_line_is_the_tasks_blind_ceiling_not_the_text_only_runs(tracking, tmp_path, monkeypatch):
+    """The Text only runs score 0.9 here; the chance line of each panel stays the task's ceiling enumerated from the
+    episode generator: SGN test 0.2 (the goal's slot, one of five), EQA test 0.5625 (the best fixed answer per
+    question; tests/tasks/test_ceiling.py) in Easy and Hard alike (one generator)."""
+    from matplotlib.text import Text
+
+    import emml.report.curves as curves
+    from tests.report.test_efficiency import write_curves
+    from tests.report.test_tables import fake_results, fake_run_dirs
+
+    fake_results("table2", tmp_path / "results", value=lambda spec: 0.9 if spec.model == "text_only" else 0.5)
+    fake_run_dirs("table2", tmp_path / "runs")
+    write_curves(tmp_path / "runs", "table2", lambda s: 0.5)
+    figs = []
+    monkeypatch.setattr(curves, "save", lambda fig, path, **kw: (figs.append(fig), path)[1])
+    kw = dict(results_root=tmp_path / "results", out=tmp_path / "reports", run_root=tmp_path / "runs")
+    plot_table("table2", "quick", **kw)
+    fig = figs[0]
+    lines = {}
+    for ax in fig.axes:
+        dotted = [line for line in ax.get_lines() if line.get_linestyle() == ":"]
+        if ax.get_title():
+            (line,) = dotted
+            lines[ax.get_title()] = round(float(line.get_ydata()[0]), 6)
+    assert lines == {
+        f"{m} test: {d}, {a}": (0.2 if m == "SGN" else 0.5625)
+        for m in ("SGN", "EQA")
+        for d in ("Easy", "Hard")
+        for a in ("No Aux", "Aux")
+    }
+    texts = {t.get_text() for t in fig.findobj(Text)}
+    assert {"blind ceiling 0.20", "blind ceiling 0.56"} <= texts

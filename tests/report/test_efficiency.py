@@ -147,7 +147,7 @@ def test_a_runs_crossings_its_last_evaluation_and_its_largest_gap(tmp_path):
         "sgn_test": {"chance": 299_008, "0.5": 99_328, "0.9": 299_008},
         "sgn_train": {"chance": None, "0.5": None, "0.9": None},
     }
-    # the uniform chance by default: SGN 0.2, its bar 0.3: left at 99,328
+    # the task's blind ceiling by default: Easy SGN 0.2 (the goal's slot uniform over 5), its bar 0.3: left at 99,328
     assert run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path).crossings["sgn_test"]["chance"] == 99_328
     gone = run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path / "nowhere")
     assert (gone.found, gone.crossings, gone.last, gone.every) == (False, {}, 0, 0)
@@ -166,10 +166,11 @@ def test_the_section_lists_each_run_and_its_cadence(tmp_path):
     lines = text.splitlines()
     assert lines[:2] == ["### Sample efficiency", ""] and text.endswith(" |\n")
     assert (
-        "first leaves chance (above chance + 0.10; chance is what a blind model scores here, the uniform chance: "
-        in text
+        "first leaves chance (above chance + 0.10; chance is the best a model that sees no frame can score, the best "
+        "fixed answer per question (EQA) and the best fixed object slot per instruction (SGN), enumerated from the "
+        "episode generator (emml/tasks/ceiling.py): " in text
     )
-    assert "Easy: SGN test 0.20 (uniform), EQA test 0.33 (uniform)" in text
+    assert "Easy: SGN test 0.20, EQA test 0.56, SGN train 0.20, EQA train 0.44)" in text  # the ceiling by default
     assert "Evaluations at most 100,352 frames apart: a crossing is known to that resolution." in text
     assert lines[-4:] == [
         "| Run | Setting | seed | SGN test |",  # EQA test: no run evaluated it
@@ -199,7 +200,8 @@ def test_the_section_states_the_chance_it_reads_and_each_cadence(tmp_path):
     lines = markdown(runs, ("sgn_test", "sgn_x"), chance).splitlines()
     assert lines[2] == (
         "Frames at which each run's greedy accuracy (its periodic evaluation in `metrics.csv`) first leaves chance "
-        "(above chance + 0.10; chance is what a blind model scores here, a fixture's blind runs: Easy: SGN test 0.25, "
+        "(above chance + 0.10; chance is the best a model that sees no frame can score, a fixture's blind runs: Easy: "
+        "SGN test 0.25, "
         "EQA test 0.33 (uniform), SGN train 0.20 (uniform), EQA train 0.33 (uniform)), then reaches 0.5 and 0.9, as "
         "'leaves chance / 0.5 / 0.9'; >F: not by its last evaluation at F frames. Evaluations at most 50,000, 100,352 "
         "frames apart: a crossing is known to that resolution."
@@ -211,19 +213,22 @@ def test_the_section_states_the_chance_it_reads_and_each_cadence(tmp_path):
     ]
 
 
-def test_a_tables_crossings_read_the_profiles_blind_prior_by_default(tmp_path, monkeypatch):
+def test_a_tables_crossings_read_the_tasks_blind_ceiling_by_default(tmp_path, monkeypatch):
+    """No chance given: the task's ceiling (emml/report/chance.py `task_ceiling`), whatever the profile's results."""
     import emml.report.chance
 
-    asked = []
-
-    def prior(profile, results_root=None):
-        asked.append((profile.name, results_root))
-        return Chance({("easy", "sgn_test"): 0.5})
-
-    monkeypatch.setattr(emml.report.chance, "blind_prior", prior)
+    monkeypatch.setattr(emml.report.chance, "task_ceiling", lambda: Chance({("easy", "sgn_test"): 0.5}))
     points = [(99_328, 0.5), (199_680, 0.6), (299_008, 0.95)]
     write_points(tmp_path, W_O_SA, [f"{s},eval/sgn_test,{v}" for s, v in points])
     plan = plan_report("table3", PROFILE, results_root=tmp_path / "results", run_root=tmp_path)
     (eff,) = table_efficiency(plan, [W_O_SA.run_name(PROFILE)])
-    assert asked == [(PROFILE, tmp_path / "results")]  # the plan's results, not the profile's default folder
     assert eff.crossings["sgn_test"]["chance"] == 299_008  # above 0.6, not the uniform 0.3
+
+
+def test_a_runs_eqa_leaves_chance_above_the_enumerated_ceiling_not_the_uniform_third(tmp_path):
+    """Easy EQA test: the best fixed answer per question scores 0.5625 (tests/tasks/test_ceiling.py), the bar 0.6625;
+    a curve at 0.45, 0.6, 0.7 leaves chance at its third point (the uniform 1/3 would have it at its first)."""
+    points = [(100_000, 0.45), (200_000, 0.6), (300_000, 0.7)]
+    write_points(tmp_path, W_O_SA, [f"{s},eval/eqa_test,{v}" for s, v in points])
+    eff = run_efficiency(W_O_SA, W_O_SA.run_name(PROFILE), tmp_path)
+    assert eff.crossings["eqa_test"] == {"chance": 300_000, "0.5": 200_000, "0.9": None}
