@@ -466,7 +466,8 @@ def write_claims(
     if tables is None:
         tables = _tables_with_runs({c.table for c in claims.values()}, profile, results_root)
     chance = blind_prior(profile, results_root)
-    eqa = eqa_test.finding(eqa_test.read_arms(profile, results_root), eqa_test.paper_value(), chance, profile.name)
+    arms = eqa_test.read_arms(profile, results_root, run_root)  # each run's gate from its run dir (issue 82)
+    eqa = eqa_test.finding(arms, eqa_test.paper_value(), chance, profile.name)
     paths = write_pages(folder, decisions, profile, paper, claims, chance, set(tables), eqa)
     return paths[0], decisions
 
