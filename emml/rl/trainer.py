@@ -23,6 +23,7 @@ from emml.config.schema import TrainConfig
 from emml.envs.engine import stop_after
 from emml.envs.labels import channel_mask
 from emml.eval.diagnose import SCALARS, diagnose, saturation_warning, summary_line
+from emml.eval.diagnose_gate import gate_metrics
 from emml.eval.evaluate import evaluate
 from emml.models import build_model
 from emml.rl import alloc
@@ -239,6 +240,7 @@ class Trainer:
             warning = saturation_warning(diag)  # a collapsed conv (issue 48) is said even in a quiet run
             if warning:
                 tqdm.write(f"{self.name} frames {frames:,}: {warning}")
+        metrics.update(gate_metrics(model, self.cfg, self.device))  # the question gate (issue 82), no engine
         metrics["perf/eval_s"] = time.perf_counter() - t_start  # what an evaluation costs (emml campaign's estimate)
         self.tracker.log_metrics(metrics, step=frames)
         return acc

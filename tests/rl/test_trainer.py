@@ -268,6 +268,7 @@ def test_every_evaluation_logs_the_diagnostics(tracking, no_leftovers):
         for key in ("detector_ap", "actor_sensitivity"):
             assert [s for s, _ in metric_history(run_id, f"diag/{key}")] == [64, 128]
         assert bool(metric_history(run_id, "diag/attention_on_target")) == has_attention
+        assert bool(metric_history(run_id, "diag/gate_on_attribute")) == has_attention  # GA2: issue 82
 
 
 def test_a_house_run_trains_evaluates_diagnoses_and_reloads(tracking, no_leftovers):
