@@ -15,8 +15,8 @@ other ``diag/*`` figures (`gate_metrics`, emml/rl/trainer.py) and filled for com
   on the answer's attribute channels (the colour words' channels for a colour question, the object words' for an
   object question) as a fraction of its mass on all V channels. A question whose gate is 0 on every channel puts
   no mass on its attribute: 0. The same mean per attribute beside it (``gate_on_color``, ``gate_on_object``): the
-  Doom test split has 3 colour and 5 object questions, and the object questions' gate sits at 0.98-1.0 on every
-  committed seed, so the overall mean hides most of a colour question's failure.
+  Doom test split has 3 colour and 5 object questions, and the object questions' gate sits at 0.99-1.00 on Table
+  2's three Easy·Aux seeds, so the overall mean hides most of a colour question's failure.
 * ``gate_dead`` — the answer words (`Dataset.answer_words`: the words Eq. 5 can have to answer) whose gate channel
   is exactly 0 on every EQA question of the run, train and test: a ReLU unit no gradient reaches (§3's x_sent =
   ReLU(Linear(GRU(T)))), so the word is never answered (issue 81: seed 0's 'blue').
