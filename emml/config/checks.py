@@ -31,6 +31,20 @@ training (50M frames, Doom Hard) and about a month at the fastest rate measured 
 on an H100, docs/throughput.md). A larger count is a typo (an extra zero, 1e20), and beyond 2^63 a step no longer
 fits MLflow's metric steps (issue 65: 10^20 was accepted and its run named 'warm1e+20')."""
 
+MAX_LR = 1.0
+"""The largest learning rate accepted: 4,000x the paper's 2.5e-4 (Appendix A), already far past where Adam diverges
+here; 1e308 passed and the run died after one update with a 127-line traceback (issue 85)."""
+MAX_THREADS = 1024
+"""The most torch threads a run may ask for (`threads`, `acting_threads`): more than any machine this runs on has
+cores (16 on a GPU node, docs/throughput.md); a larger count is a typo."""
+MAX_ENVS = 1024
+"""The most parallel actors (`num_envs`): each is an engine process (~100 MB), 128x the paper's 8."""
+MAX_EPISODES = 100_000
+"""The most greedy episodes per (task, split) of an evaluation (`eval_episodes`, `final_eval_episodes`): 200x the
+paper's 500; at ~0.1 s an episode, 100,000 are already ~11 h per (task, split)."""
+MAX_EPOCHS = 100
+"""The most PPO epochs per rollout (`ppo.epochs`): 25x the paper's 4."""
+
 # What a field accepts, declared on its annotation: pydantic's constraints, and the words an error gives them.
 Positive = Annotated[int, Field(ge=1), "a positive integer (>= 1)"]
 Count = Annotated[int, Field(ge=0), ">= 0"]
@@ -40,6 +54,19 @@ PlainName = Annotated[
     Field(pattern=rf"^{PLAIN_NAME.pattern}$"),
     "a plain name: letters, digits, '_', '.' or '-', starting with a letter or digit (no path separators)",
 ]
+Threads = Annotated[int, Field(ge=0, le=MAX_THREADS), f"an integer from 0 to {MAX_THREADS} (MAX_THREADS)"]
+Envs = Annotated[int, Field(ge=1, le=MAX_ENVS), f"an integer from 1 to {MAX_ENVS} (MAX_ENVS)"]
+Episodes = Annotated[int, Field(ge=1, le=MAX_EPISODES), f"an integer from 1 to {MAX_EPISODES:,} (MAX_EPISODES)"]
+Epochs = Annotated[int, Field(ge=1, le=MAX_EPOCHS), f"an integer from 1 to {MAX_EPOCHS} (MAX_EPOCHS)"]
+LearningRate = Annotated[
+    float, Field(gt=0, le=MAX_LR, allow_inf_nan=False), f"a finite number > 0 and <= {MAX_LR:g} (MAX_LR)"
+]
+Folder = Annotated[
+    str,
+    Field(pattern=r"\S"),
+    "a folder path, not empty (relative to the project root, or absolute)",
+]
+"""A run's root folder (`run_root`, `results_root`): an empty one wrote into the checkout's own ``adhoc/``."""
 Words = Annotated[typing.Sequence[str], "a list of words"]
 Sentences = Annotated[typing.Sequence[str], "a list of sentences"]
 Fraction = Annotated[float, Field(ge=0, le=1), "a number in [0, 1]"]

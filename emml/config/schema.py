@@ -21,11 +21,17 @@ from emml.config.checks import (
     MAX_FRAMES,
     PLAIN_NAME,
     Count,
+    Envs,
+    Episodes,
+    Epochs,
+    Folder,
     Fraction,
     Frames,
+    LearningRate,
     PlainName,
     Positive,
     PositiveNumber,
+    Threads,
     Weight,
     check,
     check_choice,
@@ -122,11 +128,11 @@ class PPOConfig:
     """Discount factor. Paper: 0.99."""
     gae_lambda: Fraction = 0.95
     """GAE lambda (Schulman et al. 2016). Paper silent -- our choice (PPO paper's Atari value)."""
-    epochs: Positive = 4
+    epochs: Epochs = 4
     """Optimisation epochs per rollout. Paper: 4."""
     minibatches: Positive = 1
     """Minibatches per epoch, split along the env axis so recurrent sequences stay whole. Paper: 1 ("single batch")."""
-    lr: PositiveNumber = 2.5e-4
+    lr: LearningRate = 2.5e-4
     """Adam learning rate. Paper: 2.5e-4 (constant; no annealing mentioned)."""
     ent_coef: Weight = 0.01
     """Entropy-bonus coefficient on the move distribution. Paper silent -- our choice (PPO paper's Atari value)."""
@@ -172,7 +178,7 @@ class TrainConfig:
     frames: Frames = 10_000_000
     """Agent steps to train, summed over actors (§5.1: 10M Easy, 50M Hard); at least one update (num_envs ×
     num_steps), and rounded up to whole updates (10M is 9,766 updates of 1,024: 10,000,384 frames)."""
-    num_envs: Positive = 8
+    num_envs: Envs = 8
     """Parallel actors (Appendix A: 8)."""
     num_steps: Positive = 128
     """Rollout horizon per actor and update (Appendix A: 128)."""
@@ -180,9 +186,9 @@ class TrainConfig:
     """Name of the profile the run came from (smoke, demo, quick, paper), recorded everywhere."""
     eval_every: Frames = 0
     """Evaluate every this many frames for the curves; 0: only at the end."""
-    eval_episodes: Positive = 100
+    eval_episodes: Episodes = 100
     """Greedy evaluation episodes per (task, split) of the evaluations during training (the curves)."""
-    final_eval_episodes: Positive = 500
+    final_eval_episodes: Episodes = 500
     """Greedy evaluation episodes per (task, split) of the final evaluation, the score in results.json and the
     results table (paper silent). Larger than `eval_episodes`: one checkpoint's SGN train accuracy (GA quick seed
     0) ranged 0.51-0.71 over 18 disjoint blocks of 100 episodes, 0.54-0.61 over 5 blocks of 500 (docs/fidelity.md,
@@ -218,7 +224,7 @@ class TrainConfig:
     graph instead of hundreds of kernels per call. The paper's single batch only (`ppo.minibatches` = 1). On a CPU
     the same fixed-tensor calls run uncaptured (no faster; what the CPU tests compare with the plain path). Off by
     default until measured on a GPU (docs/throughput.md)."""
-    threads: Count = 0
+    threads: Threads = 0
     """torch threads; 0: all cores (the learner and the env workers take turns, PPO being synchronous)."""
     asynchronous: bool = True
     """Env workers in processes (True) or in the learner process (False, for debugging)."""
@@ -230,7 +236,7 @@ class TrainConfig:
     """Envs hosted by each env worker process, stepped at once from one thread each (ViZDoom releases the GIL;
     `emml.envs.vector.GroupedDoomVectorEnv`): the same envs and seeds, fewer processes to wake at every step.
     Must divide num_envs / env_groups."""
-    acting_threads: Count = 1
+    acting_threads: Threads = 1
     """torch threads while acting (batches of num_envs/env_groups, one step): one is about as fast as two for
     such small batches and leaves the other cores to the env workers; 0: as many as the learner."""
     max_engine_restarts: Count = 3
@@ -240,9 +246,9 @@ class TrainConfig:
     """Steps of a worker after which an engine death no longer counts as repeated."""
     table: PlainName = "adhoc"
     """MLflow experiment / results table the run belongs to."""
-    run_root: str = "runs"
+    run_root: Folder = "runs"
     """Where run directories (checkpoints, results.json) go, relative to the project root unless absolute."""
-    results_root: str = "results"
+    results_root: Folder = "results"
     """Where finished runs are recorded as rows of `<table>/<profile>.csv` (small, committed), relative to the
     project root unless absolute."""
     env: DoomConfig = field(default_factory=DoomConfig)
