@@ -208,8 +208,8 @@ def campaign(
     except ValueError as e:
         _fail(str(e))
     if show_status:
-        rows = status(plan, run_root, results_root)
         try:
+            rows = status(plan, run_root, results_root)
             at_once = runs_at_once(jobs, device)
         except ValueError as e:
             _fail(str(e))

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from emml.experiments.campaign import load_campaign, pin_worktree, run_campaign, status, step_runs
+from emml.experiments.campaign.progress import CannotCount
 from emml.experiments.tables import load_table
 from emml.runs.runlock import hold_run
 from tests.experiments.test_launch import calls, fake_train
@@ -471,9 +472,26 @@ def test_status_names_a_damaged_run_dir_or_results_csv_and_goes_on(tracking, cam
     csv = Path(tracking["results_root"]) / "table3" / "smoke.csv"
     csv.parent.mkdir(parents=True)
     csv.write_text("run_name,seed\nx,notanint\n")
-    rows = status(plan, *roots)
-    assert {r.step for r in rows} == {"second"}  # the step whose CSV is damaged is named and left out
-    assert f"note: step first: not shown: {csv}: line 2: column 'seed'" in capsys.readouterr().err
+    with pytest.raises(CannotCount) as refused:  # issue 85: left out, its steps counted as no run (a wrong total)
+        status(plan, *roots)
+    assert f"{csv}: line 2: column 'seed'" in str(refused.value) and "cannot count" in str(refused.value)
+
+
+def test_cli_status_with_a_damaged_results_row_says_it_cannot_count(tracking):
+    """Issue 85: one garbage line in a results CSV showed its steps '0/0 done' and a total of 3 runs left (of 78);
+    now --status refuses to count, naming the file and the line, exit 2, no traceback."""
+    from typer.testing import CliRunner
+
+    from emml.cli import app
+
+    csv = Path(tracking["results_root"]) / "table2" / "quick.csv"
+    csv.parent.mkdir(parents=True)
+    csv.write_text("run_name,seed,frames\nconcat-easy-aux-s0-quick,0,1500160\n\x00garbage,,\n")
+    roots = ["--run-root", tracking["run_root"], "--results-root", tracking["results_root"]]
+    result = CliRunner().invoke(app, ["campaign", "reference", "--status", "--jobs", "1", *roots])
+    assert result.exit_code == 2, result.output  # the CLI's refusal (`_fail`)
+    assert f"{csv}: line 3" in result.output and "cannot count" in result.output, result.output
+    assert "left:" not in result.output and "done" not in result.output and "Traceback" not in result.output
 
 
 def test_cli_status_of_the_reference_campaign_names_a_garbage_mirror_and_goes_on(tracking):

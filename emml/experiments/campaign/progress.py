@@ -12,7 +12,7 @@ from pathlib import Path
 from emml.config.paths import project_path
 from emml.experiments.campaign.file import Campaign, step_runs
 from emml.runs.naming import run_name
-from emml.runs.records import mirror_point, note, note_once, points_or_none, torn_tail
+from emml.runs.records import mirror_point, note_once, points_or_none, torn_tail
 
 NODE_FPS = {"quick": 360.0, "paper": 300.0}
 """Training frames/s of one run on a lent GPU node (one H100, 16 cores) with `NODE_RUNS` runs side by side, by
@@ -23,6 +23,12 @@ NODE_RUNS = 8
 STATES = ("done", "running", "interrupted", "to do")
 """done: finished and recorded; running: a live process holds the run's lock; interrupted: a checkpoint to resume
 from; to do: nothing yet (or a reference row with no run dir here, which is trained again)."""
+
+
+class CannotCount(ValueError):
+    """A results CSV a campaign's steps read is damaged: its runs cannot be counted (the message names the file and
+    the line). Raised rather than shown as steps of no run, which added up to a wrong total (issue 85: one garbage
+    line gave 22 steps '0/0 done' and '3 runs, ~20.8 h left' of 78 runs, ~181 h)."""
 
 
 @dataclass
@@ -48,7 +54,8 @@ class RunStatus:
 
 
 def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:
-    """Every run of the campaign in order (a run two steps share is listed once, at its first step)."""
+    """Every run of the campaign in order (a run two steps share is listed once, at its first step). `CannotCount`
+    when a results CSV its steps read is damaged."""
     from emml.experiments.launch import run_states
     from emml.runs.rundir import METRICS, run_dir
     from emml.runs.runlock import holder
@@ -61,11 +68,12 @@ def status(campaign: Campaign, run_root: str | None = None, results_root: str | 
         if key not in read:  # run_states reads every run dir's checkpoint: once per table and profile
             try:
                 read[key] = run_states(step.table, step.profile, run_root, results_root)
-            except ValueError as e:  # a damaged results CSV (ResultsError names it): the other steps are shown
-                note(f"step {step.name}: not shown: {e}")
-                read[key] = None
-        if read[key] is None:
-            continue
+            except ValueError as e:  # a damaged results CSV (ResultsError names it and the line): left out, its
+                # steps were counted as no run at all
+                raise CannotCount(
+                    f"campaign {campaign.name}: cannot count its runs: {e} (step {step.name} and every step of "
+                    f"{step.table} [{step.profile}] read it); fix or remove that line, then ask again"
+                ) from None
         for spec, launch_state in step_runs(step, run_root, results_root, read[key]):
             cfg = spec.to_config(step.profile, **fields)
             directory = run_dir(cfg)
