@@ -61,7 +61,7 @@ def plan_runs(
     table = table if table is not None else load_table(name)
     planned: dict[str, PlannedRun] = {}
     recorded: dict[Path, set[str]] = {}  # per results CSV: a row may borrow another table's runs (from_table)
-    for spec in table.runs(list(profile.seeds)):
+    for spec in table.runs(list(profile.seeds), profile.name):
         cfg = spec.to_config(profile, **fields)
         rname = run_name(cfg, profile)
         planned[rname] = PlannedRun(spec, cfg, rname, _state(cfg, rname, table, spec, recorded))

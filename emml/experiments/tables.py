@@ -27,7 +27,8 @@ DIFFICULTIES = tuple(ENV_KINDS)
 """Columns of a table: the Doom difficulties, and the House domain (Table 5, Appendix C): emml/config/env_kinds.py."""
 TOP_KEYS = ("title", "paper_label", "status", "row_header", "columns", "rows", "transfer")
 COLUMN_KEYS = ("difficulties", "aux", "metrics")
-ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "noaux_overrides", "from_table")
+ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "noaux_overrides", "from_table", "more_seeds")
+MORE_SEEDS_KEYS = ("profile", "difficulty", "aux", "seeds")
 TRANSFER_KEYS = ("model", "overrides", "words", "detector")
 TRANSFER_RUN_ROW = "Training run (before transfer)"
 """The `RunSpec.row` of a transfer table's runs: one training setting serves every row (its curve's label)."""
@@ -96,6 +97,21 @@ class RunSpec:
 
 
 @dataclass(frozen=True)
+class MoreSeeds:
+    """Seeds one setting of a row trains beyond its profile's (`more_seeds` in a table file): the stated model's
+    spread (issue 82: Table 2's Dual-Attention, Easy · Aux, on five seeds at the quick profile)."""
+
+    profile: str
+    """The profile they apply under (reproduce/profiles.toml); no other profile plans them."""
+    difficulty: str
+    """The setting's difficulty column."""
+    aux: bool
+    """The setting's aux column."""
+    seeds: tuple[int, ...]
+    """The seeds added after the profile's own."""
+
+
+@dataclass(frozen=True)
 class Row:
     """A row of the paper's table."""
 
@@ -117,6 +133,18 @@ class Row:
     noaux_overrides: dict = field(default_factory=dict)
     """Extra overrides for the row's runs without the auxiliary task only (over `overrides` and `metric_overrides`):
     Dual-Attention's No Aux runs keep the answer loss to the GA2 gate (issue 48, docs/fidelity.md 'No Aux')."""
+    more_seeds: tuple[MoreSeeds, ...] = ()
+    """Settings of the row that train more seeds than the profile's, under one named profile (`MoreSeeds`)."""
+
+    def seeds(self, seeds: list[int], profile: str | None, difficulty: str, aux: bool) -> list[int]:
+        """The seeds of one setting: the profile's, then its `more_seeds` under that profile."""
+        more = [
+            s
+            for m in self.more_seeds
+            if (m.profile, m.difficulty, m.aux) == (profile, difficulty, aux)
+            for s in m.seeds
+        ]
+        return list(seeds) + [s for s in more if s not in seeds]
 
     def settings(self, metrics: tuple[str, ...]) -> list[tuple[dict, tuple[str, ...]]]:
         """(overrides, metrics filled) for each distinct setting of the row."""
@@ -163,9 +191,10 @@ class Table:
         """(difficulty, aux, metric) for every cell column, in the paper's order."""
         return [(d, a, m) for d in self.difficulties for a in self.aux for m in self.metrics.values()]
 
-    def runs(self, seeds: list[int]) -> list[RunSpec]:
+    def runs(self, seeds: list[int], profile: str | None = None) -> list[RunSpec]:
         """Every run: rows × difficulties × aux × row settings × seeds (a transfer table: difficulties × aux ×
-        seeds, every row read from them)."""
+        seeds, every row read from them); ``profile``: the profile's name, whose rows' `more_seeds` are added (None:
+        the seeds given only)."""
         out = []
         if self.transfer is not None:
             t = self.transfer
@@ -195,7 +224,7 @@ class Table:
                     for overrides, metrics in row.settings(tuple(self.metrics.values())):
                         settings, departures = row.for_aux(overrides, aux)
                         owner = row.from_table or self.name
-                        for seed in seeds:
+                        for seed in row.seeds(seeds, profile, difficulty, aux):
                             out.append(
                                 RunSpec(
                                     owner,
@@ -396,10 +425,50 @@ def _parse_rows(path: Path, data: dict, metrics: tuple[str, ...], no_aux: bool =
             _from_table(
                 path, f"{where}.from_table", from_table, r["model"], overrides, per_metric, noaux if no_aux else None
             )
+        more = _more_seeds(path, f"{where}.more_seeds", r.get("more_seeds", []))
         rows.append(
-            Row(r["label"], r["model"], dict(overrides), dict(per_metric), from_table=from_table, noaux_overrides=noaux)
+            Row(
+                r["label"],
+                r["model"],
+                dict(overrides),
+                dict(per_metric),
+                from_table=from_table,
+                noaux_overrides=noaux,
+                more_seeds=more,
+            )
         )
     return tuple(rows)
+
+
+def _more_seeds(path: Path, key: str, raw) -> tuple[MoreSeeds, ...]:
+    """A row's `more_seeds`: a list of {profile, difficulty, aux, seeds}, each naming a profile of
+    reproduce/profiles.toml, a difficulty of DIFFICULTIES and distinct non-negative integer seeds."""
+    from emml.config.profiles import load_profiles
+
+    raw = _typed(path, key, raw, list, "a list of tables {profile, difficulty, aux, seeds}")
+    profiles = sorted(load_profiles())
+    out = []
+    for i, entry in enumerate(raw):
+        where = f"{key}[{i}]"
+        entry = _section(path, where, entry, MORE_SEEDS_KEYS)
+        if entry["profile"] not in profiles:
+            raise _err(
+                path, f"{where}.profile", f"{entry['profile']!r} is not allowed; choose one of {', '.join(profiles)}"
+            )
+        if entry["difficulty"] not in DIFFICULTIES:
+            raise _err(
+                path,
+                f"{where}.difficulty",
+                f"{entry['difficulty']!r} is not allowed; choose from {', '.join(DIFFICULTIES)}",
+            )
+        aux = _typed(path, f"{where}.aux", entry["aux"], bool, "true or false")
+        seeds = _typed(path, f"{where}.seeds", entry["seeds"], list, "a list of seeds")
+        if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
+            raise _err(path, f"{where}.seeds", f"must be a non-empty list of non-negative integers, got {seeds!r}")
+        if len(set(seeds)) != len(seeds):
+            raise _err(path, f"{where}.seeds", f"a seed appears twice in {seeds!r}")
+        out.append(MoreSeeds(entry["profile"], entry["difficulty"], aux, tuple(seeds)))
+    return tuple(out)
 
 
 def _from_table(path: Path, key: str, name, model: str, overrides: dict, per_metric: dict, noaux: dict | None) -> None:

@@ -162,7 +162,7 @@ def results_path(name: str, profile: Profile, results_root: str | Path | None = 
 def table_results(table: Table, profile: Profile, results_root: str | Path | None = None) -> pd.DataFrame:
     """The results rows of the table's runs under ``profile``: its own CSV, and the CSVs of the tables some of its
     rows borrow runs from (`from_table`: Table 3's "DA Multi-Task" is Table 2's Dual-Attention)."""
-    owners = dict.fromkeys([table.name, *(spec.table for spec in table.runs(list(profile.seeds)))])
+    owners = dict.fromkeys([table.name, *(spec.table for spec in table.runs(list(profile.seeds), profile.name))])
     frames = [read_results(results_path(owner, profile, results_root)) for owner in owners]
     frames = [f for f in frames if not f.empty]
     if not frames:

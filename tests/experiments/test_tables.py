@@ -317,3 +317,66 @@ def test_paper_numbers_are_kept_as_printed():
     assert df[("PACMAN", "hard", False, "eqa_test")] == "0.33"
     t3 = paper_numbers("table3").set_index(["row", "aux", "metric"])["value"]
     assert t3[("w/o GA2", True, "sgn_test")] == "0.97" and t3[("DA Single-Task", False, "eqa_test")] == "0.31"
+
+
+MORE = (
+    'model = "dual_attention"\nmore_seeds = [{ profile = "quick", difficulty = "easy", aux = false, seeds = [3, 4] }]'
+)
+
+
+def test_more_seeds_add_a_settings_seeds_under_their_profile_only(tmp_path):
+    """`more_seeds` (issue 82): the setting it names trains the profile's seeds, then its own, under that profile
+    only; another profile, difficulty or aux column plans the profile's seeds alone."""
+    text = GOOD.replace('difficulties = ["easy"]', 'difficulties = ["easy", "hard"]').replace(
+        "[false]", "[false, true]"
+    )
+    table = load_table("tableX", _write(tmp_path, text.replace('model = "dual_attention"', MORE)))
+    seeds = {
+        (r.difficulty, r.aux): [
+            s.seed for s in table.runs([0, 1], "quick") if (s.difficulty, s.aux) == (r.difficulty, r.aux)
+        ]
+        for r in table.runs([0])
+    }
+    assert seeds == {
+        ("easy", False): [0, 1, 3, 4],
+        ("easy", True): [0, 1],
+        ("hard", False): [0, 1],
+        ("hard", True): [0, 1],
+    }
+    assert [s.seed for s in table.runs([0, 1], "paper")] == [0, 1] * 4
+    assert [s.seed for s in table.runs([0, 3], "quick") if (s.difficulty, s.aux) == ("easy", False)] == [0, 3, 4]
+
+
+def test_the_stated_model_trains_five_easy_aux_seeds_at_quick():
+    """Table 2's Dual-Attention, Easy · Aux: seeds 0-4 at the quick profile (issue 82); Table 3's DA Multi-Task
+    reads the same five runs; the paper profile plans its own seeds only."""
+    from emml.config.profiles import profile_seeds
+
+    def easy_aux(table: str, profile: str, row: str) -> list[int]:
+        runs = load_table(table).runs(profile_seeds(profile), profile)
+        return [r.seed for r in runs if (r.row, r.difficulty, r.aux) == (row, "easy", True)]
+
+    assert easy_aux("table2", "quick", "Dual-Attention") == [0, 1, 2, 3, 4]
+    assert easy_aux("table3", "quick", "DA Multi-Task") == [0, 1, 2, 3, 4]
+    assert easy_aux("table2", "paper", "Dual-Attention") == profile_seeds("paper")
+
+
+@pytest.mark.parametrize(
+    "entry, key, what",
+    [
+        ('{ profile = "quik", difficulty = "easy", aux = false, seeds = [3] }', "profile", "quik"),
+        ('{ profile = "quick", difficulty = "medium", aux = false, seeds = [3] }', "difficulty", "medium"),
+        ('{ profile = "quick", difficulty = "easy", aux = "no", seeds = [3] }', "aux", "true or false"),
+        ('{ profile = "quick", difficulty = "easy", aux = false, seeds = [-1] }', "seeds", "non-negative"),
+        ('{ profile = "quick", difficulty = "easy", aux = false, seeds = [3, 3] }', "seeds", "twice"),
+        ('{ profile = "quick", difficulty = "easy", aux = false }', "seeds", "missing"),
+        ('{ profile = "quick", difficulty = "easy", aux = false, seeds = [3], seed = 4 }', "seed", "unknown key"),
+    ],
+)
+def test_a_bad_more_seeds_entry_names_its_key(tmp_path, entry, key, what):
+    path = _write(
+        tmp_path, GOOD.replace('model = "dual_attention"', f'model = "dual_attention"\nmore_seeds = [{entry}]')
+    )
+    with pytest.raises(ValueError) as err:
+        load_table("tableX", path)
+    assert repr(f"rows[0].more_seeds[0].{key}") in str(err.value) and what in str(err.value)

@@ -32,20 +32,23 @@ def test_a_table2_report_builds_at_most_two_configs_per_run(tmp_path, monkeypatc
 
     monkeypatch.setattr(emml.report.field, "plot_field", lambda *a: [])  # the rliable figure reads the cells only
     fake_results("table2", tmp_path / "results")  # finished runs, no run dirs here: no saved config to read
-    runs = len(load_table("table2").runs(list(resolve_profile(PROFILE).seeds)))
+    runs = len(load_table("table2").runs(list(resolve_profile(PROFILE).seeds), PROFILE))
     for difficulty in ("easy", "hard"):
         fidelity.resolve({"env": {"difficulty": difficulty}})
     count = built(monkeypatch)
     load_table("table2")
     table_file, count[0] = count[0], 0
     rep = report("table2", tmp_path)
-    assert runs == 84 and all(c["n"] == 3 for c in rep["cells"])
+    assert runs == 86 and all(
+        c["n"] == (5 if (c["row"], c["difficulty"], c["aux"]) == ("Dual-Attention", "easy", True) else 3)
+        for c in rep["cells"]
+    )
     assert count[0] - table_file <= 2 * runs, f"{count[0] - table_file} TrainConfigs for {runs} runs"
 
 
 def test_the_plan_holds_every_run_once_named_as_the_launch_names_it(tmp_path):
     plan = plan_report("table3", PROFILE, tmp_path / "results", tmp_path / "runs")
-    specs = load_table("table3").runs(list(resolve_profile(PROFILE).seeds))
+    specs = load_table("table3").runs(list(resolve_profile(PROFILE).seeds), PROFILE)
     assert [r.spec for r in plan.runs] == specs
     assert [r.name for r in plan.runs] == [s.run_name(PROFILE) for s in specs]
     assert plan.run_root == tmp_path / "runs" and all(r.cfg.run_root == str(tmp_path / "runs") for r in plan.runs)

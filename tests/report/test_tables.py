@@ -19,7 +19,7 @@ PROFILE = "quick"  # three seeds
 def fake_results(table: str, root, drop: tuple[str, ...] = (), value=None) -> pd.DataFrame:
     """FIXTURE: one made-up row per declared run, as the trainer's record_result would write it."""
     rows = []
-    for i, spec in enumerate(load_table(table).runs(profile_seeds(PROFILE))):
+    for i, spec in enumerate(load_table(table).runs(profile_seeds(PROFILE), PROFILE)):
         cfg = spec.to_config(PROFILE)
         name = run_name(cfg)
         if name in drop:
@@ -53,7 +53,7 @@ def fake_results(table: str, root, drop: tuple[str, ...] = (), value=None) -> pd
 def fake_run_dirs(table: str, run_root, change=None) -> None:
     """FIXTURE: each declared run's dir with a results.json holding its config, as the trainer writes it;
     ``change(spec, config_dict)`` edits a run's saved config first."""
-    for spec in load_table(table).runs(profile_seeds(PROFILE)):
+    for spec in load_table(table).runs(profile_seeds(PROFILE), PROFILE):
         config = spec.to_config(PROFILE).to_dict()
         if change is not None:
             change(spec, config)

@@ -192,7 +192,7 @@ def _declared(table: str, profile: str) -> dict:
     from emml.config.profiles import profile_seeds
     from emml.experiments.tables import load_table
 
-    return {spec.run_name(profile): (spec, None) for spec in load_table(table).runs(profile_seeds(profile))}
+    return {spec.run_name(profile): (spec, None) for spec in load_table(table).runs(profile_seeds(profile), profile)}
 
 
 def step_runs(
