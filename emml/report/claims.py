@@ -15,12 +15,15 @@ from dataclasses import dataclass, field
 from emml.config.profiles import Profile, resolve_profile
 from emml.experiments.claims.evidence import (
     BUDGET,
+    CLOSING,
     CONTRADICTED,
     HOLDS,
     INCONCLUSIVE,
     MISSING,
+    ONE_SEED,
     REVERSED,
     SUPPORTED,
+    UNKNOWN_FLAT,
     UNTESTABLE,
     Chance,
     Check,
@@ -38,7 +41,10 @@ from emml.runs.rundir import METRICS, path_of
 
 __all__ = [
     "BUDGET",
+    "CLOSING",
     "CONTRADICTED",
+    "ONE_SEED",
+    "UNKNOWN_FLAT",
     "INCONCLUSIVE",
     "SUPPORTED",
     "UNTESTABLE",

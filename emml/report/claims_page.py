@@ -9,15 +9,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from emml.config.profiles import Profile
+from emml.experiments.claims.closing import CONFIDENCE
 from emml.experiments.claims.evidence import (
     BUDGET,
+    CLOSING,
     CONTRADICTED,
     INCONCLUSIVE,
     LEAVE,
+    ONE_SEED,
     REVERSED,
     STATUSES,
     SUPPORTED,
     UNCLEAR,
+    UNKNOWN_FLAT,
     UNTESTABLE,
     Chance,
     Z,
@@ -34,6 +38,17 @@ GENERAL_RULES = [
     "nothing against the paper). "
     "**untestable yet**: a cell the claim compares has no finished run (the missing runs are listed, with the "
     "campaign step that trains each); numbers already there are shown.",
+    "**Settled** (issue 81): a reversal counts as contradicted only when a second seed and more frames would not "
+    "overturn it: (a) each row it compares has two seeds or more, or a one-seed row is still reversed once its "
+    "error includes the between-seed variance of the nearest cell of the same row with two seeds (the same "
+    "difficulty first, then the same aux; named in the comparison), and (b) the gap (the higher row's mean over "
+    "seeds minus the lower's, per evaluation point of the runs' metrics.csv curves) is not still closing: over the "
+    f"last third of the evaluations its least-squares slope against frames is not towards the claim with a "
+    f"one-sided {CONFIDENCE:.0%} interval that excludes 0. Otherwise the claim is **{ONE_SEED}**, **{CLOSING}** "
+    f"or, where a run's curve is not here, **{UNKNOWN_FLAT}**, and names the run that would settle it (a missing "
+    "seed's run, or more frames) with its campaign step.",
+    "**The paper's table first**: a claim whose rule the paper's own numbers fail is shown apart ('the paper's "
+    "table does not support its text') and is not counted among the reproduction's verdicts.",
     f"**Ordering**: the higher row's mean over every seed it has minus the lower row's, against {Z:g} standard error "
     "of that gap; a row's error is the larger of its between-seed spread (sample variance / seeds, as Welch's test, "
     "with two seeds or more) and the binomial error of its rates (p(1−p)/N per seed, N the evaluation's episodes: a "
@@ -94,6 +109,9 @@ MAX_CELLS = 4
 STATUS_COLOURS = {
     SUPPORTED: "#1a7f37",
     CONTRADICTED: "#cf222e",
+    ONE_SEED: "#9a6700",
+    CLOSING: "#9a6700",
+    UNKNOWN_FLAT: "#9a6700",
     INCONCLUSIVE: "#bc4c00",
     BUDGET: "#6e7781",
     UNTESTABLE: "#8c959f",
@@ -118,25 +136,47 @@ def page_names(name: str) -> dict[str, str]:
 
 
 def focus_rows(claim, decision=None) -> list[str]:
-    """The rows whose numbers the status table and the figure show: the reference row the claim compares with
-    (`than`), then its first row ('best': the row it puts above every other), then, given its ``decision``, the rows
-    of the comparison that decides against the claim, where one does (`against`): a contradicted claim shows the
-    number that contradicts it."""
+    """The rows whose numbers the status table and the figure show. Given a ``decision`` that goes against the claim
+    (`against`), the rows of the comparison that decides it first (issue 81 item 5: the first screen says what
+    decided), then the reference row (`than`) and the claim's first row; else the reference row, then its first
+    row ('best': the row it puts above every other)."""
     rows = [*([claim.than] if claim.than else []), *claim.rows[:1]]
-    return list(dict.fromkeys(rows + (against(decision) if decision is not None else [])))
+    return list(dict.fromkeys((against(decision) if decision is not None else []) + rows))
+
+
+def deciding(decision):
+    """The comparison that decides against the claim while it is not supported: a settled reversal of a row that
+    learned (what makes it contradicted), else a provisional one, else any reversal, else one within the error;
+    None for a supported or untestable claim. A 'most' comparison stands for its first reversed row."""
+    if decision.status in (SUPPORTED, UNTESTABLE):
+        return None
+    checks = [p for c in decision.checks for p in (c.parts if c.parts and c.outcome == REVERSED else [c])]
+    ranked = (
+        lambda c: c.outcome == REVERSED and not c.chance and not c.unsettled,
+        lambda c: c.outcome == REVERSED and not c.chance,
+        lambda c: c.outcome == REVERSED,
+        lambda c: c.outcome == UNCLEAR,
+    )
+    return next((c for test in ranked for c in checks if test(c)), None)
 
 
 def against(decision) -> list[str]:
-    """The rows of the first of the decision's comparisons that went against its claim (reversed, else unclear) while
-    the claim is not supported: the rows it reads (`Check.rows`: 'Dual-Attention > Concat' reads both, 'Go to the red
-    object ≥ 0.8' its one row, 'most rows' none); [] for a supported or untestable claim."""
-    if decision.status in (SUPPORTED, UNTESTABLE):
-        return []
-    for outcome in (REVERSED, UNCLEAR):
-        for check in decision.checks:
-            if check.outcome == outcome:
-                return list(check.rows)
-    return []
+    """The rows of the comparison that decides against the claim (`deciding`): the rows it reads (`Check.rows`:
+    'Dual-Attention > Concat' reads both, 'Go to the red object ≥ 0.8' its one row); [] for a supported or untestable
+    claim."""
+    check = deciding(decision)
+    return list(check.rows) if check is not None else []
+
+
+def row_seeds(decision, rows: list[str]) -> str:
+    """'Dual-Attention 3 · Text only 1': the seeds each of ``rows`` has in the claim's cells (a range, '2–3', where
+    its cells differ); '—' when none has a run."""
+    parts = []
+    for row in rows:
+        n = sorted({len(e["values"]) for e in decision.evidence if e["row"] == row and e["values"]})
+        if n:
+            parts.append(f"{row} {n[0]}" if len(n) == 1 else f"{row} {n[0]}–{n[-1]}")
+    return " · ".join(parts) or "—"
 
 
 @dataclass
@@ -155,21 +195,39 @@ class Cell:
 
 
 def cells(decision, paper_decision, claim) -> list[Cell]:
-    """The focus rows' cells of a decision (`focus_rows`), with the paper's number for the same cell."""
-    focus, base = focus_rows(claim, decision), focus_rows(claim)
-    # the claim's own focus rows in the evidence's order, then each row against it in turn
-    entries = [e for e in decision.evidence if e["row"] in base]
-    entries += [e for row in focus if row not in base for e in decision.evidence if e["row"] == row]
+    """The focus rows' cells of a decision (`focus_rows`), with the paper's number for the same cell: the cells of
+    the comparison that decides against the claim first (`deciding`), then the rest in the focus rows' order. A No
+    Aux cell trained under the warm-up says so, with the paper-literal run's number (no warm-up) beside it where one
+    was trained (`Decision.literal`)."""
+    from emml.report.claims_settle import warm_frames
+
+    focus = focus_rows(claim, decision)
+    decides = deciding(decision)
+
+    def first(e) -> bool:
+        return (
+            decides is not None
+            and e["row"] in decides.rows
+            and (not decides.metric or e["metric"].startswith(decides.metric))
+            and (not decides.setting or e["setting"].startswith(decides.setting))
+        )
+
+    entries = sorted(
+        (e for e in decision.evidence if e["row"] in focus), key=lambda e: (not first(e), focus.index(e["row"]))
+    )
     theirs = {
         (e["row"], e["setting"], e["metric"]): next(iter(e["values"].values()), None)
         for e in (paper_decision.evidence if paper_decision is not None else [])
     }
+    literal = {(x["row"], x["setting"], x["metric"]): x for x in getattr(decision, "literal", [])}
     settings = {e["setting"] for e in entries}
     frames = claim.kind_of.reads == "crossing"
     out = []
     for e in entries:
         parts = [e["row"]] if len(focus) > 1 else []
-        parts += [e["setting"]] if len(settings) > 1 else []
+        warm = warm_frames(e.get("runs", []))
+        setting = e["setting"] + (f" (warm-up {warm / 1000:g}k)" if warm else "")
+        parts += [setting] if len(settings) > 1 or warm else []
         label = ", ".join([*parts, e["metric"]])
         values = [float(v) for _, v in sorted(e["values"].items())]
         if frames:
@@ -177,7 +235,12 @@ def cells(decision, paper_decision, claim) -> list[Cell]:
         else:
             shown = f"{sum(values) / len(values):.2f}" if values else "—"
         task = "diag" if claim.kind_of.reads == "figure" else ("eqa" if "EQA" in e["metric"] else "sgn")
-        out.append(Cell(label, task, values, shown, theirs.get((e["row"], e["setting"], e["metric"])), frames))
+        key = (e["row"], e["setting"], e["metric"])
+        out.append(Cell(label, task, values, shown, theirs.get(key), frames))
+        if key in literal:
+            x = literal[key]
+            name = f"{e['row']}, {e['setting']} (no warm-up, the paper's loss: {x['run']}), {e['metric']}"
+            out.append(Cell(name, task, [x["value"]], f"{x['value']:.2f}", theirs.get(key), frames))
     return out
 
 
@@ -189,8 +252,42 @@ def _lines(values: list[str]) -> str:
 
 
 def counts(decisions: list) -> dict[str, int]:
-    """How many of ``decisions`` have each status, every status named (0 where none has it)."""
-    return {s: sum(d.status == s for d in decisions) for s in STATUSES}
+    """How many of ``decisions`` have each status, every status named (0 where none has it); a claim shown apart
+    (the paper's own table fails its rule, `Decision.apart`) is not counted."""
+    return {s: sum(d.status == s and not getattr(d, "apart", False) for d in decisions) for s in STATUSES}
+
+
+def tally(decisions: list) -> str:
+    """'3 supported, 0 contradicted, …; 1 shown apart (the paper's table does not support its text)'."""
+    apart = sum(getattr(d, "apart", False) for d in decisions)
+    text = ", ".join(f"{v} {k}" for k, v in counts(decisions).items())
+    return text + (f"; {apart} shown apart (the paper's table does not support its text)" if apart else "")
+
+
+def status_text(d) -> str:
+    """The status, and how many of its comparisons hold where it has several ('reversed on 1 seed (14 of 15
+    hold)')."""
+    present = [c for c in d.checks if c.outcome != "missing"]
+    return f"{d.status} ({d.held})" if len(present) > 1 else d.status
+
+
+def _row(d, claims: dict, paper: dict, names: dict) -> str:
+    """One line of the status table."""
+    claim = claims[d.id]
+    cs = cells(d, paper.get(d.id), claim)
+    shown = focus_rows(claim, d)
+    return (
+        f"| [{d.id}]({names['detail']}#{d.id}) | {status_text(d)} | {_cell(row_seeds(d, shown))} | "
+        + " | ".join(
+            _lines(col)
+            for col in (
+                [_cell(c.label) for c in cs],
+                ["—" if c.paper is None else f"{c.paper:.2f}" for c in cs],
+                [_cell(c.shown) for c in cs],
+            )
+        )
+        + f" | {_paper_label(paper.get(d.id), claim)} |"
+    )
 
 
 def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict, findings: list[str] = ()) -> str:
@@ -198,7 +295,6 @@ def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict, fin
     numbers and ours on its focus rows, its status on the paper's own table), the figure, ``findings`` (markdown
     lines: a finding beyond the claims, e.g. emml/report/eqa_test.py's), and the way to the detail."""
     names = page_names(profile.name)
-    n = counts(decisions)
     frames = sorted({f for d in decisions for f in d.frames})
     inferred = sum(claims[d.id].inferred for d in decisions)
     lines = [
@@ -207,26 +303,28 @@ def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict, fin
         f"{len(decisions)} claims of the paper ({len(decisions) - inferred} it states, {inferred} inferred from its "
         f"tables; reproduce/claims.toml) decided from the '{profile.name}' profile's results "
         f"({', '.join(f'{f:,}' for f in frames) or 'no'} frames per run) and from the paper's own tables, by the same "
-        "rules. Here: " + ", ".join(f"{v} {k}" for k, v in n.items()) + ". Regenerated by `make reports`.",
+        "rules. Here: " + tally(decisions) + ". Regenerated by `make reports`.",
         "",
         "| Claim | Status | Seeds | Cells (focus rows) | Paper | Ours | On the paper's table |",
         "|:--|:--|--:|:--|--:|--:|:--|",
     ]
-    for d in decisions:
-        claim = claims[d.id]
-        cs = cells(d, paper.get(d.id), claim)
-        lines.append(
-            f"| [{d.id}]({names['detail']}#{d.id}) | {d.status} | {d.seeds or '—'} | "
-            + " | ".join(
-                _lines(col)
-                for col in (
-                    [_cell(c.label) for c in cs],
-                    ["—" if c.paper is None else f"{c.paper:.2f}" for c in cs],
-                    [_cell(c.shown) for c in cs],
-                )
-            )
-            + f" | {_paper_label(paper.get(d.id), claim)} |"
-        )
+    apart = [d for d in decisions if getattr(d, "apart", False)]
+    lines += [_row(d, claims, paper, names) for d in decisions if d not in apart]
+    if apart:
+        lines += [
+            "",
+            "**The paper's table does not support its text** (its own numbers fail the claim's rule; not counted "
+            "above): ours shown for the record.",
+            "",
+            *lines[4:6],
+            *(_row(d, claims, paper, names) for d in apart),
+            "",
+            *(f"- {d.id}: {_cell(claims[d.id].on_paper)}." for d in apart if claims[d.id].on_paper),
+        ]
+    settle = [(d.id, x) for d in decisions if d not in apart for x in getattr(d, "settle", [])]
+    if settle:
+        lines += ["", "What would settle the provisional verdicts (the runs each names, and their campaign step):", ""]
+        lines += [f"- {i}: {_cell(x)}" for i, x in settle]
     lines += [
         "",
         f"![Ours against the paper, per claim]({names['png']})",
@@ -235,8 +333,10 @@ def quick_page(decisions: list, profile: Profile, paper: dict, claims: dict, fin
         f"SGN in blue, EQA in orange, a `diag/*` figure in green ([PDF]({names['pdf']}), {FIGURE_WIDTH:g} in wide). "
         "The focus rows are the row a claim compares with and its first row (for 'best', the row it puts above "
         "every other), and for a claim not supported the rows of the comparison that goes against it; a 'faster' "
-        "claim's crossings are frames, in the table only. Seeds: the fewest seeds of the "
-        "rows any comparison of the claim read.",
+        "claim's crossings are frames, in the table only. Seeds: per focus row, the seeds of its cells. A No Aux "
+        "cell says when its runs trained under the warm-up (runs …-noaux-warm400000-…: the answer kept off the "
+        "image for the first 400k frames, issue 61), with the paper-literal run (no warm-up) beside it where one "
+        "was trained.",
         "",
         *findings,
         f"Every claim's comparisons, the numbers per row and seed, the decision rules, the runs still missing and the "
@@ -256,19 +356,19 @@ def detail_page(decisions: list, profile: Profile, paper: dict, claims: dict, ch
     (<table>-<profile>.md) lies beside this one; a claim of another table names its table without a link (None:
     every claim's table is linked)."""
     names = page_names(profile.name)
-    n = counts(decisions)
     lines = [
         f"# Claims ({profile.name}): the detail",
         "",
         f"Each claim of [{names['page']}]({names['page']}) with the numbers per row and seed that decide it, by the "
-        "rules below. Here: " + ", ".join(f"{v} {k}" for k, v in n.items()) + ". Regenerated by `make reports`.",
+        "rules below. Here: " + tally(decisions) + ". Regenerated by `make reports`.",
         "",
         "| Claim | Status | On the paper's table | Evidence |",
         "|:--|:--|:--|:--|",
     ]
     for d in decisions:
+        label = d.label + (" (shown apart: not counted)" if getattr(d, "apart", False) else "")
         lines.append(
-            f"| [{d.id}](#{d.id}) | {d.label} | {_paper_label(paper.get(d.id), claims[d.id])} | {_cell(d.phrase)} |"
+            f"| [{d.id}](#{d.id}) | {label} | {_paper_label(paper.get(d.id), claims[d.id])} | {_cell(d.phrase)} |"
         )
     lines += ["", "## Decision rules", ""] + [f"- {r}" for r in rules(chance)]
     if profile.name != "paper":
@@ -304,7 +404,11 @@ def detail_page(decisions: list, profile: Profile, paper: dict, claims: dict, ch
             lines.append("")
         elif d.evidence:
             lines += [f"No run of its cells has finished ({len(d.evidence)} cells).", ""]
-        lines += ["Comparisons:", ""] + [f"- {_cell(c.what)}: **{c.outcome}** ({_cell(c.detail)})" for c in d.checks]
+        lines += ["Comparisons:", ""] + [
+            f"- {_cell(c.what)}: **{c.outcome}** ({_cell(c.detail)}){_settled(c)}" for c in d.checks
+        ]
+        if getattr(d, "settle", None):
+            lines += ["", "What would settle it:", ""] + [f"- {_cell(x)}" for x in d.settle]
         p = paper.get(d.id)
         if p is not None:
             lines += ["", f"On the paper's own table: **{_paper_label(p, claim)}** ({_cell(p.phrase)})."]
@@ -316,6 +420,13 @@ def detail_page(decisions: list, profile: Profile, paper: dict, claims: dict, ch
             lines += ["", "The campaign steps that train them (emml campaign reference --status):", ""]
             lines += [f"- {c}" for c in d.costs]
     return "\n".join(lines) + "\n"
+
+
+def _settled(check) -> str:
+    """A reversal's weighing for being settled, for the detail's comparison line ('' when it was not weighed)."""
+    if not check.settlement:
+        return ""
+    return f"; **{check.unsettled or 'settled'}**: {_cell(check.settlement)}"
 
 
 def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:

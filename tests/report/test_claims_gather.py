@@ -33,12 +33,8 @@ from tests.report.test_tables import PROFILE, fake_results
 COLUMNS = ("sgn_train", "sgn_test", "eqa_train", "eqa_test")
 CHANCE = Chance({(d, m): v for d, v in (("easy", 0.5), ("hard", 0.7)) for m in COLUMNS}, "made up")
 """Chance 0.5 in Easy and 0.7 in Hard (both above every uniform floor): bars 0.6 and 0.8."""
-DA = [f"dual_attention-easy-aux-s{s}-quick" for s in (0, 1, 2)]
-
-
-def fake_names(root) -> list[str]:
-    """The run names the fixture's results hold (table2)."""
-    return list(pd.read_csv(root / "table2" / f"{PROFILE}.csv")["run_name"])
+DA = [f"dual_attention-easy-aux-s{s}-quick" for s in (0, 1, 2, 3, 4)]
+"""Table 2's Dual-Attention, Easy · Aux, at the quick profile: its seeds and its more_seeds 3-4."""
 
 
 def scores(ev: Evidence, row: str, difficulty: str, aux: bool, metric: str) -> list[tuple]:
@@ -50,13 +46,13 @@ def scores(ev: Evidence, row: str, difficulty: str, aux: bool, metric: str) -> l
 
 
 def test_each_run_is_one_score_with_its_seed_episodes_frames_and_learning_bar(tmp_path):
-    """Dual-Attention's three Easy · Aux runs score 0.5 / 0.6 / 0.7 (train the same) on 100 episodes each; with the
-    chance given, its bar is Easy's 0.5 + LEAVE (Hard's would be 0.8; the fixture's own Text only rows 0.3)."""
+    """Dual-Attention's five Easy · Aux runs score 0.5 … 0.9 (train the same) on 100 episodes each; with the chance
+    given, its bar is Easy's 0.5 + LEAVE (Hard's would be 0.8; the fixture's own Text only rows 0.3)."""
     root = tmp_path / "results"
     frames = int(fake_results("table2", root, value=da_ahead)["frames"].iloc[0])
     ev = gather(CLAIMS["da-best-easy-aux"], plan_report("table2", PROFILE, root), CHANCE)
     assert scores(ev, "Dual-Attention", "easy", True, "sgn_test") == [
-        (DA[s], s, 0.5 + 0.1 * s, 100, frames, 0.5 + 0.1 * s, 0.5 + LEAVE, 0) for s in (0, 1, 2)
+        (DA[s], s, round(0.5 + 0.1 * s, 6), 100, frames, round(0.5 + 0.1 * s, 6), 0.5 + LEAVE, 0) for s in range(5)
     ]
     assert scores(ev, "Text only", "easy", True, "eqa_test")[0][6] == -math.inf  # the blind row is the chance line
     (entry,) = [e for e in ev.evidence if e["row"] == "Dual-Attention" and e["metric"] == "SGN test"]
@@ -64,14 +60,13 @@ def test_each_run_is_one_score_with_its_seed_episodes_frames_and_learning_bar(tm
         "row": "Dual-Attention",
         "setting": "Easy · Aux",
         "metric": "SGN test",
-        "values": {0: 0.5, 1: 0.6, 2: 0.7},
-        "shown": {0: "0.500", 1: "0.600", 2: "0.700"},
-        "declared": len(plan_report("table2", PROFILE, root).cell_runs("Dual-Attention", "easy", True, "sgn_test")),
+        "values": {0: 0.5, 1: 0.6, 2: 0.7, 3: 0.8, 4: 0.9},
+        "shown": {0: "0.500", 1: "0.600", 2: "0.700", 3: "0.800", 4: "0.900"},
+        "declared": 5,
         "runs": DA,
         "column": "sgn_test",
     }
-    declared = {r.name for r in plan_report("table2", PROFILE, root).runs}
-    assert ev.frames == {frames} and set(ev.missing) <= declared - set(fake_names(root))  # more_seeds: not faked
+    assert ev.frames == {frames} and ev.missing == []
     assert ev.owners == {
         run.name: "table2" for run in plan_report("table2", PROFILE, root).runs if run.spec.difficulty == "easy"
         and run.spec.aux
@@ -101,7 +96,7 @@ def test_a_run_without_its_training_score_is_named_and_the_next_seed_still_read(
     # a test cell's run without its training score is read, and read as having none (not NaN)
     edit(root, "table2", DA[1], sgn_train=float("nan"))
     ev = gather(CLAIMS["da-best-easy-aux"], plan_report("table2", PROFILE, root), CHANCE)
-    assert [s[5] for s in scores(ev, "Dual-Attention", "easy", True, "sgn_test")] == [0.5, None, 0.7]
+    assert [s[5] for s in scores(ev, "Dual-Attention", "easy", True, "sgn_test")] == [0.5, None, 0.7, 0.8, 0.9]
 
 
 def test_nan_is_what_cannot_be_read_as_a_number():
@@ -181,7 +176,7 @@ def test_a_crossing_is_a_score_of_frames_known_to_the_evaluations_gap(tmp_path):
     # a run whose results row lacks the training column is still read from its curve
     edit(results, "table3", name, sgn_train=float("nan"))
     ev = gather(CLAIMS["shaping-speed"], plan_report("table3", PROFILE, results, runs))
-    assert not [m for m in ev.missing if "noshaping" in m]
+    assert not [m for m in ev.missing if "noshaping" in m]  # (the fixture's curves leave out the more_seeds)
     assert scores(ev, "w/o Reward Shaping", "easy", True, "sgn_train")[0][:3] == first[:3]
 
 

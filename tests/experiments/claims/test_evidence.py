@@ -350,3 +350,91 @@ def test_the_frames_texts():
     # millions, rounded to two places: 1,255,001 is 1.255001 M
     assert frames_text(1_255_001, 0) == "1.26M" and frames_text(None, 1_255_001) == ">1.26M"
     assert frames_list([crossing(250_000, 0), crossing(math.inf, 1, last=2_000_000)]) == "0.25M (s0) · >2.00M (s1)"
+
+
+# Issue 85 item 3: each rule held at its boundary, one seed and several, worked out by hand (500 episodes each).
+# Dropping the error term (Z * se → 0), leaving out the spread between seeds or flipping a side fails a case here.
+
+
+def test_order_on_one_seed_at_its_boundary():
+    """0.55 against 0.50: se sqrt((0.2475 + 0.25) / 500) = 0.03154, 1.645 se = 0.05189 > 0.05: unclear; 0.555
+    against 0.50: se 0.03153, 1.645 se = 0.05186 < 0.055: holds. Swapped: reversed, and unclear just inside."""
+    assert order("w", "x", [s(0.55)], [s(0.50)]).outcome == UNCLEAR
+    assert order("w", "x", [s(0.555)], [s(0.50)]).outcome == HOLDS
+    assert order("w", "x", [s(0.50)], [s(0.555)]).outcome == REVERSED
+    assert order("w", "x", [s(0.50)], [s(0.55)]).outcome == UNCLEAR
+    assert order("w", "x", [s(0.50)], [s(0.555)]).against == pytest.approx(0.055)
+
+
+def test_order_on_several_seeds_at_its_boundary():
+    """0.6 / 0.7 (mean 0.65, sample variance 0.005 > binomial 0.00045: 0.005 / 2 = 0.0025) against 0.57 / 0.57
+    (binomial 0.2451 / 500 / 2 = 0.000245): se 0.05241, 1.645 se = 0.0862 > 0.08: unclear; against 0.56 / 0.56:
+    gap 0.09 > 0.0862: holds. With the binomial error alone (se 0.0218) both would hold; the reverse is reversed."""
+    hi = [s(0.6), s(0.7, 1)]
+    assert order("w", "x", hi, [s(0.57), s(0.57, 1)]).outcome == UNCLEAR
+    assert order("w", "x", hi, [s(0.56), s(0.56, 1)]).outcome == HOLDS
+    assert order("w", "x", [s(0.56), s(0.56, 1)], hi).outcome == REVERSED
+    assert order("w", "x", [s(0.57), s(0.57, 1)], hi).outcome == UNCLEAR
+
+
+def test_level_on_one_seed_at_its_boundary():
+    """Margin 0.1 against 0.55: 0.46 is within it (holds); 0.44 beyond it by 0.01, inside the error (unclear);
+    0.40 beyond it by 0.05 < 1.645 × 0.03122 = 0.0514 (unclear); 0.395 by 0.055 > 1.645 × 0.03119 = 0.0513
+    (reversed). Above the reference: 0.698 by 0.048 < 1.645 × 0.03028 = 0.0498 (unclear), 0.705 by 0.055 >
+    1.645 × 0.03018 = 0.0496 (reversed)."""
+    ref = [s(0.55)]
+    assert level("w", "x", [s(0.46)], ref, 0.1).outcome == HOLDS
+    assert level("w", "x", [s(0.44)], ref, 0.1).outcome == UNCLEAR
+    assert level("w", "x", [s(0.40)], ref, 0.1).outcome == UNCLEAR
+    assert level("w", "x", [s(0.395)], ref, 0.1).outcome == REVERSED
+    assert level("w", "x", [s(0.698)], ref, 0.1).outcome == UNCLEAR
+    assert level("w", "x", [s(0.705)], ref, 0.1).outcome == REVERSED
+    check = level("w", "x", [s(0.395)], ref, 0.1)
+    assert check.against == pytest.approx(0.055) and check.orient == -1.0
+    assert level("w", "x", [s(0.705)], ref, 0.1).orient == 1.0
+
+
+def test_level_on_several_seeds_at_its_boundary():
+    """Reference 0.5 / 0.6 (mean 0.55, spread 0.005 / 2 = 0.0025), margin 0.1: 0.37 / 0.37 is 0.08 beyond it,
+    se 0.05213, 1.645 se = 0.0858: unclear; 0.36 / 0.36 is 0.09 beyond it: reversed. Without the spread (se 0.0218)
+    both would be reversed."""
+    ref = [s(0.5), s(0.6, 1)]
+    assert level("w", "x", [s(0.37), s(0.37, 1)], ref, 0.1).outcome == UNCLEAR
+    assert level("w", "x", [s(0.36), s(0.36, 1)], ref, 0.1).outcome == REVERSED
+
+
+def test_threshold_on_one_seed_at_its_boundary():
+    """Value 0.8: 0.8 holds (at it), 0.799 does not (unclear); 0.77 is 0.03 below, inside 1.645 × 0.01882 =
+    0.0310 (unclear); 0.765 is 0.035 below, outside 1.645 × 0.01896 = 0.0312 (reversed)."""
+    assert threshold("w", "x", [s(0.8)], 0.8).outcome == HOLDS
+    assert threshold("w", "x", [s(0.799)], 0.8).outcome == UNCLEAR
+    assert threshold("w", "x", [s(0.77)], 0.8).outcome == UNCLEAR
+    assert threshold("w", "x", [s(0.765)], 0.8).outcome == REVERSED
+    check = threshold("w", "x", [s(0.765)], 0.8)
+    assert check.against == pytest.approx(0.035) and check.floor == 0.8 and check.low == []
+
+
+def test_threshold_on_several_seeds_at_its_boundary():
+    """Value 0.8: 0.70 / 0.78 (mean 0.74, spread 0.0032 / 2 = 0.0016, se 0.04, 1.645 se = 0.0658) is 0.06 below:
+    unclear; 0.68 / 0.76 (mean 0.72) is 0.08 below: reversed. With the binomial error alone (se 0.0138) both would
+    be reversed."""
+    assert threshold("w", "x", [s(0.70), s(0.78, 1)], 0.8).outcome == UNCLEAR
+    assert threshold("w", "x", [s(0.68), s(0.76, 1)], 0.8).outcome == REVERSED
+
+
+def test_a_borrowed_spread_is_read_only_when_asked_and_scaled_above_chance():
+    """One seed of 0.5 (binomial 0.0005) with a borrowed variance 0.004: 0.0005 as it stands, 0.004 when borrowed;
+    above chance 0.5 ((0.75 − 0.5) / 0.5 = 0.5) both scale by 1 / 0.5² = 4."""
+    from dataclasses import replace
+
+    from emml.experiments.claims.evidence import above_chance
+
+    one = [replace(s(0.5), borrowed=0.004)]
+    assert variance_of_mean(one) == pytest.approx(0.0005)
+    assert variance_of_mean(one, borrow=True) == pytest.approx(0.004)
+    (up,) = above_chance([replace(s(0.75), borrowed=0.004)], 0.5)
+    assert up.value == pytest.approx(0.5) and up.rate == pytest.approx(0.75)
+    assert variance_of_mean([up]) == pytest.approx(0.75 * 0.25 / 500 * 4)
+    assert variance_of_mean([up], borrow=True) == pytest.approx(0.016)
+    with pytest.raises(ValueError, match="chance=1"):
+        above_chance([s(0.5)], 1)
