@@ -70,9 +70,13 @@ def test_a_run_being_trained_again_or_ended_meanwhile_is_left_as_it_is(tracking,
 def test_a_resumed_run_drops_its_own_record(tracking, tmp_path):
     stopped = _running(tracking, tmp_path / "runs" / "r")
     pending_ends.record_end(tracking["uri"], stopped.run_id, "KILLED", 1, tmp_path / "runs" / "r")
-    resumed = Tracker(tracking["uri"])
-    resumed.start("test", "r", run_id=stopped.run_id)
-    assert pending_ends.pending(tracking["uri"]) == []
+    fd = take_lock(tmp_path / "runs" / "r" / LOCK)  # the resuming trainer holds its run (hold_run)
+    try:
+        resumed = Tracker(tracking["uri"])
+        resumed.start("test", "r", run_id=stopped.run_id)
+    finally:
+        os.close(fd)
+    assert pending_ends.pending(tracking["uri"]) == []  # dropped, not left for a later start to mark KILLED
     assert _status(tracking["uri"], stopped.run_id)[0] == "RUNNING"  # the resumed run's, not the record's KILLED
 
 
