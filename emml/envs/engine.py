@@ -140,7 +140,9 @@ def start_engine(game) -> Engine:
     """``game.init()`` (the engine running in :func:`engine_home`) and record the engine it forked. Raises
     EngineError on failure. A Ctrl-C is held back during ``init()``: the process it forks keeps the mask until the
     launcher's ``trap '' INT`` (`LAUNCHER`), so that no Ctrl-C kills the launcher, which crashed ``init()`` with a
-    segfault (issue 85: 5 of 7 `emml train`, 7 of 7 `emml eval`); the owner gets it when ``init()`` returns."""
+    segfault (issue 85: 5 of 7 `emml train`, 7 of 7 `emml eval`); a stop (Ctrl-C, SIGTERM: `stop_after`) comes once the
+    engine is taken live, so that the owner's exit ends it by pid (it was left running, unrecorded, until the next
+    `emml` command swept it)."""
     before = set(_children_named("vizdoom"))
     binary = game.get_vizdoom_path()
     if not binary.endswith(".sh"):
@@ -149,22 +151,23 @@ def start_engine(game) -> Engine:
 
             binary = os.path.join(os.path.dirname(vizdoom.__file__), "vizdoom")
         game.set_vizdoom_path(str(engine_launcher(binary)))
-    try:
-        with _ctrl_c_held():  # until init() returns (its fork inherits the mask up to the launcher's trap)
-            game.init()
-    except Exception as e:  # vizdoom raises its own exception types
-        _drop_dead_records()  # what the launcher recorded of an engine that did not start
-        raise EngineError(f"ViZDoom failed to start: {e}") from e
-    new = {p: c for p, c in _children_named("vizdoom").items() if p not in before}
-    pid, instance = None, None
-    if len(new) == 1:
-        pid, cmd = next(iter(new.items()))
-        instance = _instance_id(cmd)
-    engine = Engine(game, pid, instance)
-    if pid is not None:
-        with _LOCK:
-            _LIVE[pid] = engine
-        _record(engine)
+    with stop_after():  # a stop comes once the engine is taken live (else no one ends it: issue 85, `emml eval`)
+        try:
+            with _ctrl_c_held():  # until init() returns (its fork inherits the mask up to the launcher's trap)
+                game.init()
+        except Exception as e:  # vizdoom raises its own exception types
+            _drop_dead_records()  # what the launcher recorded of an engine that did not start
+            raise EngineError(f"ViZDoom failed to start: {e}") from e
+        new = {p: c for p, c in _children_named("vizdoom").items() if p not in before}
+        pid, instance = None, None
+        if len(new) == 1:
+            pid, cmd = next(iter(new.items()))
+            instance = _instance_id(cmd)
+        engine = Engine(game, pid, instance)
+        if pid is not None:
+            with _LOCK:
+                _LIVE[pid] = engine
+            _record(engine)
     return engine
 
 

@@ -172,3 +172,33 @@ def test_a_ctrl_c_while_an_evaluation_starts_its_engines_stops_cleanly(tracking,
     _assert_stopped(proc, out, err, args, "ctrl-c")
     assert _run_status(tracking) == "KILLED"
     assert not list(records_dir().glob(f"{proc.pid}-*"))  # every engine it started, ended by pid
+
+
+def test_a_ctrl_c_while_emml_eval_starts_its_engines_leaves_no_engine(tracking, no_leftovers):
+    """`emml eval` Ctrl-C'd as its first engine starts (7 of 7 crashed, issue 85): it exits 130 and its engine is
+    ended by pid on the way out: the stop comes once the engine is taken live (`start_engine`), where it came right
+    after ``init()`` and left the engine unrecorded, running until the next `emml` command swept it (4 of 4 here)."""
+    from emml.config.profiles import profile_config
+    from emml.envs.engine import records_dir
+    from emml.rl.trainer import train
+
+    over = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "frames": 64}
+    over |= {"final_eval_episodes": 1, "diagnose_episodes": 0}
+    checkpoint = train(profile_config("smoke", "easy", over), quiet=True).run_dir / "checkpoint.pt"
+    proc = _start(["eval", str(checkpoint), "--episodes", "2"])
+    caught = False
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            if any(records_dir().glob(f"{proc.pid}-*")):  # its first engine is starting
+                caught = True
+                break
+            time.sleep(0.002)
+        assert caught and proc.poll() is None, proc.communicate()
+        _stop(proc, "ctrl-c")
+        out, err = proc.communicate(timeout=120)
+    finally:
+        _end(proc)
+    assert proc.returncode == 130, f"rc {proc.returncode}\n{out}\n{err[-3000:]}"
+    assert "Traceback" not in err, err[-3000:]
+    assert not list(records_dir().glob(f"{proc.pid}-*"))  # its engine ended by pid (no_leftovers: none alive)
