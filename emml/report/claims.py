@@ -101,7 +101,7 @@ class Decision:
     @property
     def label(self) -> str:
         """The status with the seeds it rests on, always: '(on 1 seed)', '(on 3 seeds)', '(no run yet)'."""
-        if not self.seeds:
+        if not self.seeds or self.status == ONE_SEED:  # 'reversed on 1 seed' says its seeds itself
             return f"{self.status} (no comparison yet)" if self.status == UNTESTABLE else self.status
         return f"{self.status} (on {self.seeds} seed{'s' if self.seeds != 1 else ''})"
 
@@ -376,13 +376,16 @@ def _phrase(checks: list[Check]) -> str:
         text = f"{setting}: {sum(c.outcome == HOLDS for c in present)} of {len(present)} hold"
         text += f", {left} not run yet" if left else ""
         failing = [c for c in present if c.outcome != HOLDS]
-        worst = next((c for c in failing if c.outcome == REVERSED and not c.chance), None) or next(
-            (c for c in failing if c.chance), failing[0] if failing else None
+        learned_lost = [c for c in failing if c.outcome == REVERSED and not c.chance]
+        worst = (  # a settled reversal first (what makes the claim contradicted), then a provisional one
+            next((c for c in learned_lost if not c.unsettled), None)
+            or next(iter(learned_lost), None)
+            or next((c for c in failing if c.chance), failing[0] if failing else None)
         )
         if worst is not None:
             note = f"; {worst.subject} has not learned" if worst.chance else ""
             compared = " ".join(x for x in (worst.metric, worst.compared) if x)
-            text += f"; {worst.outcome}: {compared} ({worst.numbers}{note})"
+            text += f"; {worst.unsettled or worst.outcome}: {compared} ({worst.numbers}{note})"
         parts.append(text)
     return "; ".join(parts)
 

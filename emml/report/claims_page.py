@@ -55,13 +55,13 @@ GENERAL_RULES = [
     "results row's eval_episodes, a transfer row times its instructions). One seed: binomial only, and the status "
     "says so.",
     f"**Learned**: a row has learned when the mean of its training-split scores on the task compared (sgn_train for "
-    f"an SGN cell), over every seed it has, is above chance + {LEAVE:.2f}; the blind row (Text only) is the chance "
-    "line itself and is never excused. On the paper's own table, which gives no training score per cell, a row is "
-    "read on the cell itself.",
+    f"an SGN cell), over every seed that has one, is above chance + {LEAVE:.2f} (a run without a training score is "
+    "left out, not averaged in); the blind row (Text only) is never excused. On the paper's own table, which gives "
+    "no training score per cell, the cell's own number stands in for it, held against the training split's chance.",
     "**On the paper's table**: the same rules on the paper's own numbers (reproduce/paper/), each read as one seed of "
-    "500 episodes (the paper gives no count; ours, the final evaluation's), chance its own Text only rows. A claim "
-    "whose rule the paper's own table fails says why; a curve or a diagnostic the paper shows as a figure has no "
-    "number there.",
+    "500 episodes (the paper gives no count; ours, the final evaluation's), against the same chance as ours; its "
+    "reversals are the paper's printed numbers and are not weighed for being settled. A claim whose rule the "
+    "paper's own table fails says why; a curve or a diagnostic the paper shows as a figure has no number there.",
 ]
 
 
@@ -429,57 +429,6 @@ def _settled(check) -> str:
     return f"; **{check.unsettled or 'settled'}**: {_cell(check.settlement)}"
 
 
-def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:
-    """Ours against the paper per claim, one line each (its status in its label's colour): for each focus cell the
-    paper's number (×), our mean (●) and each seed (○), joined by a line; FIGURE_WIDTH inches wide, written to each
-    of ``paths`` (PNG, PDF)."""
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-
-    from emml.report.savefig import save
-
-    n = len(decisions)
-    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 0.8 + 0.22 * n), layout="constrained")
-    for i, d in enumerate(decisions):
-        y = n - 1 - i
-        cs = [c for c in cells(d, paper.get(d.id), claims[d.id]) if not c.frames]
-        if not cs:
-            note = "a curve's crossing in frames: see the table" if claims[d.id].kind_of.curve else "no number"
-            ax.text(0.01, y, note, va="center", fontsize=6, color="0.45")
-            continue
-        step = min(0.6 / len(cs), 0.18)
-        for j, c in enumerate(cs):
-            yy = y + (len(cs) - 1) / 2 * step - j * step
-            colour = TASK_COLOURS[c.task]
-            mean = sum(c.ours) / len(c.ours) if c.ours else None
-            if c.paper is not None and mean is not None:
-                ax.plot([c.paper, mean], [yy, yy], color=colour, alpha=0.35, lw=1)
-            if c.paper is not None:
-                ax.plot(c.paper, yy, "x", color=colour, ms=4, mew=1)
-            ax.plot(c.ours, [yy] * len(c.ours), "o", mfc="none", color=colour, ms=2.5, mew=0.6)
-            if mean is not None:
-                ax.plot(mean, yy, "o", color=colour, ms=3.5)
-    ax.set_yticks(range(n), [f"{d.id}: {d.status} ({d.seeds or 0})" for d in reversed(decisions)])
-    for label, d in zip(ax.get_yticklabels(), reversed(decisions)):
-        label.set_color(STATUS_COLOURS.get(d.status, "black"))
-    ax.set_ylim(-0.6, n - 0.4)
-    ax.set_xlim(-0.02, 1.02)  # a point at 0 or 1 drawn whole
-    ax.set_xlabel("success rate (a diag/* figure: its value)")
-    ax.grid(axis="y", visible=False)
-    handles = [
-        Line2D([], [], ls="none", marker="x", color="0.2", label="paper"),
-        Line2D([], [], ls="none", marker="o", color="0.2", label="ours (mean)"),
-        Line2D([], [], ls="none", marker="o", mfc="none", color="0.2", label="ours (a seed)"),
-        *(Line2D([], [], ls="none", marker="s", color=TASK_COLOURS[t], label=t.upper()) for t in TASKS),
-        Line2D([], [], ls="none", marker="s", color=TASK_COLOURS["diag"], label="diag/*"),
-    ]
-    ax.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=6, fontsize=6)
-    ax.set_title("Ours against the paper per claim (label: status, seeds)", pad=14)
-    for path in paths:
-        save(fig, path)
-    plt.close(fig)
-
-
 def write_pages(
     folder, decisions: list, profile: Profile, paper: dict, claims: dict, chance: Chance, tables=None, findings=()
 ):
@@ -496,5 +445,7 @@ def write_pages(
     write_text(page, quick_page(decisions, profile, paper, claims, findings), then=RERUN)  # whole or not at all
     write_text(detail, detail_page(decisions, profile, paper, claims, chance, tables), then=RERUN)
     figs = [folder / names["png"], folder / names["pdf"]]
+    from emml.report.claims_figure import figure
+
     figure(decisions, paper, claims, figs)
     return [page, detail, *figs]

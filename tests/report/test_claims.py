@@ -7,7 +7,7 @@ from dataclasses import replace
 from emml.config.profiles import resolve_profile
 from emml.experiments.claims import load_claims
 from emml.experiments.claims.evidence import HOLDS, MISSING, REVERSED, UNCLEAR, Chance, Check, Score
-from emml.report.claims import BUDGET, SUPPORTED, UNTESTABLE, Decision, costs_of, paper_evidence
+from emml.report.claims import BUDGET, ONE_SEED, SUPPORTED, UNTESTABLE, Decision, costs_of, paper_evidence
 from emml.report.claims import _phrase as phrase
 
 
@@ -20,6 +20,7 @@ def test_the_label_names_the_seeds_it_rests_on():
     assert decision(SUPPORTED, 3).label == "supported (on 3 seeds)"
     assert decision(UNTESTABLE).label == "untestable yet (no comparison yet)"
     assert decision(BUDGET).label == "not supported at this budget"
+    assert decision(ONE_SEED, 1).label == "reversed on 1 seed"  # not '(on 1 seed)' twice
 
 
 def test_each_missing_run_is_costed_under_its_own_table():
@@ -53,6 +54,11 @@ def test_the_phrase_counts_each_settings_comparisons_and_names_the_one_against()
     )
     assert phrase([held, unclear]) == "Easy · Aux: 1 of 2 hold; unclear: SGN test DA > PACMAN (0.50 vs 0.52)"
     assert phrase([held, check("Easy · Aux", MISSING)]) == "Easy · Aux: 1 of 1 hold, 1 not run yet"
+    # issue 81: a provisional reversal says so; a settled one, listed after it, is the one named
+    provisional = check("Easy · Aux", REVERSED, "SGN test, Easy · Aux: DA > Concat", "0.30 vs 0.45")
+    provisional.unsettled = "reversed on 1 seed"
+    assert phrase([provisional]).endswith("; reversed on 1 seed: SGN test DA > Concat (0.30 vs 0.45)")
+    assert phrase([provisional, check("Easy · Aux", REVERSED)]).endswith("; reversed: SGN test DA > GA (0.30 vs 0.50)")
 
 
 def test_the_phrase_of_a_setting_with_nothing_run_says_who_has_not_learned():

@@ -1,7 +1,8 @@
 """The rules tested on the paper's own tables (issue 60): every claim decided on the paper's numbers (each one seed of
-500 episodes, chance its Text only rows) is supported there, but for the claims that say why the paper's own table
-fails them (`on_paper` in reproduce/claims.toml) and those the paper shows only as a figure. A made-up paper table
-where Dual-Attention loses must fail: the rules cannot be loosened until anything passes."""
+500 episodes, chance the same as ours: the task's) is supported there, but for the claims that say why the paper's
+own table fails them (`on_paper` in reproduce/claims.toml: shown apart on the page) and those the paper shows only as
+a figure. A made-up paper table where Dual-Attention loses must fail: the rules cannot be loosened until anything
+passes."""
 
 import pandas as pd
 import pytest

@@ -70,7 +70,7 @@ def test_a_claim_flips_when_a_results_row_changes(tmp_path):
     for seed in (0, 2):
         edit(root, "table2", f"text_only-easy-aux-s{seed}-quick", eqa_test=0.95)  # now ahead in every seed
     d = decide(claim, PROFILE, root)  # three seeds each, but no curve here: flatness unknown
-    assert d.status == UNKNOWN_FLAT and "reversed: EQA test Dual-Attention > Text only" in d.phrase
+    assert d.status == UNKNOWN_FLAT and f"{UNKNOWN_FLAT}: EQA test Dual-Attention > Text only" in d.phrase
     d = decide(claim, PROFILE, root, flat(tmp_path))  # flat curves: settled
     assert d.status == CONTRADICTED and "reversed: EQA test Dual-Attention > Text only" in d.phrase
 
@@ -279,6 +279,15 @@ def test_the_counts_cover_every_status():
     assert counts([decision(SUPPORTED), decision(BUDGET), decision(SUPPORTED)]) == {
         s: {SUPPORTED: 2, BUDGET: 1}.get(s, 0) for s in STATUSES
     }
+
+
+def test_a_claim_the_paper_own_table_fails_is_not_counted_but_named_apart():
+    from emml.report.claims_page import tally
+
+    apart = decision(CONTRADICTED, apart=True)
+    assert counts([decision(SUPPORTED), apart]) == {s: {SUPPORTED: 1}.get(s, 0) for s in STATUSES}
+    assert tally([decision(SUPPORTED), apart]).endswith("; 1 shown apart (the paper's table does not support its text)")
+    assert "shown apart" not in tally([decision(SUPPORTED)])
 
 
 def test_a_claim_not_supported_shows_the_rows_of_the_comparison_against_it(tmp_path):

@@ -31,6 +31,9 @@ def test_the_nearest_cell_is_the_same_difficulty_first_then_the_same_aux():
     }
     assert nearest(("DA", "easy", False, "eqa_test"), spreads) == ("DA", "easy", True, "eqa_test")
     assert nearest(("DA", "hard", False, "eqa_test"), spreads) == ("DA", "hard", True, "eqa_test")
+    # the same difficulty before the same aux: Hard · No Aux is the same aux, Easy · Aux the same difficulty
+    both = {**spreads, ("DA", "hard", False, "eqa_test"): (0.05, 2)}
+    assert nearest(("DA", "easy", False, "eqa_test"), both) == ("DA", "easy", True, "eqa_test")
     del spreads[("DA", "hard", True, "eqa_test")]
     assert nearest(("DA", "hard", True, "eqa_test"), spreads) == ("DA", "easy", True, "eqa_test")  # same aux
     assert nearest(("PACMAN", "easy", True, "eqa_test"), spreads) is None

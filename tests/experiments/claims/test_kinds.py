@@ -210,7 +210,8 @@ def test_harder_compares_each_task_above_its_own_chance_not_raw_rates():
     keys = [("easy", True, "eqa_test"), ("easy", True, "sgn_test")]
 
     def outcome(cells):
-        (c,) = KINDS["harder"].checks(harder_claim(), TABLE2, keys, lambda r, d, a, m: cells.get((r, d, a, m), []), chance)
+        get = lambda r, d, a, m: cells.get((r, d, a, m), [])  # noqa: E731
+        (c,) = KINDS["harder"].checks(harder_claim(), TABLE2, keys, get, chance)
         return c
 
     c = outcome(cells)

@@ -148,6 +148,10 @@ def test_most_is_settled_when_more_than_half_of_its_rows_are_settled_reversals()
     curve = flat_curves(*[x for _, xs in parts for x in xs])
     check = weigh(most("w", "x", [p for p, _ in parts] + [held("d"), held("e")], 0), curve)
     assert check.outcome == REVERSED and check.unsettled == "" and check.settlement.startswith("3 of 5 rows")
+    parts = [part(2, "a"), part(2, "b"), part(1, "c")]  # 2 of 5 settled: half is not most
+    curve = flat_curves(*[x for _, xs in parts for x in xs])
+    check = weigh(most("w", "x", [p for p, _ in parts] + [held("d"), held("e")], 0), curve)
+    assert check.unsettled == ONE_SEED and check.settlement.startswith("2 of 5 rows")
     parts = [part(2, "a"), part(1, "b"), part(1, "c")]
     curve = flat_curves(*[x for _, xs in parts for x in xs])
     check = weigh(most("w", "x", [p for p, _ in parts] + [held("d"), held("e")], 0), curve)

@@ -1,0 +1,58 @@
+"""The claims page's figure (emml/report/claims_page.py): ours against the paper per claim, one line each, its
+status in its label's colour."""
+
+from __future__ import annotations
+
+from emml.experiments.metrics import TASKS
+from emml.report.claims_page import FIGURE_WIDTH, STATUS_COLOURS, TASK_COLOURS, cells
+
+
+def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:
+    """Ours against the paper per claim, one line each (its status in its label's colour): for each focus cell the
+    paper's number (×), our mean (●) and each seed (○), joined by a line; FIGURE_WIDTH inches wide, written to each
+    of ``paths`` (PNG, PDF)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from emml.report.savefig import save
+
+    n = len(decisions)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 0.8 + 0.22 * n), layout="constrained")
+    for i, d in enumerate(decisions):
+        y = n - 1 - i
+        cs = [c for c in cells(d, paper.get(d.id), claims[d.id]) if not c.frames]
+        if not cs:
+            note = "a curve's crossing in frames: see the table" if claims[d.id].kind_of.curve else "no number"
+            ax.text(0.01, y, note, va="center", fontsize=6, color="0.45")
+            continue
+        step = min(0.6 / len(cs), 0.18)
+        for j, c in enumerate(cs):
+            yy = y + (len(cs) - 1) / 2 * step - j * step
+            colour = TASK_COLOURS[c.task]
+            mean = sum(c.ours) / len(c.ours) if c.ours else None
+            if c.paper is not None and mean is not None:
+                ax.plot([c.paper, mean], [yy, yy], color=colour, alpha=0.35, lw=1)
+            if c.paper is not None:
+                ax.plot(c.paper, yy, "x", color=colour, ms=4, mew=1)
+            ax.plot(c.ours, [yy] * len(c.ours), "o", mfc="none", color=colour, ms=2.5, mew=0.6)
+            if mean is not None:
+                ax.plot(mean, yy, "o", color=colour, ms=3.5)
+    ax.set_yticks(range(n), [f"{d.id}: {d.status} ({d.seeds or 0})" for d in reversed(decisions)])
+    for label, d in zip(ax.get_yticklabels(), reversed(decisions)):
+        label.set_color(STATUS_COLOURS.get(d.status, "black"))
+    ax.set_ylim(-0.6, n - 0.4)
+    ax.set_xlim(-0.02, 1.02)  # a point at 0 or 1 drawn whole
+    ax.set_xlabel("success rate (a diag/* figure: its value)")
+    ax.grid(axis="y", visible=False)
+    handles = [
+        Line2D([], [], ls="none", marker="x", color="0.2", label="paper"),
+        Line2D([], [], ls="none", marker="o", color="0.2", label="ours (mean)"),
+        Line2D([], [], ls="none", marker="o", mfc="none", color="0.2", label="ours (a seed)"),
+        *(Line2D([], [], ls="none", marker="s", color=TASK_COLOURS[t], label=t.upper()) for t in TASKS),
+        Line2D([], [], ls="none", marker="s", color=TASK_COLOURS["diag"], label="diag/*"),
+    ]
+    ax.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=6, fontsize=6)
+    ax.set_title("Ours against the paper per claim (label: status, seeds)", pad=14)
+    for path in paths:
+        save(fig, path)
+    plt.close(fig)
