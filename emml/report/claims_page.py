@@ -239,7 +239,8 @@ def cells(decision, paper_decision, claim) -> list[Cell]:
         out.append(Cell(label, task, values, shown, theirs.get(key), frames))
         if key in literal:
             x = literal[key]
-            name = f"{e['row']}, {e['setting']} (no warm-up, the paper's loss: {x['run']}), {e['metric']}"
+            twin = f"{e['setting']} (no warm-up, the paper's loss: {x['run']})"
+            name = ", ".join([*([e["row"]] if len(focus) > 1 else []), twin, e["metric"]])
             out.append(Cell(name, task, [x["value"]], f"{x['value']:.2f}", theirs.get(key), frames))
     return out
 

@@ -54,11 +54,14 @@ def borrow(scores: dict, spreads: dict, label) -> dict:
 
 
 class Curves:
-    """Each run's evaluation curves, read once: run name → its metrics.csv (``paths``)."""
+    """Each run's evaluation curves, read once: run name → its metrics.csv (``paths``). A file is read once per
+    process while it is unchanged (`READ`: the claims of one page read the same runs' files many times)."""
+
+    READ: dict = {}
+    """(path, its size and modification time) → its curves (emml/report/efficiency.py's `curves`)."""
 
     def __init__(self, paths: dict[str, Path]):
         self.paths = paths
-        self._read: dict = {}
 
     def __call__(self, score: Score) -> dict[int, float] | None:
         """The run's curve of the score's metric (frames → value); None when the run has no metrics.csv here, it is
@@ -67,11 +70,13 @@ class Curves:
         if path is None:
             return None
         if score.metric in CURVE_METRICS:
-            if path not in self._read:
-                from emml.report.efficiency import curves
+            from emml.report.efficiency import curves
 
-                self._read[path] = curves(path) or {}
-            points = self._read[path].get(score.metric)
+            stat = path.stat() if path.is_file() else None
+            key = (path, stat and (stat.st_size, stat.st_mtime_ns))
+            if key not in self.READ:
+                self.READ[key] = curves(path) or {}
+            points = self.READ[key].get(score.metric)
         else:  # a diag/* figure: the mirror's points of that key, a point logged twice keeping its last value
             from emml.runs.records import points_or_none
 

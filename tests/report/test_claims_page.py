@@ -383,3 +383,27 @@ def test_seeds_are_per_row_and_the_status_counts_what_holds():
     assert status_text(d) == f"{CONTRADICTED} (14 of 15 hold)"
     d.checks = d.checks[-2:-1]
     assert status_text(d) == CONTRADICTED  # one comparison: nothing to count
+
+
+def test_a_no_aux_cell_under_the_warm_up_says_so_with_the_paper_literal_run_beside_it():
+    """Issue 81 item 5: the No Aux column's runs are …-noaux-warm400000-…: its cell says 'warm-up 400k', and the
+    paper-literal Dual-Attention No Aux run (no warm-up) is shown beside it with its own number; an Aux cell is
+    labelled as it was."""
+    from emml.report.claims_page import cells
+
+    def entry(setting, runs, value):
+        return {"row": "Dual-Attention", "setting": setting, "metric": "SGN test", "values": {0: value},
+                "shown": {0: f"{value:.3f}"}, "runs": runs, "column": "sgn_test"}  # fmt: skip
+
+    d = decision(SUPPORTED, 1, evidence=[
+        entry("Easy · No Aux", ["dual_attention-easy-noaux-warm400000-s0-quick"], 0.52),
+        entry("Easy · Aux", ["dual_attention-easy-aux-s0-quick"], 0.92),
+    ])  # fmt: skip
+    d.literal = [{"row": "Dual-Attention", "setting": "Easy · No Aux", "metric": "SGN test",
+                  "run": "table2/dual_attention-easy-noaux-s0-quick", "value": 0.194}]  # fmt: skip
+    claim = CLAIMS["da-best-easy-noaux"]
+    assert [(c.label, c.shown) for c in cells(d, None, claim)] == [
+        ("Easy · No Aux (warm-up 400k), SGN test", "0.52"),
+        ("Easy · No Aux (no warm-up, the paper's loss: table2/dual_attention-easy-noaux-s0-quick), SGN test", "0.19"),
+        ("Easy · Aux, SGN test", "0.92"),
+    ]  # fmt: skip

@@ -89,3 +89,55 @@ def test_each_settling_run_is_named_once_with_its_campaign_step():
         "more frames for the runs of EQA test, Easy · No Aux: DA > Text only (no campaign step trains them further)",
     ]
     assert settle_costs([c], {})[0].endswith("in no step of the campaign")
+
+
+def test_a_runs_curve_is_read_for_its_scores_metric_and_again_when_its_file_changes(tmp_path):
+    from emml.report.claims_settle import Curves
+
+    path = tmp_path / "metrics.csv"
+    path.write_text("step,key,value\n100,eval/sgn_test,0.2\n200,eval/sgn_test,0.4\n200,diag/detector_ap,0.3\n")
+    curves = Curves({"r": path})
+    score = Score("r", 0, 0.4, 500, 200, 0.9, 0.3, metric="sgn_test")
+    assert curves(score) == {100: 0.2, 200: 0.4}
+    assert curves(Score("r", 0, 0.3, 0, 200, 0.9, 0.0, metric="diag/detector_ap")) == {200: 0.3}
+    assert curves(Score("r", 0, 0.4, 500, 200, metric="eqa_test")) is None  # no point of that key
+    assert curves(Score("other", 0, 0.4, 500, 200, metric="sgn_test")) is None  # no metrics.csv here
+    path.write_text("step,key,value\n100,eval/sgn_test,0.25\n200,eval/sgn_test,0.45\n300,eval/sgn_test,0.5\n")
+    assert curves(score) == {100: 0.25, 200: 0.45, 300: 0.5}
+
+
+def test_the_paper_literal_run_is_found_beside_a_warm_up_cell_in_any_results_csv_of_the_profile(tmp_path):
+    """Table 2's Dual-Attention No Aux runs trained under the warm-up; its no-warm-up twin is in Table 2's CSV, w/o
+    GA2's in an experiment's (noaux_schedule): each found, with its number for the cell's metric."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from emml.config.profiles import resolve_profile
+    from emml.report.claims_settle import literal
+
+    root = tmp_path / "results"
+    for table, name, value in (
+        ("table2", "dual_attention-easy-noaux-s0-quick", 0.194),
+        ("noaux_schedule", "da_no_ga2-easy-noaux-s0-quick", 0.45),
+    ):
+        (root / table).mkdir(parents=True)
+        pd.DataFrame([{"run_name": name, "table": table, "sgn_test": value}]).to_csv(root / table / "quick.csv")
+    plan = SimpleNamespace(profile=resolve_profile("quick"), results_root=root)
+
+    def entry(row, runs):
+        return {"row": row, "setting": "Easy · No Aux", "metric": "SGN test", "runs": runs, "column": "sgn_test"}
+
+    evidence = [
+        entry("Dual-Attention", ["dual_attention-easy-noaux-warm400000-s0-quick"]),
+        entry("w/o GA2", ["da_no_ga2-easy-noaux-warm400000-s0-quick"]),
+        entry("GA", ["ga-easy-noaux-warm400000-s0-quick"]),  # no twin trained: nothing beside it
+        entry("Text only", ["text_only-easy-noaux-s0-quick"]),  # no warm-up: nothing to set beside it
+    ]
+    assert literal(evidence, plan) == [
+        {"row": "Dual-Attention", "setting": "Easy · No Aux", "metric": "SGN test",
+         "run": "table2/dual_attention-easy-noaux-s0-quick", "value": 0.194},
+        {"row": "w/o GA2", "setting": "Easy · No Aux", "metric": "SGN test",
+         "run": "noaux_schedule/da_no_ga2-easy-noaux-s0-quick", "value": 0.45},
+    ]  # fmt: skip
+    assert literal(evidence[3:], plan) == []
