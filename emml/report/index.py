@@ -165,6 +165,8 @@ def claims_lines(profiles: dict, out: Path, results_root: str | Path, run_root: 
         pages = [t for t in profiles[profile] if not load_table(t).placeholder]  # the table pages written beside
         path, decisions = write_claims(profile, out, results_root, costs, run_root, pages)
         summary = ", ".join(f"{n} {status}" for status, n in counts(decisions).items() if n)
+        apart = sum(d.apart for d in decisions)  # not among the counts: the paper's own table fails their rule
+        summary += f"; {apart} shown apart (the paper's table does not support its text)" if apart else ""
         lines += [
             f"**Claims ({profile})**: [{path.name}]({path.name}), {len(decisions)} claims ({inferred} of them "
             f"inferred from the paper's tables, not stated), each also decided on the paper's own tables: {summary}.",

@@ -140,3 +140,19 @@ def test_a_garbage_line_in_one_mirror_costs_that_run_only(tmp_path, monkeypatch,
     assert "not reported" not in text and "not reported" not in out.out
     said = f"{damaged}: line 4: not a metric point"
     assert (out.err + out.out).count(said) == 1, out.err  # named once, with the line, for every reader of it
+
+
+def test_the_index_counts_every_claim_those_shown_apart_named(tmp_path, monkeypatch):
+    """The index's lead names every claim once: the counts of the reproduction's verdicts, then those shown apart
+    (the paper's own table fails their rule: issue 81 item 4), so that its numbers add up to the claims it names."""
+    from types import SimpleNamespace
+
+    import emml.report.claims as claims
+    from emml.report.index import claims_lines
+
+    decisions = [SimpleNamespace(status=s, apart=a) for s, a in [("supported", False), ("supported", True)]]
+    decisions += [SimpleNamespace(status="untestable yet", apart=False)]
+    monkeypatch.setattr(claims, "campaign_costs", lambda: {})
+    monkeypatch.setattr(claims, "write_claims", lambda *a, **k: (tmp_path / "claims-quick.md", decisions))
+    (lead,) = [line for line in claims_lines({"quick": []}, tmp_path, tmp_path) if line]
+    assert "3 claims" in lead and "1 supported, 1 untestable yet; 1 shown apart" in lead
