@@ -99,10 +99,7 @@ class StoreGaveUp(RuntimeError):
 def _give_up_if_stopping(started: float) -> None:
     stop = stop_requested()
     if stop is not None and time.monotonic() > max(stop, started) + STOP_GRACE_S:
-        raise StoreGaveUp(
-            f"the MLflow store ({tracking_uri()}) did not answer within {STOP_GRACE_S:g} s of the stop "
-            "(locked or busy): given up"
-        )
+        raise StoreGaveUp(f"the MLflow store did not answer within {STOP_GRACE_S:g} s of the stop (locked or busy)")
 
 
 def _attempt(fn: Callable[[], T], started: float) -> T:

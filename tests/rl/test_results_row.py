@@ -6,8 +6,8 @@ config's target" passed 221 tests."""
 
 from __future__ import annotations
 
-import os
 import signal
+import threading
 from pathlib import Path
 
 import pandas as pd
@@ -17,6 +17,12 @@ from emml.config.profiles import profile_config
 from emml.rl.trainer import train
 from emml.runs.checkpoint import load_checkpoint
 from emml.runs.rundir import CHECKPOINT, RESULTS, read_results, run_name
+
+
+def _to_main_thread(sig) -> None:
+    """The signal to this process's main thread, delivered before the call returns (`os.kill` to the process may
+    reach another thread first, and the main thread see it bytecodes later on a busy machine)."""
+    signal.pthread_kill(threading.main_thread().ident, sig)
 
 
 def _smoke(tracking, **over):
@@ -44,7 +50,7 @@ def test_a_run_stopped_short_then_resumed_records_the_frames_it_trained_not_its_
     def term_on_second(*args, **kwargs):
         calls["n"] += 1
         if calls["n"] == 2:
-            os.kill(os.getpid(), signal.SIGTERM)  # held until the update's block ends: the run stops at 128 frames
+            _to_main_thread(signal.SIGTERM)  # held until the update's block ends: the run stops at 128 frames
         return real_update(*args, **kwargs)
 
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}

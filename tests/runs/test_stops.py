@@ -4,12 +4,19 @@ stop line calls 'Ctrl-C'), and is remembered by `stop_requested`; a SIGINT inher
 
 from __future__ import annotations
 
-import os
 import signal
+import threading
 
 import pytest
 
 from emml.runs import stops
+
+
+def _to_main_thread(sig) -> None:
+    """The signal to this process's main thread, delivered before the call returns (`os.kill` to the process may
+    reach another thread first, and the main thread see it bytecodes later on a busy machine)."""
+    signal.pthread_kill(threading.main_thread().ident, sig)
+
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
@@ -31,7 +38,7 @@ def test_a_stop_inside_stop_after_comes_when_the_block_ends(handlers, sig, raise
     with pytest.raises(raised) as stop:
         with stops.stop_after():
             with stops.stop_after():  # nested: the outermost block decides
-                os.kill(os.getpid(), sig)
+                _to_main_thread(sig)
                 finished.append("inner")
                 assert stops.stop_requested() is not None  # noted at once, raised later
             finished.append("outer")
@@ -42,12 +49,12 @@ def test_a_stop_inside_stop_after_comes_when_the_block_ends(handlers, sig, raise
 
 def test_outside_a_block_ctrl_c_stops_at_once_and_the_first_signal_names_the_stop(handlers):
     with pytest.raises(KeyboardInterrupt):
-        os.kill(os.getpid(), signal.SIGINT)
+        _to_main_thread(signal.SIGINT)
         pytest.fail("never reached")
     with pytest.raises(SystemExit) as stop:  # SIGTERM first, then Ctrl-C: 'signal SIGTERM' it was
         with stops.stop_after():
-            os.kill(os.getpid(), signal.SIGTERM)
-            os.kill(os.getpid(), signal.SIGINT)
+            _to_main_thread(signal.SIGTERM)
+            _to_main_thread(signal.SIGINT)
     assert stop.value.code == 128 + signal.SIGTERM
 
 
