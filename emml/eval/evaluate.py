@@ -191,10 +191,17 @@ def evaluate_checkpoint(
     device: str = "cpu",
     control: str | None = None,
     tasks: tuple[str, ...] | None = None,
+    compiled: bool = False,
 ) -> Scores:
     """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily over ``episodes``
     per (task, split) from episode seed ``seed`` (`evaluate`, ``tasks`` as there); ``control`` as in `load_model`
-    (emml.runs.rundir)."""
+    (emml.runs.rundir). ``compiled``: its conv stack and fusion unit through `torch.compile`, as the trainer runs them
+    under `TrainConfig.compile` (emml/rl/compiled.py): the same model within float tolerance, whose greedy argmax
+    can still follow the last bits near a tie (emml/eval/rescore.py, `rescore_questions`)."""
     model, cfg = load_model(path, device, control)
+    if compiled:
+        from emml.rl.compiled import compile_model
+
+        compile_model(model)
     torch.manual_seed(seed)
     return evaluate(model, cfg.env, episodes, seed=seed, device=device, tasks=tasks)

@@ -175,3 +175,67 @@ def test_a_full_rescore_replaces_the_counts_with_those_of_its_episodes(tracking,
     rows = read_questions(questions_path(results_csv(cfg)))
     assert rows.groupby("split")["episodes"].sum().to_dict() == {"test": 6, "train": 6}
     assert "questions" not in read_results(results_csv(cfg)).columns  # results.json's only (rundir.JSON_ONLY)
+
+
+# --- a run its trainer scored compiled (TrainConfig.compile) ---------------------------------------------------------
+def _compile_as(result, value: str) -> None:
+    """The run's checkpoint as if trained under ``compile=value`` (its config's field; nothing else changes)."""
+    path = result.run_dir / CHECKPOINT
+    ckpt = load_checkpoint(path)
+    ckpt["config"] = {**ckpt["config"], "compile": value}
+    save_checkpoint(path, ckpt)
+
+
+def _eager_one_off(monkeypatch, compiled_too: bool = False) -> list[bool]:
+    """evaluate_checkpoint with its eager replay one EQA test episode off the trainer's counts (as float sums that
+    differ in the last bits flipped one greedy answer), its compiled one as played (or off too: ``compiled_too``);
+    returns the ``compiled`` flag of each call."""
+    calls: list[bool] = []
+
+    def played(*args, compiled: bool = False, **kwargs):
+        calls.append(compiled)
+        scores = evaluate_checkpoint(*args, **kwargs)
+        if compiled_too or not compiled:
+            question, counts = next(iter(scores.questions["eqa_test"].items()))
+            k = counts["successes"]
+            scores.questions["eqa_test"][question] = {**counts, "successes": k + 1 if k == 0 else k - 1}
+        return scores
+
+    monkeypatch.setattr("emml.eval.evaluate.evaluate_checkpoint", played)
+    return calls
+
+
+def test_a_run_scored_compiled_is_replayed_compiled_where_eager_does_not_reproduce(tracking, monkeypatch, no_leftovers):
+    cfg, result, trained = _counted_run(tracking, seed=6)
+    _compile_as(result, "on")
+    calls = _eager_one_off(monkeypatch)
+    r = rescore_questions(result.run_dir)
+    assert calls == [False, True] and r.played and r.compiled
+    assert r.questions == trained["questions"]  # the compiled replay's counts, those of the row's episodes
+    assert json.loads((result.run_dir / RESULTS).read_text())["questions"] == trained["questions"]
+    rows = read_questions(questions_path(results_csv(cfg)))
+    assert rows.groupby("split")["successes"].sum().to_dict() == {
+        split: _totals(trained["questions"])[f"eqa_{split}"][0] for split in ("test", "train")
+    }
+
+
+def test_a_run_trained_uncompiled_is_not_replayed_compiled(tracking, monkeypatch, no_leftovers):
+    cfg, result, trained = _counted_run(tracking, seed=6)
+    _compile_as(result, "off")
+    calls = _eager_one_off(monkeypatch)
+    with pytest.raises(NotReproduced, match="eqa_test per question sums to") as raised:
+        rescore_questions(result.run_dir)
+    assert calls == [False] and "compiled" not in str(raised.value)
+    assert "questions" not in json.loads((result.run_dir / RESULTS).read_text())
+    assert not questions_path(results_csv(cfg)).exists()
+
+
+def test_a_run_neither_replay_reproduces_writes_nothing_and_says_both(tracking, monkeypatch, no_leftovers):
+    cfg, result, trained = _counted_run(tracking, seed=6)
+    _compile_as(result, "on")
+    calls = _eager_one_off(monkeypatch, compiled_too=True)
+    with pytest.raises(NotReproduced, match=r"\(played eagerly\); compiled, as its trainer plays: .*eqa_test per q"):
+        rescore_questions(result.run_dir)
+    assert calls == [False, True]
+    assert "questions" not in json.loads((result.run_dir / RESULTS).read_text())
+    assert not questions_path(results_csv(cfg)).exists()
