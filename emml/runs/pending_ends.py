@@ -37,6 +37,11 @@ def ends_dir(uri: str | None) -> Path:
     return Path(tempfile.gettempdir()) / f"emml-pending-ends-{os.getuid()}" / store_key(uri)
 
 
+STALE_TMP_S = 3600
+"""Age (seconds) past which a record's temp file is a kill's leftover (`record_end` writes one in milliseconds), removed
+by `apply_ends`."""
+
+
 def record_end(uri: str | None, run_id: str, status: str, end_time: int, run_dir: Path | None = None) -> Path:
     """Record that MLflow run ``run_id`` ended with ``status`` at ``end_time`` (ms since the epoch), its run dir
     ``run_dir`` (whose lock says whether it is being trained again); written atomically. Returns the record."""
@@ -71,10 +76,15 @@ def pending(uri: str | None) -> list[dict]:
 
 def apply_ends(uri: str | None = None, mlflow_client=None) -> list[str]:
     """Mark each pending run of the store ``uri`` ended as recorded, if it is still RUNNING and nobody trains it (its
-    run dir's lock free), and drop the record; a run gone from the store drops its record too. Returns the run ids
-    marked."""
+    run dir's lock free), and drop the record; a run gone from the store drops its record too; a record's temp file
+    older than `STALE_TMP_S` goes. Returns the run ids marked."""
     from mlflow.exceptions import MlflowException
 
+    folder = ends_dir(uri)
+    for tmp in folder.glob(".*.tmp") if folder.is_dir() else ():  # what a kill inside `record_end` left
+        with contextlib.suppress(OSError):
+            if time.time() - tmp.stat().st_mtime > STALE_TMP_S:
+                tmp.unlink()
     records = pending(uri)
     if not records:
         return []

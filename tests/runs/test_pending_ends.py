@@ -5,6 +5,7 @@ when the store is given up, written by the next start against that store, never 
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -86,3 +87,16 @@ def test_records_are_per_store(tracking, tmp_path):
     other = f"sqlite:///{tmp_path}/other.db"
     assert pending_ends.pending(other) == [] and len(pending_ends.pending(tracking["uri"])) == 1
     assert pending_ends.ends_dir(tracking["uri"]) != pending_ends.ends_dir(other)
+
+
+def test_a_temp_file_a_kill_left_is_removed_once_stale_and_a_fresh_one_kept(tracking):
+    folder = pending_ends.ends_dir(tracking["uri"])
+    folder.mkdir(parents=True, exist_ok=True)
+    stale, fresh = folder / ".abc.tmp", folder / ".def.tmp"
+    for tmp in (stale, fresh):
+        tmp.write_text('{"run_id": ')  # a record_end killed mid-write
+    old = time.time() - pending_ends.STALE_TMP_S - 10
+    os.utime(stale, (old, old))
+    assert pending_ends.apply_ends(tracking["uri"]) == [] and pending_ends.pending(tracking["uri"]) == []
+    assert not stale.exists() and fresh.exists()  # a record being written now is left to its writer
+    fresh.unlink()
