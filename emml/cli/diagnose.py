@@ -38,7 +38,7 @@ def diagnose(
         False,
         "--gate",
         help="Only the GA2 gate on the EQA test questions whose subject is unseen (no engine; every other figure "
-        "left out): its mass on the answer's attribute and the answer channels it shuts (issue 82).",
+        "left out): its mass on the answer's attribute and the answer channels it shuts.",
     ),
     record: bool = typer.Option(
         False, "--record", help="With --gate: append its diag/gate_* figures to the finished run's metrics.csv."
@@ -51,7 +51,7 @@ def diagnose(
     move depends on where the target stands, and whether x_I collapsed to a constant code. EQA, per question: its
     accuracy, answers, where the attention sits and the GA2 gate per channel. With --sgn-outcomes, per SGN
     instruction: its success and how its episodes end (target, which wrong object, time-out). With --gate, only the GA2
-    gate on the EQA test questions whose subject no training question names (no engine; issue 82), and with --record
+    gate on the EQA test questions whose subject no training question names (no engine), and with --record
     its diag/gate_* figures appended to the finished run's metrics.csv at its last frame."""
     from emml.eval.diagnose import diagnose_checkpoint, summary_line
     from emml.eval.diagnose_eqa import eqa_table
