@@ -249,9 +249,9 @@ def tables_validated_again():
 @pytest.fixture(autouse=True)
 def stop_forgotten():
     """A test that stops a training in this process (a SIGTERM it sends itself, an abort after KeyboardInterrupt)
-    leaves it noted (emml/runs/stops.py): forgotten after it, or the next tests' store calls would be given up after
+    leaves it noted (emml/envs/stops.py): forgotten after it, or the next tests' store calls would be given up after
     `emml.runs.store.STOP_GRACE_S`."""
     yield
-    from emml.runs.stops import reset_stop
+    from emml.envs.stops import reset_stop
 
     reset_stop()

@@ -98,7 +98,7 @@ __all__ = [  # the configs' one import point: what is defined here, and the name
 ]
 
 COMPILE = ("off", "on", "auto")
-"""Values of TrainConfig.compile (emml/rl/compiled.py)."""
+"""Values of TrainConfig.compile (emml/models/compiled.py)."""
 
 PRECISIONS = ("fp32", "bf16")
 """Values of TrainConfig.precision (emml/rl/precision.py)."""
@@ -214,7 +214,7 @@ class TrainConfig:
     of the model, weights, losses and evaluation in fp32 (emml/rl/precision.py). bf16 is refused on a CPU
     without native bf16 arithmetic, where it runs slower."""
     compile: Literal[COMPILE] = "off"
-    """torch.compile the conv stack and the fusion unit (emml/rl/compiled.py): the same model within float
+    """torch.compile the conv stack and the fusion unit (emml/models/compiled.py): the same model within float
     tolerance, ~10-20 s of compiling at start, then faster (2-core CPU, end to end: x1.03 at 84x150, x1.23 at
     168x300; docs/throughput.md). 'on' (refused before any compute where it cannot run: a CPU without a C++
     compiler), 'off', or 'auto' (on where measured faster: a CPU with a C++ compiler; off on CUDA until measured

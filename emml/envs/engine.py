@@ -4,7 +4,7 @@
 files. If the Python owner dies without `close()`, the engine keeps running and the files stay. So every engine
 started here is recorded with its pid and instance id, and `end_engine` closes the game, kills the pid if it
 still lives and removes its shm files. An atexit hook ends what is left on normal exit, and
-`install_signal_handlers` (emml/runs/stops.py) turns SIGTERM into SystemExit so that `finally` blocks and context
+`install_signal_handlers` (emml/envs/stops.py) turns SIGTERM into SystemExit so that `finally` blocks and context
 managers run. Each engine runs in a session (and process group) of its own: a terminal's Ctrl-C reaches its owner,
 never the engine, which ViZDoom crashes on while it starts (issue 85); the owner ends it by pid.
 """
@@ -26,9 +26,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-# how a stop (Ctrl-C, SIGTERM, SIGHUP) is raised and held back lives in emml/runs/stops.py; these names stay here for
+# how a stop (Ctrl-C, SIGTERM, SIGHUP) is raised and held back lives in emml/envs/stops.py; these names stay here for
 # the modules and tests that import them from the engines' module
-from emml.runs.stops import install_signal_handlers, stop_after  # noqa: F401
+from emml.envs.stops import install_signal_handlers, stop_after  # noqa: F401
 
 SHM_DIR = "/dev/shm"
 

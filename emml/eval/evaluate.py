@@ -5,7 +5,7 @@ a few envs in lockstep so that the model sees batches; each (task, split) gets e
 seeds ``seed, seed+1, …`` so that a checkpoint's numbers are reproducible.
 
 EQA is also counted per question (issue 81): the same episodes, grouped by the question each one's reset drew, so
-that a question's successes can be read beside the best fixed answer's probability for it (emml/tasks/ceiling.py).
+that a question's successes can be read beside the best fixed answer's probability for it (emml/envs/ceiling.py).
 The counts of a (task, split) sum exactly to its accuracy; `Scores.questions` holds them, results.json keeps them
 under "questions" and results/<table>/<profile>-questions.csv has them in long format (emml/runs/results.py).
 """
@@ -196,11 +196,11 @@ def evaluate_checkpoint(
     """Rebuild the model of a checkpoint (its own config and vocabulary) and evaluate it greedily over ``episodes``
     per (task, split) from episode seed ``seed`` (`evaluate`, ``tasks`` as there); ``control`` as in `load_model`
     (emml.runs.rundir). ``compiled``: its conv stack and fusion unit through `torch.compile`, as the trainer runs them
-    under `TrainConfig.compile` (emml/rl/compiled.py): the same model within float tolerance, whose greedy argmax
+    under `TrainConfig.compile` (emml/models/compiled.py): the same model within float tolerance, whose greedy argmax
     can still follow the last bits near a tie (emml/eval/rescore.py, `rescore_questions`)."""
     model, cfg = load_model(path, device, control)
     if compiled:
-        from emml.rl.compiled import compile_model
+        from emml.models.compiled import compile_model
 
         compile_model(model)
     torch.manual_seed(seed)

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -94,15 +96,7 @@ def rescore(
     checkpoint's `results_root`, or ``results_root``). Nothing is written unless every score was measured."""
     from emml.eval.evaluate import evaluate_checkpoint
 
-    rdir = Path(run) if Path(run).is_dir() else Path(run).parent
-    if not (rdir / CHECKPOINT).is_file():
-        raise FileNotFoundError(f"{run}: no run directory with a {CHECKPOINT}")
-    with hold_run(rdir):  # no training of this run meanwhile (emml/runs/runlock.py)
-        ckpt = load_checkpoint(rdir / CHECKPOINT)
-        cfg = TrainConfig.from_dict(ckpt["config"])
-        if results_root is not None:
-            cfg.results_root = results_root
-        check_finished(rdir, ckpt, cfg)
+    with finished_run(run, results_root) as (rdir, ckpt, cfg):
         payload = training_record(rdir, ckpt, cfg)
         episodes = episodes or cfg.final_eval_episodes
         before = _protocol(payload)
@@ -123,6 +117,23 @@ def rescore(
         if played or record:
             save_results(rdir, payload, cfg, record=record)
     return Rescored(rdir, before, _protocol(payload), played, results_csv(cfg) if record else None)
+
+
+@contextmanager
+def finished_run(run: str | Path, results_root: str | None = None) -> Iterator[tuple[Path, dict, TrainConfig]]:
+    """The finished run at ``run`` (its directory or its checkpoint), held (no training of it meanwhile:
+    emml/runs/runlock.py): its directory, checkpoint and config (``results_root`` in place of its own when given);
+    a run without a checkpoint, or not finished, fails by name (`check_finished`)."""
+    rdir = Path(run) if Path(run).is_dir() else Path(run).parent
+    if not (rdir / CHECKPOINT).is_file():
+        raise FileNotFoundError(f"{run}: no run directory with a {CHECKPOINT}")
+    with hold_run(rdir):
+        ckpt = load_checkpoint(rdir / CHECKPOINT)
+        cfg = TrainConfig.from_dict(ckpt["config"])
+        if results_root is not None:
+            cfg.results_root = results_root
+        check_finished(rdir, ckpt, cfg)
+        yield rdir, ckpt, cfg
 
 
 def check_finished(rdir: Path, ckpt: dict, cfg: TrainConfig) -> None:
@@ -213,22 +224,14 @@ def rescore_questions(
     written. A run whose counts for this training (run_id) are in the file already is not played (``force``: it is).
 
     The replay runs the model eagerly; where that does not reproduce the row and the run's `TrainConfig.compile`
-    compiles on ``device`` (emml.rl.compiled.wants_compile, the trainer's rule), it is played again compiled, as the
+    compiles on ``device`` (emml.models.compiled.wants_compile, the trainer's rule), it is played again compiled, as the
     trainer's final evaluation ran it (emml/rl/trainer.py), and that must reproduce the row exactly. The two agree
     within float tolerance, and a greedy argmax near a tie can follow the last bits: Table 3's w/o GA2 Easy No Aux
     seed 0 replayed eagerly EQA train 107/500, test 78/500; compiled 105/500 and 42/500, its row (0.210, 0.084)."""
     from emml.eval.evaluate import PER_QUESTION, evaluate_checkpoint
-    from emml.rl.compiled import wants_compile
+    from emml.models.compiled import wants_compile
 
-    rdir = Path(run) if Path(run).is_dir() else Path(run).parent
-    if not (rdir / CHECKPOINT).is_file():
-        raise FileNotFoundError(f"{run}: no run directory with a {CHECKPOINT}")
-    with hold_run(rdir):  # no training of this run meanwhile (emml/runs/runlock.py)
-        ckpt = load_checkpoint(rdir / CHECKPOINT)
-        cfg = TrainConfig.from_dict(ckpt["config"])
-        if results_root is not None:
-            cfg.results_root = results_root
-        check_finished(rdir, ckpt, cfg)
+    with finished_run(run, results_root) as (rdir, ckpt, cfg):
         name, table = run_name(cfg), results_csv(cfg)
         row = _row(table, name, ckpt)
         out = questions_path(table)

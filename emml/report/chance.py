@@ -1,5 +1,5 @@
 """Chance from the task (issue 81, item 1): the best a model that sees no frame can score, per difficulty, task and
-split, enumerated from the episode generator (emml/tasks/ceiling.py): the best fixed answer per question (EQA), the
+split, enumerated from the episode generator (emml/envs/ceiling.py): the best fixed answer per question (EQA), the
 best fixed object slot per instruction (SGN), weighted as the env draws the sentences. No run is read: the Text only
 row is a row like any other. The claims page (ours and the paper's own tables alike), the sample-efficiency tables
 and the curves' chance lines all read it (emml/experiments/claims/evidence.py: `Chance`)."""
@@ -12,9 +12,9 @@ from pathlib import Path
 
 from emml.config.env_kinds import ENV_KINDS
 from emml.config.profiles import Profile
+from emml.envs.ceiling import split_ceiling
 from emml.experiments.claims.evidence import Chance
 from emml.experiments.metrics import BY_NAME, CHANCE_COLUMNS, label
-from emml.tasks.ceiling import split_ceiling
 
 BLIND_MODEL = "text_only"
 """The model that sees no frame (the claims mark its row: its score is no evidence of having learned)."""
@@ -22,7 +22,7 @@ COLUMNS = CHANCE_COLUMNS
 """The columns chance is given for: each metric's declared `chance` (emml/experiments/metrics.py)."""
 SOURCE = (
     "the best fixed answer per question (EQA) and the best fixed object slot per instruction (SGN), enumerated from "
-    "the episode generator (emml/tasks/ceiling.py)"
+    "the episode generator (emml/envs/ceiling.py)"
 )
 """What chance is, as the pages say it."""
 

@@ -123,7 +123,7 @@ def plot_table(
     if table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
     results = table_results(table, prof, plan.results_root)  # its own rows, and those it borrows (Table 3's DA)
-    prior = task_ceiling()  # the task's blind ceiling, enumerated (emml/tasks/ceiling.py), not a run's score
+    prior = task_ceiling()  # the task's blind ceiling, enumerated (emml/envs/ceiling.py), not a run's score
     run_ids = dict(zip(results["run_name"], results["run_id"]))
     paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
     metrics = list(dict.fromkeys(table.metrics.values()))

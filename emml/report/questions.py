@@ -1,7 +1,7 @@
 """EQA test per question beside its blind ceiling, and one grounded summary a prior cannot pass (issue 81, item 2).
 
 As one number, EQA test cannot tell grounding from answer priors: on Doom Easy's 8 test questions the best fixed answer
-per question already scores 0.5625 (emml/tasks/ceiling.py, enumerated from the episode generator), above the paper's
+per question already scores 0.5625 (emml/envs/ceiling.py, enumerated from the episode generator), above the paper's
 own Dual-Attention EQA test in two of its four columns. So each question's score is shown beside its ceiling (the
 probability of its best fixed answer), read from results/<table>/<profile>-questions.csv (the final evaluation's
 successes per question: emml/eval/evaluate.py `Scores.questions`, `emml rescore --questions` for older runs), and
@@ -67,8 +67,8 @@ def grounded(per_question: pd.DataFrame) -> Grounded:
 
 def ceilings_of(difficulty: str, split: str) -> pd.DataFrame:
     """The split's EQA questions (index, the generator's order) with their best fixed answer ('best') and its
-    probability ('ceiling'), enumerated (emml/tasks/ceiling.py)."""
-    from emml.tasks.ceiling import ceiling_table
+    probability ('ceiling'), enumerated (emml/envs/ceiling.py)."""
+    from emml.envs.ceiling import ceiling_table
 
     table = ceiling_table(difficulty, "eqa", split)
     return table.set_index("text")[["best", "probability"]].rename(columns={"probability": "ceiling"})
@@ -91,7 +91,7 @@ def section(results_csv: str | Path, cells: list[Cell], results: pd.DataFrame) -
     are read from the per-question file beside ``results_csv`` and beside the results tables of the runs' own
     tables (a borrowed run's: Table 3's DA Multi-Task is Table 2's), only the rows of the results row's training
     (run_id); runs without them are named. [] when the table has no EQA test cell with runs."""
-    from emml.tasks.ceiling import split_ceiling
+    from emml.envs.ceiling import split_ceiling
 
     eqa = [c for c in cells if c.metric == METRIC and c.runs]
     if not eqa or results.empty:
@@ -109,7 +109,7 @@ def section(results_csv: str | Path, cells: list[Cell], results: pd.DataFrame) -
         "",
         f"Each question's EQA test accuracy in the final evaluation ({', '.join(f'`{_shown(p)}`' for p in paths)}) "
         "beside its **ceiling**: the "
-        "probability of the best fixed answer to it, enumerated from the episode generator (emml/tasks/ceiling.py), "
+        "probability of the best fixed answer to it, enumerated from the episode generator (emml/envs/ceiling.py), "
         "what a model that sees no frame can score at most. "
         "**Grounded EQA** G = mean over questions of (score − ceiling) / (1 − ceiling): 0 for the best "
         "blind answer to every question, 1 for a perfect score, below 0 under that prior; ± its binomial standard "

@@ -144,7 +144,7 @@ def _model_only(cfg, updates: int, stack: int = 1) -> float:
     from emml.config.geometry import conv_output_size
     from emml.envs.labels import channel_mask, default_aux_words
     from emml.models import build_model
-    from emml.rl.compiled import compile_model, wants_compile
+    from emml.models.compiled import compile_model, wants_compile
     from emml.rl.graphs import acting, captures
     from emml.rl.packed import StackedModels
     from emml.rl.packed_trainer import PackedLearner
@@ -307,8 +307,8 @@ def bench_train(
     ``runs`` N > 0 packed runs captured."""
     import dataclasses
 
+    from emml.models.compiled import wants_compile
     from emml.rl import alloc
-    from emml.rl.compiled import wants_compile
 
     alloc.tune_glibc()  # as the trainer does: model-only and end-to-end measured on the same allocator
     if part not in PARTS:

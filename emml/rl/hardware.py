@@ -4,7 +4,7 @@ and by `emml train`, `emml run` and `emml bench train` before any run starts.
 
 `TrainConfig.validate` checks the values (it is a leaf and imports no torch); these are the checks that ask the model
 registry (the model's name and options, plugins loaded: `emml.models.model_config`) and the machine: a C++ compiler
-for `compile='on'` on a CPU (emml/rl/compiled.py), native bf16 arithmetic for `precision='bf16'`
+for `compile='on'` on a CPU (emml/models/compiled.py), native bf16 arithmetic for `precision='bf16'`
 (emml/rl/precision.py), a CUDA device for `device='cuda'`. Each failure is a ValueError naming the field, its value
 and what to use instead (the CLI prints it and exits 2).
 """
@@ -15,7 +15,7 @@ import torch
 
 from emml.config.schema import TrainConfig
 from emml.models import model_config
-from emml.rl.compiled import check_compile
+from emml.models.compiled import check_compile
 from emml.rl.precision import check_precision
 
 

@@ -26,8 +26,8 @@ from emml.eval.diagnose import SCALARS, diagnose, saturation_warning, summary_li
 from emml.eval.diagnose_gate import gate_metrics
 from emml.eval.evaluate import evaluate
 from emml.models import build_model
+from emml.models.compiled import compile_model, wants_compile
 from emml.rl import alloc
-from emml.rl.compiled import compile_model, wants_compile
 from emml.rl.contention import share_cores
 from emml.rl.graphs import Graphs, Kept, captures, mean_stats
 from emml.rl.ppo import explained_variance, make_optimizer, model_forward, ppo_step, ppo_update

@@ -6,7 +6,7 @@ and ``import emml`` must stay fast.
   (a shared ``mlflow server``) is a matter of the ``MLFLOW_TRACKING_URI`` environment variable.
 * Writes go through ``MlflowClient.log_batch``, which splits them into calls of MLflow's limits; SQLite "database is
   locked" errors (many concurrent writers) are retried with backoff (`retry`).
-* Once the process is stopping (Ctrl-C, SIGTERM: emml/runs/stops.py), a call to the store gets `STOP_GRACE_S` more
+* Once the process is stopping (Ctrl-C, SIGTERM: emml/envs/stops.py), a call to the store gets `STOP_GRACE_S` more
   seconds and is then given up (`StoreGaveUp`): a store locked by another process, whose every try waits MLflow's
   20 s busy timeout, held a stopped training for 3 minutes (issue 85). From the main thread each try runs in a
   helper thread that the main thread waits on, so that it can be given up, and never cut in the middle.
@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from emml.config.paths import project_root
-from emml.runs.stops import stop_requested
+from emml.envs.stops import stop_requested
 
 T = TypeVar("T")
 

@@ -25,11 +25,11 @@ from pathlib import Path
 from typing import Any
 
 from emml.config.paths import checkout_root
+from emml.envs.stops import note_stop
 from emml.runs import pending_ends, store
 from emml.runs.mirror import append_mirror, export_mirror, read_mirror
 from emml.runs.portable import ROOTS, portable, root_name
 from emml.runs.provenance import NOTE, experiment_note, source_tags
-from emml.runs.stops import note_stop
 from emml.runs.store import MAX_PARAM_LEN, MAX_TAG_LEN, StoreGaveUp, retry
 
 __all__ = ["Tracker", "display_name", "flatten", "parent_run", "set_run_status", "stored_run", "tag_strings"]

@@ -147,13 +147,13 @@ def split_of(question: str) -> str:
 
 @pytest.mark.parametrize("compiled", [False, True])
 def test_evaluate_checkpoint_compiles_the_model_only_when_asked(compiled, monkeypatch):
-    """``compiled``: the checkpoint's model through emml.rl.compiled.compile_model (the trainer's), else as loaded."""
+    """``compiled``: the model through emml.models.compiled.compile_model (the trainer's), else as loaded."""
     import emml.eval.evaluate as module
 
     model, cfg = object(), SimpleNamespace(env="env")
     monkeypatch.setattr(module, "load_model", lambda path, device, control: (model, cfg))
     seen = {}
-    monkeypatch.setattr("emml.rl.compiled.compile_model", lambda m: seen.setdefault("compiled", m))
+    monkeypatch.setattr("emml.models.compiled.compile_model", lambda m: seen.setdefault("compiled", m))
     monkeypatch.setattr(module, "evaluate", lambda m, env, episodes, **k: seen.setdefault("played", (m, env, episodes)))
     module.evaluate_checkpoint("ckpt", 7, compiled=compiled)
     assert seen.get("compiled") is (model if compiled else None) and seen["played"] == (model, "env", 7)

@@ -1,5 +1,5 @@
 """Chance from the task (emml/report/chance.py, issue 81 item 1): the blind ceiling enumerated from the episode
-generator (tests/tasks/test_ceiling.py works its values by hand), whatever a profile's results say; a FIXTURE of
+generator (tests/envs/test_ceiling.py works its values by hand), whatever a profile's results say; a FIXTURE of
 made-up results rows shows that no run moves it."""
 
 import pytest
@@ -32,7 +32,7 @@ def test_chance_is_the_enumerated_ceiling_per_difficulty_and_column():
 def test_the_page_says_what_chance_is():
     assert task_ceiling().source == (
         "the best fixed answer per question (EQA) and the best fixed object slot per instruction (SGN), enumerated "
-        "from the episode generator (emml/tasks/ceiling.py)"
+        "from the episode generator (emml/envs/ceiling.py)"
     )
     assert chance_text(task_ceiling(), ("easy", "house")) == (
         "Easy: SGN test 0.20, EQA test 0.56, SGN train 0.20, EQA train 0.44; "

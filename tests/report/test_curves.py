@@ -185,7 +185,7 @@ def test_the_figure_is_a_page_wide_nothing_cut_x_in_m_frames_dual_attention_over
 def test_the_dotted_chance_line_is_the_tasks_blind_ceiling_not_the_text_only_runs(tracking, tmp_path, monkeypatch):
     """The Text only runs score 0.9 here; the chance line of each panel stays the task's ceiling enumerated from the
     episode generator: SGN test 0.2 (the goal's slot, one of five), EQA test 0.5625 (the best fixed answer per
-    question; tests/tasks/test_ceiling.py) in Easy and Hard alike (one generator)."""
+    question; tests/envs/test_ceiling.py) in Easy and Hard alike (one generator)."""
     from matplotlib.text import Text
 
     import emml.report.curves as curves

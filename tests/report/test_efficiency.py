@@ -168,7 +168,7 @@ def test_the_section_lists_each_run_and_its_cadence(tmp_path):
     assert (
         "first leaves chance (above chance + 0.10; chance is the best a model that sees no frame can score, the best "
         "fixed answer per question (EQA) and the best fixed object slot per instruction (SGN), enumerated from the "
-        "episode generator (emml/tasks/ceiling.py): " in text
+        "episode generator (emml/envs/ceiling.py): " in text
     )
     assert "Easy: SGN test 0.20, EQA test 0.56, SGN train 0.20, EQA train 0.44)" in text  # the ceiling by default
     assert "Evaluations at most 100,352 frames apart: a crossing is known to that resolution." in text
@@ -226,7 +226,7 @@ def test_a_tables_crossings_read_the_tasks_blind_ceiling_by_default(tmp_path, mo
 
 
 def test_a_runs_eqa_leaves_chance_above_the_enumerated_ceiling_not_the_uniform_third(tmp_path):
-    """Easy EQA test: the best fixed answer per question scores 0.5625 (tests/tasks/test_ceiling.py), the bar 0.6625;
+    """Easy EQA test: the best fixed answer per question scores 0.5625 (tests/envs/test_ceiling.py), the bar 0.6625;
     a curve at 0.45, 0.6, 0.7 leaves chance at its third point (the uniform 1/3 would have it at its first)."""
     points = [(100_000, 0.45), (200_000, 0.6), (300_000, 0.7)]
     write_points(tmp_path, W_O_SA, [f"{s},eval/eqa_test,{v}" for s, v in points])

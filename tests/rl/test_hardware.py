@@ -1,6 +1,6 @@
 """What this machine can run (emml/rl/hardware.py) is asked where training starts, not by the config: a config
 with device='cuda' validates on any machine, and the trainer and `emml run` refuse it by name, before any compute
-or run, where torch sees no CUDA device (compile and precision: tests/rl/test_compiled.py, test_precision.py)."""
+or run, where torch sees no CUDA device (compile and precision: tests/models/test_compiled.py, test_precision.py)."""
 
 import re
 import subprocess

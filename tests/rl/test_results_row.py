@@ -41,7 +41,7 @@ def test_a_run_stopped_short_then_resumed_records_the_frames_it_trained_not_its_
     tracking, monkeypatch, no_leftovers
 ):
     import emml.rl.trainer as trainer_module
-    from emml.runs.stops import install_signal_handlers
+    from emml.envs.stops import install_signal_handlers
 
     cfg = _smoke(tracking, frames=150, checkpoint_every=100)  # 3 updates of 2 actors x 32 steps: 192 frames
     assert cfg.num_updates * cfg.frames_per_update == 192 != cfg.frames

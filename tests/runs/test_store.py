@@ -9,7 +9,8 @@ import time
 
 import pytest
 
-from emml.runs import stops, store
+from emml.envs import stops
+from emml.runs import store
 
 
 @pytest.fixture

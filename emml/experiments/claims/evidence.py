@@ -80,7 +80,7 @@ class Chance:
     source: str = "the uniform chance"
     """Where the values come from, for the page ('the best fixed answer per question, enumerated ...')."""
     exact: bool = False
-    """The values are the task's exact ceiling (emml/tasks/ceiling.py), taken as they are, below the uniform floor
+    """The values are the task's exact ceiling (emml/envs/ceiling.py), taken as they are, below the uniform floor
     too (the House's colour questions: 1/4 of four colours); False: measured scores, never below the floor (a blind
     run's noise)."""
 

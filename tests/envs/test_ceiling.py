@@ -1,4 +1,4 @@
-"""The blind ceiling enumerated from the episode generator (emml/tasks/ceiling.py, issue 81 item 1), against values
+"""The blind ceiling enumerated from the episode generator (emml/envs/ceiling.py, issue 81 item 1), against values
 worked by hand from the actors of emml/tasks/doom.toml (Table 7) and the House's slots (emml/envs/house_wad.py)."""
 
 import itertools
@@ -6,8 +6,8 @@ from fractions import Fraction as F
 
 import pytest
 
-from emml.tasks import ceiling
-from emml.tasks.ceiling import (
+from emml.envs import ceiling
+from emml.envs.ceiling import (
     ceiling_table,
     enumerate_draws,
     question_ceiling,

@@ -13,7 +13,7 @@ stand-in random generator that walks each of its branches once (`_Branches`).
   it, its slot uniform over the 5. The four distractors, uniform over the subsets of the referent's pool, are drawn
   once (the first four of the pool): the generator asserts that the referent is the scene's one referent, so neither
   the answer (an attribute of the referent) nor the goal's slot depends on which distractors stand beside it
-  (tests/tasks/test_ceiling.py enumerates every subset of some sentences to check it).
+  (tests/envs/test_ceiling.py enumerates every subset of some sentences to check it).
 - The House (Appendix C, `sample_colours`): the furniture at fixed slots, each slot's colour drawn until the
   sentence has one referent (SGN) or one answer (EQA): the accepted scene is the first draw conditioned on being
   accepted, so every one of the 4^7 colourings is enumerated and the rejected ones are left out.

@@ -1,4 +1,4 @@
-"""How a stop is raised and held back (emml/runs/stops.py, issue 85): Ctrl-C inside `stop_after` waits for the block
+"""How a stop is raised and held back (emml/envs/stops.py, issue 85): Ctrl-C inside `stop_after` waits for the block
 to end like SIGTERM (it used to cut MLflow's metric insert in the middle), comes out as KeyboardInterrupt (what the
 stop line calls 'Ctrl-C'), and is remembered by `stop_requested`; a SIGINT inherited ignored stays ignored."""
 
@@ -9,7 +9,7 @@ import threading
 
 import pytest
 
-from emml.runs import stops
+from emml.envs import stops
 
 
 def _to_main_thread(sig) -> None:

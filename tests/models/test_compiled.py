@@ -1,4 +1,4 @@
-"""`TrainConfig.compile` (emml/rl/compiled.py): the compiled model is the plain model, within float tolerance."""
+"""`TrainConfig.compile` (emml/models/compiled.py): the compiled model is the plain model, within float tolerance."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import torch
 
 from emml.config.schema import TrainConfig
 from emml.models import build_model
-from emml.rl import compiled as compiled_module
-from emml.rl.compiled import compile_model, wants_compile
+from emml.models import compiled as compiled_module
+from emml.models.compiled import compile_model, wants_compile
 from emml.rl.hardware import check_runnable
 
 V, H, W, L, STEPS = 12, 60, 108, 6, 20

@@ -3,7 +3,7 @@
 The conv stack and the fusion unit run batched over T·B in acting (T = 1) and in the PPO update (T = 128), with
 fixed shapes per call site, so they compile once per shape. They are compiled in place (`nn.Module.compile`):
 parameter names, checkpoints and hooks stay those of the plain model, and outputs equal it within float tolerance
-(tests/rl/test_compiled.py). The policy's recurrent loop is left alone: compiling the whole model, its 128 unrolled
+(tests/models/test_compiled.py). The policy's recurrent loop is left alone: compiling the whole model, its 128 unrolled
 steps included, took 180 s for the same update time as the pieces (docs/throughput.md).
 
 On a CPU, inductor needs a C++ compiler. On CUDA, 'auto' stays off: the compiled path, and CUDA graphs (mode
