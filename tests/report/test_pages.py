@@ -21,7 +21,7 @@ def test_a_page_opens_with_its_headline_and_figures_and_lists_the_crossings(tmp_
     (data,) = pages(tmp_path, ("table3",))
     text = (tmp_path / "reports" / "table3-quick.md").read_text()
     head = text.split("\n")
-    assert head[2].startswith("**In one line** (quick; 3 seeds per cell): Easy · No Aux: SGN test DA Multi-Task")
+    assert head[2].startswith("**In one line** (quick; 3–5 seeds per cell): Easy · No Aux: SGN test DA Multi-Task")
     assert "![table3-quick-rliable](table3-quick-rliable.png)" in text[: text.index("Ours vs the paper")]
     assert "### Sample efficiency" in text and "0.75M / 0.75M / 0.75M" in text  # 0.5 of 1.5M frames
     pdf = (tmp_path / "reports" / "table3-quick-rliable.pdf").read_bytes()

@@ -72,7 +72,9 @@ def test_every_cell_filled_with_each_seeds_value(tmp_path):
     fake_results("table2", tmp_path / "results")
     rep = report("table2", tmp_path)
     assert len(rep["cells"]) == 56
-    assert all(c["n"] == 3 and c["paper"] is not None for c in rep["cells"])
+    five = ("Dual-Attention", "easy", True)  # table2.toml's more_seeds: the stated model's Easy · Aux on seeds 0-4
+    assert all(c["n"] == (5 if (c["row"], c["difficulty"], c["aux"]) == five else 3) for c in rep["cells"])
+    assert all(c["paper"] is not None for c in rep["cells"])
     cell = rep["cells"][0]  # Text only, Easy, No Aux, SGN: seeds 0.1 / 0.2 / 0.3
     assert (cell["row"], cell["difficulty"], cell["aux"], cell["metric"]) == ("Text only", "easy", False, "sgn_test")
     assert cell["mean"] == pytest.approx(0.2) and cell["values"] == pytest.approx([0.1, 0.2, 0.3])
@@ -82,11 +84,11 @@ def test_every_cell_filled_with_each_seeds_value(tmp_path):
     assert "[" not in md.split("| Model")[1].split("\n\n")[0]  # no bootstrap CI over three values in the cells
     assert "not the paper's protocol" in md and "1,500,000–5,000,000 frames" in md
     tex = (tmp_path / "reports" / "table2-quick.tex").read_text()  # its layout: tests/report/test_tex.py
-    assert "\\textbf{Dual-Attention} & 0.20 & 0.86 & 0.20 & 0.53 & 0.20 & 0.96 & 0.20 & 0.58 \\\\" in tex
+    assert "\\textbf{Dual-Attention} & 0.20 & 0.86 & 0.20 & 0.53 & 0.30 & 0.96 & 0.30 & 0.58 \\\\" in tex  # 5 seeds
 
 
 def test_a_missing_run_is_shown_missing_not_zero(tmp_path):
-    gone = "dual_attention-easy-aux-s0-quick", "dual_attention-easy-aux-s1-quick", "dual_attention-easy-aux-s2-quick"
+    gone = tuple(f"dual_attention-easy-aux-s{s}-quick" for s in range(5))  # its five seeds (more_seeds)
     fake_results("table3", tmp_path / "results", drop=(*gone, "da_no_sa-easy-noaux-warm400000-s2-quick"))
     rep = report("table3", tmp_path)
     cells = {(c["row"], c["aux"], c["metric"]): c for c in rep["cells"]}
@@ -113,7 +115,7 @@ def test_one_seed_of_three_says_so_and_one_of_one_shows_the_value(tmp_path, monk
     monkeypatch.setattr("emml.config.profiles.profile_seeds", lambda profile: [0])  # a profile of one seed
     monkeypatch.setattr(plan_module, "resolve_profile", lambda p: dataclasses.replace(resolve_profile(p), seeds=(0,)))
     rep = report("table3", tmp_path)
-    assert all(c["n"] == 1 for c in rep["cells"])
+    assert all(c["n"] == 1 for c in rep["cells"] if (c["row"], c["aux"]) != ("DA Multi-Task", True))  # + more_seeds
     line = next(x for x in (tmp_path / "reports" / "table3-quick.md").read_text().splitlines() if "| w/o GA1" in x)
     assert "0.10 \\|" in line and "(" not in line
 
@@ -133,10 +135,10 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
     rep = report("table3", tmp_path)
     md = (tmp_path / "reports" / "table3-quick.md").read_text()
     devs = dict(rep["deviations"]["deviations"])
-    assert devs["input 84×150 (paper 168×300, App. A)"] == "all 48 runs"
-    assert devs["frames 1.5M (paper 10M, §5.1)"] == "all 48 runs"
-    assert "- x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5): all but the w/o SA runs (42 of 48)" in md
-    assert "48 runs from their saved config" in md and "reward shaping" not in md  # the w/o RS row is the experiment
+    assert devs["input 84×150 (paper 168×300, App. A)"] == "all 50 runs"
+    assert devs["frames 1.5M (paper 10M, §5.1)"] == "all 50 runs"
+    assert "- x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5): all but the w/o SA runs (44 of 50)" in md
+    assert "50 runs from their saved config" in md and "reward shaping" not in md  # the w/o RS row is the experiment
     # the No Aux warm-up (issues 48, 61): said once, with the rows it applies to (every row of Table 3)
     gated = [line for line in devs if line.startswith("answer kept off the image encoder for the first 400,000")]
     assert len(gated) == 1 and devs[gated[0]] == (
@@ -145,13 +147,13 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
     ), devs
     choices = dict(rep["deviations"]["choices"])
     assert choices["wrong-object/answer reward 0 (paper silent: §5.1 names only +1 and -0.001 per step)"] == (
-        "all 48 runs"
+        "all 50 runs"
     )
     assert choices["score: greedy, 100 episodes per task and split (paper silent on its evaluation size)"] == (
-        "all 48 runs"  # from the results rows (the evaluation the score came from), not the config
+        "all 50 runs"  # from the results rows (the evaluation the score came from), not the config
     )
     tex = (tmp_path / "reports" / "table3-quick.tex").read_text()
-    assert r"input 84$\times$150 (paper 168$\times$300, App. A) [all 48 runs]" in tex  # ASCII: a bare pdflatex
+    assert r"input 84$\times$150 (paper 168$\times$300, App. A) [all 50 runs]" in tex  # ASCII: a bare pdflatex
 
     def paper_input_unscaled(spec, config):
         if spec.row == "DA Multi-Task" and spec.seed == 0:
@@ -163,11 +165,11 @@ def test_the_caption_lists_the_deviations_read_from_the_runs_saved_configs(tmp_p
     fake_run_dirs("table3", tmp_path / "runs", paper_input_unscaled)
     rep = report("table3", tmp_path)
     devs, choices = dict(rep["deviations"]["deviations"]), dict(rep["deviations"]["choices"])
-    assert devs["input 84×150 (paper 168×300, App. A)"].startswith("46 of 48 runs: ")
-    assert devs["x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5)"].startswith("40 of 48 runs: ")
+    assert devs["input 84×150 (paper 168×300, App. A)"].startswith("48 of 50 runs: ")
+    assert devs["x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5)"].startswith("42 of 50 runs: ")
     wrong = "wrong-object/answer reward -0.2 (paper silent: §5.1 names only +1 and -0.001 per step)"
     two = "dual_attention-easy-aux-s0-quick, dual_attention-easy-noaux-warm400000-s0-quick"
-    assert choices[wrong] == f"2 of 48 runs: {two}"
+    assert choices[wrong] == f"2 of 50 runs: {two}"
     assert wrong in (tmp_path / "reports" / "table3-quick.md").read_text()
 
 
@@ -181,7 +183,7 @@ def test_a_run_without_its_run_dir_falls_back_to_its_registry_config_and_says_so
     partial.write_text(json.dumps({"run_name": "da_no_sa-easy-aux-s1-quick"}))  # finished before configs were saved
     rep = report("table3", tmp_path)
     sources = rep["deviations"]["sources"]
-    assert "46 runs from their saved config" in sources
+    assert "48 runs from their saved config" in sources
     assert "1 run from the registry's config (their results.json has no config yet: `emml backfill-config`)" in sources
     assert "1 run from the registry's config (no run dir here: reference rows of the results CSV)" in sources
 
@@ -204,7 +206,7 @@ def test_the_aggregate_under_the_table(tmp_path, monkeypatch):
     rep = report("table2", tmp_path)
     lines = {(r["Setting"], r["Model"]): r for r in rep["aggregate"]["rows"]}
     assert len(lines) == 4 * 7  # Easy/Hard × Aux/No Aux apart, every row in each
-    da = lines[("Easy · Aux", "Dual-Attention")]
+    da = lines[("Easy · No Aux", "Dual-Attention")]  # three seeds (Easy · Aux has five: more_seeds)
     value, lo, hi = map(
         float, re.match(r"(\S+) \[(\S+), (\S+)\] \(3 runs in 1 cell\)", da["SGN IQM [95% CI]"]).groups()
     )
