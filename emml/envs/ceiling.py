@@ -20,14 +20,25 @@ stand-in random generator that walks each of its branches once (`_Branches`).
 
 The best reply of an SGN sentence is a slot: in Easy and the House a fixed place a blind agent can walk to, in Hard
 the index of the scene's object (its points are drawn apart from the sentence: still one of five).
+
+The House's enumeration walks 4^7 colourings per sentence (~20 CPU-s for its four splits), so a split's sentences
+are kept once computed in <tmp>/emml-ceiling-<key>.json (`_cached`), the key a digest of every input the
+enumeration reads (the sources and datasets of emml/tasks/, emml/envs/, emml/config/: `inputs_digest`): a changed
+generator, dataset or house is enumerated afresh, and every process after the first (the report commands, the test
+workers) reads the file. A file that does not parse is enumerated again and rewritten.
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import math
-from dataclasses import dataclass
+import os
+import tempfile
+from dataclasses import asdict, dataclass
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -149,9 +160,15 @@ def dataset_of(difficulty: str) -> Dataset:
 @functools.cache
 def sentence_ceilings(difficulty: str, task: str, split: str) -> tuple[SentenceCeiling, ...]:
     """Per sentence of the split, the best a model that sees no frame can score on it (its best fixed reply and
-    that reply's probability), enumerated from the episode generator of ``difficulty``'s env."""
+    that reply's probability), enumerated from the episode generator of ``difficulty``'s env (or read from the
+    cache of that enumeration under the same inputs: see the module docstring)."""
+    check_choice("difficulty", difficulty, tuple(ENV_KINDS))
     check_choice("task", task, TASKS)
     check_choice("split", split, SPLITS)
+    return _cached(cache_path(difficulty, task, split), lambda: _enumerate(difficulty, task, split))
+
+
+def _enumerate(difficulty: str, task: str, split: str) -> tuple[SentenceCeiling, ...]:
     dataset = dataset_of(difficulty)
     episodes = _house if ENV_KINDS[difficulty].gym_id == HOUSE_ID else _doom
     sentences = dataset.select(task, split)
@@ -165,6 +182,66 @@ def sentence_ceilings(difficulty: str, task: str, split: str) -> tuple[SentenceC
         # the env's draw (emml/envs/doom.py reset): uniform over the split's sentences of the task
         out.append(SentenceCeiling(sentence.text, sentence.template, best, prob, ranked, Fraction(1, len(sentences))))
     return tuple(out)
+
+
+INPUTS = ("tasks", "envs", "config")
+"""The folders of the package whose sources and datasets (.py, .toml) the enumeration reads: the generator and
+its datasets (tasks), the House's slots (envs/house_wad.py), which dataset each env kind plays (config)."""
+
+
+@functools.cache
+def inputs_digest() -> str:
+    """A digest of every file in `INPUTS`: the cache key's part that changes when the enumeration could."""
+    home = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(p for folder in INPUTS for p in (home / folder).rglob("*") if p.suffix in (".py", ".toml")):
+        digest.update(path.relative_to(home).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def cache_path(difficulty: str, task: str, split: str) -> Path:
+    """Where the enumeration of one split is kept: <tmp>/emml-ceiling-<difficulty>-<task>-<split>-<digest>.json."""
+    name = f"emml-ceiling-{difficulty}-{task}-{split}-{inputs_digest()[:16]}.json"
+    return Path(tempfile.gettempdir()) / name
+
+
+def _cached(path: Path, compute) -> tuple[SentenceCeiling, ...]:
+    """The sentences kept at ``path``, else ``compute()``'d and written there atomically (a concurrent writer
+    writes the same bytes; a reader never sees half a file)."""
+    try:
+        kept = tuple(_from_json(row) for row in json.loads(path.read_text()))
+        if kept:  # a split always has sentences
+            return kept
+    except (OSError, ValueError, TypeError, KeyError, ZeroDivisionError):
+        pass  # absent, or not a file this code wrote: enumerate it again
+    out = compute()
+    fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump([_to_json(s) for s in out], f)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return out
+
+
+def _to_json(s: SentenceCeiling) -> dict:
+    row = asdict(s)
+    row["probability"], row["weight"] = str(s.probability), str(s.weight)  # exact: 'p/q'
+    row["outcomes"] = [[reply, str(p)] for reply, p in s.outcomes]
+    return row
+
+
+def _from_json(row: dict) -> SentenceCeiling:
+    return SentenceCeiling(
+        text=str(row["text"]),
+        template=str(row["template"]),
+        best=str(row["best"]),
+        probability=Fraction(row["probability"]),
+        outcomes=tuple((str(reply), Fraction(p)) for reply, p in row["outcomes"]),
+        weight=Fraction(row["weight"]),
+    )
 
 
 @functools.cache

@@ -24,11 +24,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from emml.experiments.metrics import label as metric_label
 from emml.report.cells import Cell, level_label
 from emml.runs.results import questions_path, read_questions
 
 METRIC = "eqa_test"
 """The table metric whose runs are read per question."""
+EQA_TEST = metric_label(METRIC)
+"""The column head of the per-question matrix's accuracy, as every table spells it."""
 
 
 @dataclass(frozen=True)
@@ -130,7 +133,7 @@ def section(results_csv: str | Path, cells: list[Cell], results: pd.DataFrame) -
                 g, g_train = grounded(rows), grounded(run_rows(counts, run, "train", train))
                 left_out.update(g.left_out)
                 line = {"row": f"{cell.row} · {level_label('aux', cell.aux)}", "seed": int(seeds[run])}
-                line["EQA test"] = f"{rows['successes'].sum() / rows['episodes'].sum():.3f}"
+                line[EQA_TEST] = f"{rows['successes'].sum() / rows['episodes'].sum():.3f}"
                 for q, label in labels.items():
                     line[label] = f"{rows.at[q, 'successes'] / rows.at[q, 'episodes']:.2f}" if q in rows.index else "–"
                 line["G test ± SE"] = _g(g, with_se=True)
@@ -150,7 +153,7 @@ def section(results_csv: str | Path, cells: list[Cell], results: pd.DataFrame) -
         prior = {
             "row": "ceiling (best fixed answer)",
             "seed": "",
-            "EQA test": f"{split_ceiling(difficulty, 'eqa', 'test'):.3f}",
+            EQA_TEST: f"{split_ceiling(difficulty, 'eqa', 'test'):.3f}",
         }
         prior |= {label: f"{test.at[q, 'ceiling']:.2f}" for q, label in labels.items()}
         out.loc[len(out)] = prior | {"G test ± SE": "0", "G train": "0"}

@@ -2,7 +2,9 @@
 worked by hand from the actors of emml/tasks/doom.toml (Table 7) and the House's slots (emml/envs/house_wad.py)."""
 
 import itertools
+import shutil
 from fractions import Fraction as F
+from pathlib import Path
 
 import pytest
 
@@ -196,3 +198,58 @@ def test_the_table_has_one_row_per_sentence_weighted_as_the_env_draws_them():
     assert len(table) == 8 and table["weight"].tolist() == [1 / 8] * 8
     assert (table["probability"] * table["weight"]).sum() == pytest.approx(split_ceiling("easy", "eqa", "test"))
     assert sentence_ceilings("easy", "eqa", "test") is sentence_ceilings("easy", "eqa", "test")  # cached
+
+
+def test_a_kept_enumeration_reads_back_exactly_and_a_damaged_file_is_enumerated_again(tmp_path):
+    """The cache (`_cached`): what is read back is what was enumerated, Fraction for Fraction; a file that does not
+    parse, or parses to rows of another shape, is enumerated again and rewritten, not raised and not trusted."""
+    path = tmp_path / "easy-eqa-test.json"
+    fresh = ceiling._enumerate("easy", "eqa", "test")
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return fresh
+
+    assert ceiling._cached(path, compute) == fresh and len(calls) == 1
+    assert ceiling._cached(path, compute) == fresh and len(calls) == 1  # read, not enumerated
+    kept = ceiling._cached(path, lambda: pytest.fail("read, not enumerated"))
+    assert {s.text: (s.best, s.probability) for s in kept} == EASY_TEST_EQA
+    for damage in ("{not json", '[{"text": "x"}]', "[]", '{"text": 1}', ""):
+        path.write_text(damage)
+        assert ceiling._cached(path, compute) == fresh
+    assert len(calls) == 6
+    assert ceiling._cached(path, compute) == fresh and len(calls) == 6  # rewritten whole
+
+
+def test_the_cache_key_follows_every_input_and_each_split(monkeypatch):
+    """A split is kept under its own name and under a digest of the enumeration's inputs: a changed generator or
+    dataset (another digest) is never read from the file of the old one."""
+    a, b = ceiling.cache_path("easy", "eqa", "test"), ceiling.cache_path("easy", "eqa", "train")
+    assert a != b and ceiling.cache_path("hard", "eqa", "test") != a
+    monkeypatch.setattr(ceiling, "inputs_digest", lambda: "0" * 64)
+    assert ceiling.cache_path("easy", "eqa", "test") != a
+
+
+def test_the_digest_reads_the_generator_and_the_datasets(tmp_path, monkeypatch):
+    """`inputs_digest` over a copy of the package: editing a dataset or the generator changes it."""
+    home = tmp_path / "emml"
+    for folder in ceiling.INPUTS:
+        shutil.copytree(Path(ceiling.__file__).resolve().parents[1] / folder, home / folder)
+    fake = home / "envs" / "ceiling.py"
+
+    def digest():
+        monkeypatch.setattr(ceiling, "__file__", str(fake))
+        ceiling.inputs_digest.cache_clear()
+        return ceiling.inputs_digest()
+
+    try:
+        before = digest()
+        assert digest() == before
+        (home / "tasks" / "doom.toml").write_text((home / "tasks" / "doom.toml").read_text() + "\n# edited\n")
+        after_dataset = digest()
+        (home / "tasks" / "episodes.py").write_text((home / "tasks" / "episodes.py").read_text() + "\n# edited\n")
+        assert len({before, after_dataset, digest()}) == 3
+    finally:
+        monkeypatch.undo()
+        ceiling.inputs_digest.cache_clear()
