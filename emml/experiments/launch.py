@@ -22,6 +22,10 @@ from emml.experiments.tables import RunSpec, Table, load_table
 from emml.runs.naming import run_name
 
 BACKENDS = ("local", "slurm")
+PARENT_LEFT_RUNNING = "parent-running.txt"
+"""In a Slurm launch's folder (runs/slurm/<table>-<profile>/): the id of the parent MLflow run a launch without
+``wait`` left RUNNING while its jobs go on. The next launch of that table and profile ends it: FINISHED when it
+finds no run left to train, else with the status its own launch ends in (`_end_parent`)."""
 STATES = ("finished", "unrecorded", "reference", "partial", "missing")
 """finished: a finished run dir here and its row in the results CSV; unrecorded: run dir finished but no CSV row;
 reference: a CSV row with no run dir here (results committed to the repository, or made on another machine):
@@ -214,12 +218,17 @@ def run_table(
     report.total = len(runs)
     todo = [run for run in runs if run.state != "finished"]
     report.skipped = [run.name for run in runs if run.state == "finished"]
+    folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
     if todo:  # each run's config, the store, the run and results folders, the results CSV: before the parent run
         from emml.rl.prepare import prepare
 
         prepare(*(run.cfg for run in todo))
     log(f"{name} [{profile.name}]: {report.total} runs, {len(report.skipped)} finished, {len(todo)} to run ({backend})")
     if not todo:
+        left = folder / PARENT_LEFT_RUNNING
+        if left.exists():  # a Slurm launch's jobs have finished every run since: its parent run ends here
+            _end_parent(left.read_text().strip(), "FINISHED", folder)
+            log(f"{name} [{profile.name}]: the parent run a Slurm launch left RUNNING ended FINISHED")
         return report
     from emml.runs.preflight import ensure_store
 
@@ -233,7 +242,6 @@ def run_table(
     args = [(run, report.parent_run_id, train_fn) for run in todo]
     try:
         if backend == "slurm":  # the parent run ends as a local launch's does (issue 65), once the jobs are waited for
-            folder = project_path(run_root if run_root is not None else "runs") / "slurm" / f"{name}-{profile.name}"
             from emml.experiments.slurm import submit
 
             submit(
@@ -241,7 +249,10 @@ def run_table(
                 time_min=time_min, gpus=gpus, cpus=cpus, cluster=slurm_cluster, wait=wait, log=log,
                 signal_delay_s=signal_delay_s,
             )  # fmt: skip
-            if not wait:  # the jobs go on: the parent run stays RUNNING until a launch waits for them
+            if not wait:  # the jobs go on: the parent run stays RUNNING until a later launch ends it
+                from emml.runs.atomic import write_text
+
+                write_text(folder / PARENT_LEFT_RUNNING, report.parent_run_id + "\n")
                 return report
         else:
             _await_left_behind([run.cfg for run in todo], log)
@@ -251,16 +262,24 @@ def run_table(
             else:
                 run_pool(report, args, jobs, log)
     except (KeyboardInterrupt, SystemExit) as e:  # stop: the parent run ends KILLED, the caller says how to resume
-        set_run_status(report.parent_run_id, "KILLED")
+        _end_parent(report.parent_run_id, "KILLED", folder)
         finished = set(report.done) | set(report.failed)
         report.stopped = stop_cause(e)
         report.unfinished = [run.name for run in todo if run.name not in finished]
         return report
     except BaseException:  # a broken pool: the parent run ends, never stays RUNNING
-        set_run_status(report.parent_run_id, "FAILED")
+        _end_parent(report.parent_run_id, "FAILED", folder)
         raise
-    set_run_status(report.parent_run_id, "FAILED" if report.failed else "FINISHED")
+    _end_parent(report.parent_run_id, "FAILED" if report.failed else "FINISHED", folder)
     return report
+
+
+def _end_parent(run_id: str, status: str, folder: Path) -> None:
+    """The table's parent run ended ``status``, and the note that a Slurm launch left it RUNNING gone with it."""
+    from emml.runs.tracking import set_run_status
+
+    set_run_status(run_id, status)
+    (folder / PARENT_LEFT_RUNNING).unlink(missing_ok=True)
 
 
 LEFT_BEHIND_WAIT_S = STOP_GRACE_S + 12.0

@@ -49,6 +49,7 @@ def resumable_train(cfg, quiet=False, parent_run_id=None):
         (1, {"model": "da_no_sa", "aux": "true"}, 4),  # one run: in the job's own process
     ],
 )
+@pytest.mark.long(37)
 def test_a_job_trains_its_pack_and_requeues_itself_at_its_time_limit(tracking, no_leftovers, pack, only, threads):
     pytest.importorskip("submitit")
     report = run_table(
@@ -125,3 +126,36 @@ def test_packs_and_their_stores():
 def test_a_bad_pack_is_refused_before_anything_runs(tracking):
     with pytest.raises(ValueError, match="pack=0 must be a whole number of runs per Slurm job"):
         run_table("table3", "smoke", backend="slurm", pack=0, run_root=tracking["run_root"])
+
+
+def finished_train(cfg, quiet=False, parent_run_id=None):
+    """A training that records its run finished at once (module level: picklable)."""
+    folder = run_dir(cfg)
+    folder.mkdir(parents=True, exist_ok=True)
+    payload = {"run_name": run_name(cfg), "table": cfg.table, "frames": cfg.frames, "seed": cfg.seed, "run_id": "x",
+               "metrics": {"sgn_test": 0.5, "eqa_test": 0.25}}  # fmt: skip
+    save_checkpoint(folder / CHECKPOINT, {"finished": True})
+    (folder / RESULTS).write_text("{}")
+    record_result(payload, cfg)
+
+
+def test_a_launch_without_wait_leaves_its_parent_running_and_the_next_launch_ends_it(tracking, no_leftovers):
+    """Issue 85 item 6: a Slurm launch that returns after submission leaves the table's parent run RUNNING (its jobs
+    go on) and says so in its folder; the next launch, finding every run finished, ends it FINISHED."""
+    pytest.importorskip("submitit")
+    from emml.experiments.launch import PARENT_LEFT_RUNNING
+
+    only = {"model": "da_no_sa", "aux": "true"}
+    kw = {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "log": lambda m: None}
+    report = run_table("table3", "smoke", backend="slurm", slurm_cluster="local", only=only, wait=False,
+                       train_fn=finished_train, **kw)  # fmt: skip
+    left = Path(tracking["run_root"]) / "slurm" / "table3-smoke" / PARENT_LEFT_RUNNING
+    assert left.read_text().strip() == report.parent_run_id
+    assert _parent_status(report) == "RUNNING"
+    results = Path(tracking["results_root"]) / "table3" / "smoke.csv"
+    deadline = time.monotonic() + 120  # the job's process records its run (a guard, not the assertion)
+    while not results.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    again = run_table("table3", "smoke", only=only, train_fn=finished_train, **kw)
+    assert again.skipped == ["da_no_sa-easy-aux-s0-smoke"] and again.parent_run_id is None
+    assert _parent_status(report) == "FINISHED" and not left.exists()

@@ -269,3 +269,23 @@ def test_a_smoke_page_is_refused_in_the_committed_reports_before_anything_is_dec
     monkeypatch.setattr(claims, "decide_all", lambda *a: pytest.fail("decided before the folder was checked"))
     with pytest.raises(ValueError, match="'smoke' profile's numbers are not results"):
         claims.write_claims("smoke", project_root() / "reports")
+
+
+def test_a_table_with_training_columns_of_its_own_reads_its_training_cells(tmp_path):
+    """Table 5 has SGN train and EQA train columns of its own (Table 5 of the paper): a claim on sgn_train reads
+    that column's cells, not the SGN test cells beside them (the gather's `m in columns` test; reading the test
+    twin always, the mutant docs/testing.md once called equivalent, gives the test values 0.2 here)."""
+    root = tmp_path / "results"
+    fake_results("table5", root, value=lambda spec: 0.2)
+    path = root / "table5" / f"{PROFILE}.csv"
+    df = pd.read_csv(path)
+    df["sgn_train"] = [0.3 + 0.01 * i for i in range(len(df))]  # each run's own training score, none 0.2
+    df.to_csv(path, index=False)
+    claim = replace(CLAIMS["house-da-best"], metrics=("sgn_train",))
+    ev = gather(claim, plan_report("table5", PROFILE, root), CHANCE)
+    train = dict(zip(df["run_name"], df["sgn_train"]))
+    (entry,) = [e for e in ev.evidence if e["row"] == "Dual-Attention"]
+    assert entry["metric"] == "SGN train" and entry["column"] == "sgn_train"
+    read = [(s[0], s[2]) for s in scores(ev, "Dual-Attention", "house", False, "sgn_train")]
+    assert read and read == [(run, round(train[run], 6)) for run in entry["runs"]]
+    assert all(value > 0.25 for _, value in read)
