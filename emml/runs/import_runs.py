@@ -401,16 +401,26 @@ def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float]
     return ImportResult(name, "imported", reason, run_id, new, len({(k, st) for st, k, _ in points}))
 
 
-def disk_full(e: BaseException) -> bool:
-    """Whether ``e`` is a write refused for lack of room: an OSError of ENOSPC/EDQUOT, or sqlite's 'database or disk
-    is full' as SQLAlchemy or MLflow wrap it (their message, their cause)."""
+CHECK_DISK = "check the disk (its space, its health) and rerun the same command"
+"""What to do after a disk I/O error in the store (a full disk is `RERUN`'s 'free some space')."""
+IO_ERROR = "disk I/O error"
+"""sqlite's own word for a write its file or journal could not make: a full disk under the journal, a failing
+device, a file system gone read-only."""
+
+
+def write_refused(e: BaseException) -> str | None:
+    """Why the store refused a write, if it is the disk's doing: 'no space left on' for an OSError of ENOSPC/EDQUOT
+    or sqlite's 'database or disk is full', 'a disk I/O error on' for sqlite's `IO_ERROR`, as SQLAlchemy or MLflow
+    wrap them (their message, their cause); None for anything else."""
     for _ in range(10):  # the chain of causes, bounded
         if e is None:
-            return False
+            return None
         if isinstance(e, OSError) and e.errno in FULL or "database or disk is full" in str(e):
-            return True
+            return "no space left on"
+        if IO_ERROR in str(e):
+            return "a disk I/O error on"
         e = e.__cause__ or e.__context__
-    return False
+    return None
 
 
 def store_folder(uri: str | None) -> str:
@@ -445,11 +455,13 @@ def import_runs(
             except RunDirError as e:
                 result = ImportResult(relative(run_dir), "failed", str(e))
             except Exception as e:
-                if not disk_full(e):
+                why = write_refused(e)
+                if why is None:
                     raise
+                then = RERUN if why.startswith("no space") else CHECK_DISK
                 raise NoSpaceError(  # the half-made run was deleted by import_run: the store as it was before it
-                    f"no space left on {store_folder(uri)} (the MLflow store; importing {relative(run_dir)}, its "
-                    f"half-made run removed, the {len(out)} run dirs before it imported whole): {RERUN}"
+                    f"{why} {store_folder(uri)} (the MLflow store; importing {relative(run_dir)}, its "
+                    f"half-made run removed, the {len(out)} run dirs before it imported whole): {then}"
                 ) from None
             if log is not None:
                 with bar.external_write_mode():

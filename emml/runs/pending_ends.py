@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 from emml.runs import store
+from emml.runs.atomic import sweep_stale
 from emml.runs.runlock import LOCK, lock_holder
 
 
@@ -35,11 +36,6 @@ def store_key(uri: str | None) -> str:
 def ends_dir(uri: str | None) -> Path:
     """Where the pending ends of the store ``uri`` (default: `store.tracking_uri`) are recorded."""
     return Path(tempfile.gettempdir()) / f"emml-pending-ends-{os.getuid()}" / store_key(uri)
-
-
-STALE_TMP_S = 3600
-"""Age (seconds) past which a record's temp file is a kill's leftover (`record_end` writes one in milliseconds), removed
-by `apply_ends`."""
 
 
 def record_end(uri: str | None, run_id: str, status: str, end_time: int, run_dir: Path | None = None) -> Path:
@@ -77,14 +73,10 @@ def pending(uri: str | None) -> list[dict]:
 def apply_ends(uri: str | None = None, mlflow_client=None) -> list[str]:
     """Mark each pending run of the store ``uri`` ended as recorded, if it is still RUNNING and nobody trains it (its
     run dir's lock free), and drop the record; a run gone from the store drops its record too; a record's temp file
-    older than `STALE_TMP_S` goes. Returns the run ids marked."""
+    older than `STALE_TMP_S` (emml/runs/atomic.py) goes. Returns the run ids marked."""
     from mlflow.exceptions import MlflowException
 
-    folder = ends_dir(uri)
-    for tmp in folder.glob(".*.tmp") if folder.is_dir() else ():  # what a kill inside `record_end` left
-        with contextlib.suppress(OSError):
-            if time.time() - tmp.stat().st_mtime > STALE_TMP_S:
-                tmp.unlink()
+    sweep_stale(ends_dir(uri), ".*.tmp")  # what a kill inside `record_end` left
     records = pending(uri)
     if not records:
         return []

@@ -7,11 +7,12 @@ from __future__ import annotations
 import errno
 import os
 import re
+import time
 from pathlib import Path
 
 import pytest
 
-from emml.runs.atomic import replacing, write_text
+from emml.runs.atomic import STALE_TMP_S, replacing, write_text
 from emml.runs.diskspace import NoSpaceError
 
 
@@ -94,3 +95,20 @@ def test_every_file_a_report_writes_goes_through_the_atomic_writer():
         if direct.search(line) and not line.lstrip().startswith(("#", '"""', "``"))
     ]
     assert not found, found
+
+
+def test_the_next_write_removes_the_temp_files_a_kill_left_an_hour_ago_not_a_write_under_way(tmp_path):
+    """A kill -9 mid-write leaves a hidden `.<name>.*.tmp`; the next write of that file removes it once it is older
+    than STALE_TMP_S, and leaves a fresh one (another writer's, under way) and another file's alone."""
+    path = tmp_path / "results.csv"
+    stale, fresh = tmp_path / ".results.csv.a1.tmp", tmp_path / ".results.csv.b2.tmp"
+    other = tmp_path / ".metrics.csv.c3.tmp"
+    for tmp in (stale, fresh, other):
+        tmp.write_text("half a fi")
+    old = time.time() - STALE_TMP_S - 10
+    for tmp in (stale, other):
+        os.utime(tmp, (old, old))
+    write_text(path, "whole\n")
+    assert path.read_text() == "whole\n"
+    assert not stale.exists() and fresh.exists() and other.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".metrics.csv.c3.tmp", ".results.csv.b2.tmp", "results.csv"]

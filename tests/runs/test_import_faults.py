@@ -6,6 +6,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 from emml.runs import import_runs as importer
 from emml.runs import store
 from emml.runs.import_runs import IMPORTED_FROM, import_runs, relative
@@ -77,12 +79,37 @@ def test_an_import_killed_midway_and_run_again_leaves_one_finished_run_per_run_d
     assert {r.outcome for r in again} == {"skipped"} and runs_by_dir("killed", uri).keys() == stored.keys()
 
 
-def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_path, monkeypatch):
-    """Issue 65: a full disk during `emml import-runs` printed ~220 lines (two tracebacks, SQLAlchemy's dump of the
-    bound rows) and named no folder. Now one line names the store's folder and what was left as it was, the run
-    being imported is removed, and the rerun imports the rest once."""
+def _enospc():
     import errno
 
+    return OSError(errno.ENOSPC, "No space left on device")
+
+
+def _sqlite_io_error():
+    """sqlite's own 'disk I/O error' (a journal it could not write), as SQLAlchemy wraps it and MLflow re-raises."""
+    import sqlite3
+
+    from mlflow.exceptions import MlflowException
+    from sqlalchemy.exc import OperationalError
+
+    try:
+        raise OperationalError("INSERT INTO metrics", {}, sqlite3.OperationalError("disk I/O error"))
+    except OperationalError as e:
+        return MlflowException(f"(sqlite3.OperationalError) disk I/O error: {e}")
+
+
+@pytest.mark.parametrize(
+    ("fault", "why", "then"),
+    [
+        (_enospc, "no space left on", "free some space and rerun the same command"),
+        (_sqlite_io_error, "a disk I/O error on", "check the disk (its space, its health) and rerun the same command"),
+    ],
+)
+def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_path, monkeypatch, fault, why, then):
+    """Issue 65: a full disk during `emml import-runs` printed ~220 lines (two tracebacks, SQLAlchemy's dump of the
+    bound rows) and named no folder. Now one line names the store's folder and what was left as it was, the run
+    being imported is removed, and the rerun imports the rest once. Issue 85: sqlite's own 'disk I/O error' (its
+    journal unwritable: a full disk under it, a failing device) was still a traceback; it is the same one line."""
     from typer.testing import CliRunner
 
     from emml.cli import app
@@ -95,7 +122,7 @@ def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_pa
     def full(*args, **kwargs):  # the second run dir's run is made, then its points meet a full disk
         calls.append(1)
         if len(calls) == 2:
-            raise OSError(errno.ENOSPC, "No space left on device")
+            raise fault()
         return real(*args, **kwargs)
 
     monkeypatch.setattr(importer, "log_points", full)
@@ -103,8 +130,8 @@ def test_a_full_disk_during_an_import_is_one_line_naming_the_store_folder(tmp_pa
     assert out.exit_code == 2, out.output
     (line,) = [x for x in out.output.splitlines() if x.startswith("error:")]
     assert line == (
-        f"error: no space left on {tmp_path / 'store'} (the MLflow store; importing {dirs[1]}, its half-made run "
-        "removed, the 1 run dirs before it imported whole): free some space and rerun the same command"
+        f"error: {why} {tmp_path / 'store'} (the MLflow store; importing {dirs[1]}, its half-made run "
+        f"removed, the 1 run dirs before it imported whole): {then}"
     )
     assert "Traceback" not in out.output and sorted(runs_by_dir("full", uri)) == dirs[:1]
     monkeypatch.setattr(importer, "log_points", real)

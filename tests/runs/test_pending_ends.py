@@ -12,6 +12,7 @@ import pytest
 
 import emml.runs.tracking as tracking_module
 from emml.runs import pending_ends
+from emml.runs.atomic import STALE_TMP_S
 from emml.runs.runlock import LOCK, take_lock
 from emml.runs.store import StoreGaveUp, client
 from emml.runs.tracking import Tracker
@@ -95,7 +96,7 @@ def test_a_temp_file_a_kill_left_is_removed_once_stale_and_a_fresh_one_kept(trac
     stale, fresh = folder / ".abc.tmp", folder / ".def.tmp"
     for tmp in (stale, fresh):
         tmp.write_text('{"run_id": ')  # a record_end killed mid-write
-    old = time.time() - pending_ends.STALE_TMP_S - 10
+    old = time.time() - STALE_TMP_S - 10
     os.utime(stale, (old, old))
     assert pending_ends.apply_ends(tracking["uri"]) == [] and pending_ends.pending(tracking["uri"]) == []
     assert not stale.exists() and fresh.exists()  # a record being written now is left to its writer
