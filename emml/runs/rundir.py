@@ -8,7 +8,7 @@ A run lives in ``<run_root>/<table>/<run name>/``:
   ``<results_root>/<table>/<profile>.csv`` (`record_result`);
 - ``run.lock``: held while a process trains or re-scores it (emml/runs/runlock.py);
 - ``segments.json``: each session's commit and the frame it started from (emml/runs/segments.py), read into
-  results.json's ``segments``.
+  results.json's ``segments`` and into when the run last began training (`last_started`).
 
 Identity. What a run *is* is `TrainConfig.identity()`: every field but those of how it runs (`TrainConfig.RUNTIME`:
 device, threads, workers, roots, cadences, the frame target). Its name is `emml.runs.naming.run_name` (the fields a
@@ -31,6 +31,7 @@ from emml.config.paths import project_path, project_root
 from emml.config.schema import TrainConfig, apply_overrides
 from emml.runs.atomic import write_text
 from emml.runs.naming import flat, run_name
+from emml.runs.segments import noted, run_segments
 
 CHECKPOINT = "checkpoint.pt"
 """The run's state (`save_checkpoint`): written every `checkpoint_every` updates, at a stop, and at the end."""
@@ -205,6 +206,19 @@ def saved_config(directory: Path) -> dict | None:
     return _json_object(path).get("config")
 
 
+def last_started(directory: str | Path) -> str:
+    """When the run in ``directory`` last began training, UTC ISO 8601: its last noted session (segments.json,
+    emml/runs/segments.py), else results.json's ``started_at`` (a run from before segments were noted); "" when
+    neither says (an older run)."""
+    times = [s.get("started_at") for s in noted(directory)]
+    if not times:
+        try:
+            times = [read_results(directory).get("started_at")]
+        except RunDirError:  # absent or damaged (named where a report reads it): no time
+            times = []
+    return max((t for t in times if isinstance(t, str)), default="")
+
+
 def _json_object(path: Path) -> dict:
     """The JSON object in ``path``; RunDirError naming the file (and the line) unless it holds one. results.json is
     written whole (`write_json`), so a file that does not parse was damaged otherwise: it is named, never guessed."""
@@ -233,8 +247,6 @@ def results_payload(
     ``segments``: each commit it trained under with its frames, emml/runs/segments.py), when it trained (``times``:
     `TIMES`), how its score was measured, the score and the config it trained with (reports state its deviations from
     the paper)."""
-    from emml.runs.segments import run_segments
-
     return {
         **run_identity(cfg),
         "frames": frames,

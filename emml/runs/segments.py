@@ -1,4 +1,4 @@
-"""The commits a run trained under (issue 60): a run stopped and resumed under another commit (a campaign pinned at a
+"""The commits a run trained under: a run stopped and resumed under another commit (a campaign pinned at a
 new sha, a checkout moved on) is a chain of segments, each a session of training with its git sha and the frames it
 trained. The results row names one commit (`git_sha`: the one that finished the run); results.json names them all.
 
@@ -10,6 +10,9 @@ trained. The results row names one commit (`git_sha`: the one that finished the 
 - Run dirs from before (no ``segments`` in results.json) read as one segment of their single ``git_sha``
   (`read_run_segments`): nothing is guessed, and the table page says which runs record only their last commit
   (emml/report/commits.py).
+
+This module reads and writes segments.json alone and imports nothing of a run dir's other files: what needs
+results.json too (when a run last began training, `emml.runs.rundir.last_started`) is the run dir's owner's.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ UNKNOWN = "unknown"
 """The sha of frames trained before segments were noted (a run begun under older code, resumed under this)."""
 
 
-def _noted(directory: Path) -> list[dict]:
+def noted(directory: str | Path) -> list[dict]:
     """The sessions noted in ``directory``'s segments.json ([] when absent or unreadable: a torn file is noted again
     from the next session on)."""
     try:
@@ -43,7 +46,7 @@ def begin_segment(directory: str | Path, git_sha: str, frames: int, now: str | N
     gone); frames before the first noted session (a run begun before segments were noted) are `UNKNOWN`'s. Returns
     the sessions noted."""
     directory = Path(directory)
-    kept = [s for s in _noted(directory) if s["from_frame"] < frames]
+    kept = [s for s in noted(directory) if s["from_frame"] < frames]
     if frames > 0 and not kept:
         kept = [{"git_sha": UNKNOWN, "from_frame": 0, "started_at": None}]
     now = now or datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -53,32 +56,17 @@ def begin_segment(directory: str | Path, git_sha: str, frames: int, now: str | N
     return kept
 
 
-def last_started(directory: str | Path) -> str:
-    """When the run in ``directory`` last began training, UTC ISO 8601: its last noted session (segments.json), else
-    results.json's ``started_at`` (a run from before segments were noted); "" when neither says (an older run)."""
-    from emml.runs.rundir import RunDirError, read_results
-
-    directory = Path(directory)
-    times = [s.get("started_at") for s in _noted(directory)]
-    if not times:
-        try:
-            times = [read_results(directory).get("started_at")]
-        except RunDirError:  # absent or damaged (named where a report reads it): no time
-            times = []
-    return max((t for t in times if isinstance(t, str)), default="")
-
-
 def run_segments(directory: str | Path, frames: int, git_sha: str) -> list[dict]:
     """results.json's ``segments`` for a run that ends at ``frames`` under ``git_sha``: each noted session with the
     frames it trained ([from, to): to the next session's start, the last to ``frames``); one segment of ``git_sha``
     over the whole run where no session was noted."""
-    noted = _noted(Path(directory))
-    if not noted:
+    sessions = noted(directory)
+    if not sessions:
         return [{"git_sha": git_sha, "frames": [0, int(frames)], "started_at": None}]
-    ends = [s["from_frame"] for s in noted[1:]] + [int(frames)]
+    ends = [s["from_frame"] for s in sessions[1:]] + [int(frames)]
     return [
         {"git_sha": s.get("git_sha") or UNKNOWN, "frames": [s["from_frame"], end], "started_at": s.get("started_at")}
-        for s, end in zip(noted, ends)
+        for s, end in zip(sessions, ends)
     ]
 
 

@@ -7,13 +7,12 @@ import pandas as pd
 
 from emml.config.profiles import profile_config
 from emml.runs.results import read_results
-from emml.runs.rundir import RESULTS, record_result, results_payload, run_dir
+from emml.runs.rundir import RESULTS, last_started, record_result, results_payload, run_dir
 from emml.runs.segments import (
     SEGMENTS,
     UNKNOWN,
     begin_segment,
     commits,
-    last_started,
     read_run_segments,
     run_segments,
 )

@@ -155,8 +155,7 @@ class _Speed:
         self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
 
     def measured(self, cfg) -> tuple[float | None, float | None]:
-        from emml.runs.rundir import METRICS
-        from emml.runs.segments import last_started
+        from emml.runs.rundir import METRICS, last_started
 
         difficulty = cfg.env.difficulty
         key = (cfg.profile, cfg.model, difficulty)
