@@ -134,7 +134,7 @@ house3d: setup
 CAMPAIGN ?= reference
 
 campaign: setup
-	$(EMML) campaign $(CAMPAIGN)
+	$(EMML) campaign run $(CAMPAIGN)
 
 campaign-status: setup
 	$(EMML) campaign status $(CAMPAIGN)

@@ -1,16 +1,17 @@
 """`emml …`: one typer app. Thin: parses arguments, calls the wing that owns the work, prints (or `--json`).
 
 The commands live by group: train.py (train, eval, rescore, transfer, demo), diagnose.py (diagnose, probe-eqa),
-tables.py (list, run, campaign), reports.py (report, reports, backfill-config, import-runs, video, visualize) and
-tools.py (tasks, models, oracle, bench); common.py holds what they share. They are registered here under the groups
-(`rich_help_panel`) and in the order `emml --help` lists them; `emml --install-completion` completes commands,
-options and their choices in the shell."""
+tables.py (list, run), campaign.py (campaign run, campaign status), reports.py (report, reports, backfill-config,
+import-runs, video, visualize) and tools.py (tasks, models, oracle, bench); common.py holds what they share. They are
+registered here under the groups (`rich_help_panel`) and in the order `emml --help` lists them; `emml
+--install-completion` completes commands, options, their choices and the names of tables, campaigns and models in
+the shell."""
 
 from __future__ import annotations
 
 import typer
 
-from emml.cli import diagnose, reports, tables, tools, train
+from emml.cli import campaign, diagnose, reports, tables, tools, train
 from emml.cli.common import _fail
 
 TRAIN, SCORE, REPORTS, TOOLS = "Train", "Evaluate & diagnose", "Tables & reports", "Tools"
@@ -24,6 +25,7 @@ app = typer.Typer(
 tasks_app = typer.Typer(no_args_is_help=True, help="The datasets: instructions and questions by split.")
 bench_app = typer.Typer(no_args_is_help=True, help="Throughput benchmarks, measured as ratios in one run.")
 visualize_app = typer.Typer(no_args_is_help=True, help="The paper's figures on a checkpoint.")
+app.add_typer(campaign.app, name="campaign", rich_help_panel=TRAIN)
 app.add_typer(tasks_app, name="tasks", rich_help_panel=TOOLS)
 app.add_typer(bench_app, name="bench", rich_help_panel=TOOLS)
 app.add_typer(visualize_app, name="visualize", rich_help_panel=REPORTS)
@@ -68,7 +70,6 @@ def _check_project_files(
 app.command(rich_help_panel=TRAIN)(train.train)
 app.command(rich_help_panel=TRAIN)(train.demo)
 app.command("run", rich_help_panel=TRAIN)(tables.run_table)
-app.command(rich_help_panel=TRAIN)(tables.campaign)
 app.command("list", rich_help_panel=TRAIN)(tables.list_experiments)
 app.command("eval", rich_help_panel=SCORE)(train.eval_checkpoint)
 app.command("rescore", rich_help_panel=SCORE)(train.rescore_runs)

@@ -36,20 +36,37 @@ Interpolation = Literal["linear", "area", "nearest"]
 BenchPart = Literal["both", "model", "e2e"]
 
 
-def _choice(values: Callable[[], Sequence[str]], accept: Callable[[str], bool] | None = None):
+def _choice(
+    values: Callable[[], Sequence[str]],
+    accept: Callable[[str], bool] | None = None,
+    hint: Callable[[], str] | None = None,
+):
     """(parser, completion) of an option whose allowed values are read when it is parsed, not when the command line
-    is built (the profiles file, a plugin's models): a bad value is refused naming the allowed ones."""
+    is built (the profiles file, a plugin's models): a bad value is refused naming the allowed ones, then the closest
+    (`did_you_mean`) and ``hint()`` when given."""
 
     def parse(value: str) -> str:
         allowed = tuple(values())
         if value in allowed or (accept is not None and accept(value)):
             return value
-        raise typer.BadParameter(f"{value!r} is not one of {', '.join(map(repr, allowed))}")
+        message = f"{value!r} is not one of {', '.join(map(repr, allowed))}{did_you_mean(value, allowed)}"
+        raise typer.BadParameter(message + (f" ({hint()})" if hint else ""))
 
-    def complete(incomplete: str) -> list[str]:
-        return [v for v in values() if v.startswith(incomplete)]
+    return parse, _names(values)
 
-    return parse, complete
+
+def did_you_mean(value: str, allowed: Sequence[str]) -> str:
+    """'; did you mean 'quick'?' naming the allowed values closest to a misspelled one (difflib), or '' if none is
+    close."""
+    import difflib
+
+    close = difflib.get_close_matches(value, list(allowed), n=3)
+    return f"; did you mean {' or '.join(map(repr, close))}?" if close else ""
+
+
+def _names(values: Callable[[], Sequence[str]]) -> Callable[[str], list[str]]:
+    """A shell completion: the names ``values()`` reads when the shell asks, those that start with what is typed."""
+    return lambda incomplete: [v for v in values() if v.startswith(incomplete)]
 
 
 def _profile_names() -> tuple[str, ...]:
@@ -89,17 +106,45 @@ def _model_names() -> list[str]:
     return list(MODELS)
 
 
+def _plugin_hint() -> str:
+    from emml.models.registry import PLUGIN_HINT
+
+    return PLUGIN_HINT
+
+
 def model_option(
     default: str = "dual_attention", help: str = "The model to train (`emml models` lists them)."
 ) -> typer.Option:
-    """``--model``: completed from the registry; an unknown name is refused before any compute, with the hint that
-    it may be a plugin's (emml/rl/hardware.py, check_runnable)."""
-    return typer.Option(
-        default,
-        autocompletion=lambda incomplete: [m for m in _model_names() if m.startswith(incomplete)],
-        metavar="MODEL",
-        help=help,
-    )
+    """``--model``: one of the model registry's names (a loaded plugin's included: `emml --plugin` loads them before
+    the command's options are parsed), completed from it; a misspelled name is refused before any compute naming the
+    closest, the allowed ones, and how a plugin's model becomes known."""
+    parse, complete = _choice(_model_names, hint=_plugin_hint)
+    return typer.Option(default, parser=parse, autocompletion=complete, metavar="MODEL", help=help)
+
+
+def _table_names() -> list[str]:
+    from emml.experiments.table_files import table_names
+
+    return table_names()
+
+
+def table_argument(help: str) -> typer.Argument:
+    """A table's name: completed from the table files of reproduce/ (table2..5, experiments/<name>); any other
+    value is left to the command (a .toml file of one's own)."""
+    return typer.Argument(..., autocompletion=_names(_table_names), metavar="TABLE", help=help)
+
+
+def _campaign_names() -> list[str]:
+    from emml.experiments.campaign.file import list_campaigns
+
+    return list_campaigns()
+
+
+def campaign_argument() -> typer.Argument:
+    """A campaign's name: one of reproduce/campaigns/*.toml, completed from there (an unknown one is refused by
+    `load_campaign`, naming those there are)."""
+    help = "A campaign of reproduce/campaigns/ (e.g. reference)."
+    return typer.Argument(..., autocompletion=_names(_campaign_names), metavar="NAME", help=help)
 
 
 RUN_ROOT_HELP = "Folder of the run dirs (default: the checkout's runs/; same as --set run_root=DIR)."

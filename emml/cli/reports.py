@@ -17,6 +17,7 @@ from emml.cli.common import (
     _out,
     _own_engines,
     profile_option,
+    table_argument,
 )
 
 READ_RUN_ROOT_HELP = "Folder of the run dirs the report reads (default: the profile's, the checkout's runs/)."
@@ -24,7 +25,7 @@ READ_RESULTS_ROOT_HELP = "Folder of the results CSVs the report reads (default: 
 
 
 def report(
-    table: str = typer.Argument(..., help="table2 | table3 | table4 | table5, or a table file of your own (x.toml)."),
+    table: str = table_argument("table2 | table3 | table4 | table5, or a table file of your own (x.toml)."),
     profile: str = profile_option(help="Whose results are reported."),
     curves: bool = typer.Option(True, "--curves/--no-curves", help="Also plot training curves (needs MLflow)."),
     out: Path = typer.Option(None, help="Output folder (default: reports/; smoke: scratch/reports/)."),

@@ -1,4 +1,4 @@
-"""The tables and campaigns: `emml list`, `emml run` and `emml campaign` (emml/experiments/)."""
+"""The tables: `emml list` and `emml run` (emml/experiments/); campaigns are campaign.py's."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from emml.cli.common import (
     _use_tcmalloc,
     device_option,
     profile_option,
+    table_argument,
 )
 
 
@@ -57,10 +58,9 @@ def list_experiments(
 
 
 def run_table(
-    table: str = typer.Argument(
-        ...,
-        help="table2 | table3 | table4 | table5 (reproduce/<table>.toml), experiments/<name> "
-        "(reproduce/experiments/<name>.toml), or a table file of your own (x.toml).",
+    table: str = table_argument(
+        "table2 | table3 | table4 | table5 (reproduce/<table>.toml), experiments/<name> "
+        "(reproduce/experiments/<name>.toml), or a table file of your own (x.toml)."
     ),
     profile: str = profile_option(),
     backend: Backend = typer.Option(
@@ -153,93 +153,4 @@ def run_table(
         + (f", {len(report.submitted)} jobs submitted" if report.submitted else ""),
     )
     if report.failed:
-        raise typer.Exit(1)
-
-
-def campaign(
-    name: str = typer.Argument(
-        ...,
-        metavar="NAME|status",
-        help="A campaign of reproduce/campaigns/ (e.g. reference), or `status` followed by one: its status.",
-    ),
-    of: str = typer.Argument(None, metavar="NAME", help="After `status`: the campaign whose status is shown."),
-    show_status: bool = typer.Option(
-        False, "--status", help="Show each run as done / running / interrupted / to do (`emml campaign status NAME`)."
-    ),
-    pin: bool = typer.Option(
-        True,
-        "--pin/--no-pin",
-        help="Train from a git worktree of this commit (.campaign/<sha>), so edits cannot reach it.",
-    ),
-    jobs: int = typer.Option(0, help="Concurrent local runs (0: half the cores)."),
-    device: str = device_option(),
-    run_root: str = typer.Option(None, help=RUN_ROOT_HELP),
-    results_root: str = typer.Option(None, help=RESULTS_ROOT_HELP),
-    steps: list[str] = typer.Option(
-        [], "--step", help="Only this step (by name, as --status shows it; repeatable); the campaign's order stays."
-    ),
-    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
-):
-    """Train a campaign's unfinished runs in its order, or show its status (`emml campaign status NAME`).
-
-    Interrupted runs resume; with --pin (the default) it trains from a git worktree of this commit."""
-    from dataclasses import asdict
-
-    from emml.experiments.campaign import (
-        check_no_campaign,
-        hold_campaign,
-        load_campaign,
-        resume_command,
-        run_campaign,
-        run_pinned,
-        runs_at_once,
-        select_steps,
-        status,
-        status_text,
-    )
-    from emml.experiments.launch import stopped_line
-
-    if of is not None:  # `emml campaign status NAME`: the same as `emml campaign NAME --status`
-        if name != "status":
-            _fail(f"campaign {name!r} {of!r}: expected `emml campaign NAME` or `emml campaign status NAME`")
-        name, show_status = of, True
-    try:
-        plan = select_steps(load_campaign(name), steps)
-    except ValueError as e:
-        _fail(str(e))
-    if show_status:
-        try:
-            rows = status(plan, run_root, results_root)
-            at_once = runs_at_once(jobs, device)
-        except ValueError as e:
-            _fail(str(e))
-        _echo([asdict(r) for r in rows], as_json, status_text(plan, rows, at_once, device))
-        return
-    if pin:  # re-exec from a worktree of HEAD, writing into this checkout's runs, results and MLflow store
-        try:
-            check_no_campaign(name)  # before a worktree is made: the lock is taken where it trains, below
-            run_pinned(name, steps, jobs, device, run_root, results_root, as_json, log=typer.echo)
-        except ValueError as e:
-            _fail(str(e))
-    _use_tcmalloc()
-    try:
-        with hold_campaign(name):  # one campaign per checkout (issue 54: two doubled every run's MLflow entries)
-            reports = run_campaign(plan, run_root, results_root, device=device, jobs=jobs or None, log=typer.echo)
-    except ValueError as e:
-        _fail(str(e))
-    failed = {k: v for r in reports for k, v in r.failed.items()}
-    if reports and reports[-1].stopped:
-        from emml.models.plugins import configured
-
-        again = shlex.join(resume_command(name, steps, jobs, device, run_root, results_root, configured()))
-        _echo([asdict(r) for r in reports], as_json, stopped_line(reports[-1], again))
-        raise typer.Exit(130)
-    _echo(
-        [asdict(r) for r in reports],
-        as_json,
-        f"{name}: {sum(len(r.done) for r in reports)} trained, {sum(len(r.skipped) for r in reports)} already "
-        f"finished, {len(failed)} failed"
-        + (f", {busy} trained by another process" if (busy := sum(len(r.busy) for r in reports)) else ""),
-    )
-    if failed:
         raise typer.Exit(1)
