@@ -462,8 +462,8 @@ def write_claims(
     ``tables``: the tables whose page `make reports` writes for the profile, which the detail links (None: those
     that have a finished run of the profile)."""
     from emml.experiments.claims import load_claims
-    from emml.report import eqa_test
-    from emml.report.claims_page import write_pages
+    from emml.report import eqa_test, gate_figure
+    from emml.report.claims_page import page_names, write_pages
     from emml.report.tables import reports_dir
 
     profile = resolve_profile(profile)  # once: every claim, table and page below reads it
@@ -476,7 +476,9 @@ def write_claims(
         tables = _tables_with_runs({c.table for c in claims.values()}, profile, results_root)
     chance = blind_prior(profile, results_root)
     arms = eqa_test.read_arms(profile, results_root, run_root)  # each run's gate from its run dir (issue 82)
-    eqa = eqa_test.finding(arms, eqa_test.paper_value(), chance, profile.name)
+    names = page_names(profile.name)
+    gate = gate_figure.figure(arms[0], [folder / names["gate_png"], folder / names["gate_pdf"]])
+    eqa = eqa_test.finding(arms, eqa_test.paper_value(), chance, profile.name, names["gate_png"] if gate else None)
     paths = write_pages(folder, decisions, profile, paper, claims, chance, set(tables), eqa)
     return paths[0], decisions
 

@@ -126,12 +126,14 @@ FIGURE_WIDTH = 7.0
 
 def page_names(name: str) -> dict[str, str]:
     """The files of a profile's claims pages: the page read first, its detail, its figure (PNG for the page, PDF
-    for print)."""
+    for print), the EQA box's gate figure (emml/report/gate_figure.py)."""
     return {
         "page": f"claims-{name}.md",
         "detail": f"claims-{name}-detail.md",
         "png": f"claims-{name}.png",
         "pdf": f"claims-{name}.pdf",
+        "gate_png": f"claims-{name}-gate.png",
+        "gate_pdf": f"claims-{name}-gate.pdf",
     }
 
 

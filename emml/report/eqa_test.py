@@ -46,6 +46,10 @@ class Gate:
     """The same over the object questions only; None where none is asked."""
     dead: int
     """Answer words whose gate channel is 0 on every question."""
+    history: dict[str, tuple[tuple[int, float], ...]] = field(default_factory=dict, compare=False)
+    """Each of `GATE_KEYS` over the frames trained, (step, value) as the run logged it: every evaluation of a run
+    trained with the diagnostic, one point at its final checkpoint for a run filled afterwards (`emml diagnose
+    --gate --record`). What the gate figure draws (emml/report/gate_figure.py)."""
 
     def text(self) -> str:
         """'0.69 (colour 0.18 · object 1.00)'."""
@@ -80,9 +84,10 @@ def _colour_per_seed(arm: Arm) -> str:
     return " · ".join(f"{v:.2f} (s{seed})" for seed, v in found if v is not None) or "—"
 
 
-def finding(arms: list[Arm], paper: float, chance: Chance, profile: str) -> list[str]:
-    """The box's lines: the verdict in bold, the stated model's seeds with their gates, then the answer path's
-    other rows. ``arms[0]`` is the paper's stated model."""
+def finding(arms: list[Arm], paper: float, chance: Chance, profile: str, figure: str | None = None) -> list[str]:
+    """The box's lines: the verdict in bold, the stated model's seeds with their gates (and ``figure``, the gate
+    figure's file beside the page, when one was drawn: emml/report/gate_figure.py), then the answer path's other
+    rows. ``arms[0]`` is the paper's stated model."""
     stated, others = arms[0], arms[1:]
     prior = chance.of(METRIC, DIFFICULTY)
     head = ["## EQA test under the paper's stated model (issues 62, 81, 82)", ""]
@@ -136,6 +141,14 @@ def finding(arms: list[Arm], paper: float, chance: Chance, profile: str) -> list
         lines.append(
             f"| {s.seed} | {s.value:.3f} | {train} | {'above' if s.value > prior else 'not above'} | {gate} | {dead} |"
         )
+    if figure is not None:
+        lines += [
+            "",
+            f"![The stated model's question gate over training, per seed]({figure})",
+            "",
+            "The gate over training (colour questions, object questions), a line per seed: every evaluation of a "
+            "run trained with the diagnostic, one point at the final checkpoint of a run filled afterwards.",
+        ]
     lines += [
         "",
         "The answer path's other rows, each changing one choice the paper is silent on "
@@ -167,18 +180,20 @@ def read_gate(metrics_csv: Path) -> Gate | None:
     from emml.runs.records import points_or_none
 
     points = points_or_none(metrics_csv) or []
-    last: dict[str, tuple[int, float]] = {}
+    by_step: dict[str, dict[int, float]] = {}
     for step, key, value in points:
-        if key in GATE_KEYS and step >= last.get(key, (-1, 0.0))[0]:
-            last[key] = (step, value)
-    if "diag/gate_on_attribute" not in last or "diag/gate_dead" not in last:
+        if key in GATE_KEYS:
+            by_step.setdefault(key, {})[step] = value  # a point logged twice (a resumed step) keeps its last value
+    if "diag/gate_on_attribute" not in by_step or "diag/gate_dead" not in by_step:
         return None
-    value = {k: v for k, (_, v) in last.items()}
+    history = {k: tuple(sorted(v.items())) for k, v in by_step.items()}
+    value = {k: h[-1][1] for k, h in history.items()}  # at the last step each figure was logged
     return Gate(
         value["diag/gate_on_attribute"],
         value.get("diag/gate_on_color"),
         value.get("diag/gate_on_object"),
         int(value["diag/gate_dead"]),
+        history,
     )
 
 

@@ -170,3 +170,52 @@ def test_the_arms_are_the_experiments_rows_read_from_the_results_with_their_runs
 
 def test_the_papers_number_is_table_2s():
     assert eqa_test.paper_value() == 0.58
+
+
+def test_a_runs_gate_keeps_its_history_a_step_logged_twice_keeping_its_last_value(tmp_path):
+    """`Gate.history`: each figure's points by step, sorted; a step logged again (a resumed run's repeated
+    evaluation) keeps its last value; the Gate's values are those of the last step."""
+    path = tmp_path / "metrics.csv"
+    path.write_text(
+        "step,key,value\n"
+        "200,diag/gate_on_color,0.5\n200,diag/gate_on_attribute,0.6\n200,diag/gate_dead,1.0\n"
+        "100,diag/gate_on_color,0.1\n100,diag/gate_on_attribute,0.2\n100,diag/gate_dead,2.0\n"
+        "200,diag/gate_on_color,0.7\n"
+    )
+    gate = read_gate(path)
+    assert gate == Gate(0.6, 0.7, None, 1)
+    assert gate.history["diag/gate_on_color"] == ((100, 0.1), (200, 0.7))
+    assert gate.history["diag/gate_dead"] == ((100, 2.0), (200, 1.0))
+    assert "diag/gate_on_object" not in gate.history
+
+
+def test_the_gate_figure_draws_a_line_per_seed_with_a_gate_in_each_panel():
+    """One line per seed that has points, in the colour panel and the object panel, labelled with its EQA test; a
+    seed without gate figures is left out; no seed with them, no figure."""
+    import matplotlib.pyplot as plt
+
+    from emml.report import gate_figure
+
+    history = {
+        "diag/gate_on_color": ((500_000, 0.2), (1_000_000, 0.9)),
+        "diag/gate_on_object": ((500_000, 0.99), (1_000_000, 1.0)),
+    }
+    stated = arm("ours", 0.38, 0.35, 0.58)
+    stated = Arm(stated.label, stated.scores, {stated.scores[2].run: Gate(0.95, 0.9, 1.0, 0, history),
+                                               stated.scores[0].run: Gate(0.7, 0.18, 1.0, 1, {})})  # fmt: skip
+    fig = gate_figure.draw(stated)
+    colour, objects = fig.axes
+    assert [line.get_label() for line in colour.lines] == ["seed 2 (EQA test 0.58)"]
+    assert [tuple(colour.lines[0].get_xdata()), tuple(colour.lines[0].get_ydata())] == [(500_000, 1_000_000),
+                                                                                      (0.2, 0.9)]  # fmt: skip
+    assert tuple(objects.lines[0].get_ydata()) == (0.99, 1.0)
+    assert colour.get_title() == "colour questions" and objects.get_title() == "object questions"
+    plt.close(fig)
+    assert gate_figure.draw(arm("ours", 0.38)) is None and gate_figure.figure(arm("ours", 0.38), []) == []
+
+
+def test_the_box_shows_the_gate_figure_only_when_one_was_drawn():
+    image = "![The stated model's question gate over training, per seed](claims-quick-gate.png)"
+    arms = [arm("ours", 0.38, 0.35, 0.58), arm("steps", 0.40)]
+    assert image in finding(arms, PAPER, CHANCE, "quick", "claims-quick-gate.png")
+    assert not any("gate over training" in line for line in finding(arms, PAPER, CHANCE, "quick"))
