@@ -19,12 +19,6 @@ PACKAGE = Path(emml.__file__).parent
 """The package read by the guards."""
 MAX_LINES = 500
 """The most lines a module of emml may have: a module this long has more than one job."""
-PENDING_CIRCLES = {
-    ("emml.report.claims_figure", "emml.report.claims_page"): "the figure reads the page's cells and colours, the "
-    "page draws the figure: the modules were being edited elsewhere when this guard was written",
-}
-"""Circles known when the guard was written and not yet broken, each with why: tolerated as they are (a module
-more in one fails), and an entry whose circle is gone fails until it is removed here. Empty is the goal."""
 PENDING_LONG = {"emml/experiments/tables.py": 560}
 """Modules known over `MAX_LINES` when the guard was written, each with its count then: one that grows fails, and
 an entry whose module is back under the limit fails until it is removed here. Empty is the goal."""
@@ -165,18 +159,6 @@ def oversized(package: Path, limit: int = MAX_LINES) -> list[tuple[str, int]]:
     return sorted(((f, n) for f, n in counts.items() if n > limit), key=lambda fn: (-fn[1], fn[0]))
 
 
-def circle_findings(package: Path, pending: dict) -> list[str]:
-    """What the circle guard fails on: each circle of ``package`` not in ``pending`` (its report), and each entry of
-    ``pending`` that is no longer a circle as it stands."""
-    found = circle_reports(package)
-    new = [report for circle, report in found.items() if circle not in pending]
-    return new + [
-        f"{', '.join(c)}: no longer a circle as listed, remove it from PENDING_CIRCLES"
-        for c in pending
-        if c not in found
-    ]
-
-
 def size_findings(package: Path, pending: dict, limit: int = MAX_LINES) -> list[str]:
     """What the size guard fails on: each module over ``limit`` lines that is not in ``pending`` or has grown past
     its count there, and each entry of ``pending`` back under the limit."""
@@ -186,10 +168,8 @@ def size_findings(package: Path, pending: dict, limit: int = MAX_LINES) -> list[
 
 
 def test_no_import_circle_among_emmls_modules():
-    found = circle_findings(PACKAGE, PENDING_CIRCLES)
-    assert not found, "import circles (function-local imports count; move the shared piece to its owner):\n" + (
-        "\n".join(found)
-    )
+    report = circle_report(PACKAGE)
+    assert not report, f"import circles (function-local imports count; move the shared piece to its owner):\n{report}"
 
 
 def test_no_module_of_emml_is_over_the_line_limit():
@@ -276,22 +256,6 @@ def test_the_guards_fail_on_a_planted_circle_and_a_planted_long_module(tmp_path,
         test_no_import_circle_among_emmls_modules()
     with pytest.raises(AssertionError, match=r"emml/b\.py \(501 lines\)"):
         test_no_module_of_emml_is_over_the_line_limit()
-
-
-def test_a_pending_circle_is_tolerated_as_it_stands_only(tmp_path):
-    """A listed circle passes; a module more in it, or the circle gone, fails by name."""
-    package = plant(tmp_path, {"a.py": "import emml.b\n", "b.py": "def f():\n    import emml.a\n"})
-    pending = {("emml.a", "emml.b"): "why"}
-    assert circle_findings(package, pending) == []
-    (package / "c.py").write_text("import emml.a\n")
-    (package / "b.py").write_text("import emml.c\n")  # now a -> b -> c -> a
-    found, stale = circle_findings(package, pending)  # a circle of 3 now, and the listed one of 2 no more
-    assert found.startswith("circle of 3: emml.a, emml.b, emml.c") and "emml/c.py:1" in found
-    assert stale.startswith("emml.a, emml.b: no longer a circle as listed")
-    (package / "b.py").write_text("")
-    assert circle_findings(package, pending) == [
-        "emml.a, emml.b: no longer a circle as listed, remove it from PENDING_CIRCLES"
-    ]
 
 
 def test_a_pending_long_module_is_tolerated_at_its_count_only(tmp_path):

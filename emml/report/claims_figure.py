@@ -1,16 +1,44 @@
 """The claims page's figure (emml/report/claims_page.py): ours against the paper per claim, one line each, its
-status in its label's colour."""
+status in its label's colour. The page chooses the cells each claim shows and hands them over; this module owns how
+they are drawn (colours, width) and imports nothing of the page."""
 
 from __future__ import annotations
 
-from emml.experiments.metrics import TASKS
-from emml.report.claims_page import FIGURE_WIDTH, STATUS_COLOURS, TASK_COLOURS, cells
+from emml.experiments.claims.evidence import (
+    BUDGET,
+    CLOSING,
+    CONTRADICTED,
+    INCONCLUSIVE,
+    ONE_SEED,
+    SUPPORTED,
+    UNKNOWN_FLAT,
+    UNTESTABLE,
+)
+from emml.experiments.metrics import TASKS, train_of
+
+STATUS_COLOURS = {
+    SUPPORTED: "#1a7f37",
+    CONTRADICTED: "#cf222e",
+    ONE_SEED: "#9a6700",
+    CLOSING: "#9a6700",
+    UNKNOWN_FLAT: "#9a6700",
+    INCONCLUSIVE: "#bc4c00",
+    BUDGET: "#6e7781",
+    UNTESTABLE: "#8c959f",
+}
+"""The figure's colour for each status (its tick label)."""
+TASK_COLOURS = {**{task: train_of(task).colour for task in TASKS}, "diag": "C2"}
+"""A claim's colour: its task's, as its training split's curve is drawn (emml/experiments/metrics.py); a diag/* figure
+C2."""
+FIGURE_WIDTH = 7.0
+"""Inches: the figure prints across a two-column page (or a one-column one) at its own size."""
 
 
-def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:
+def figure(decisions: list, shown: dict, curves: set, paths: list) -> None:
     """Ours against the paper per claim, one line each (its status in its label's colour): for each focus cell the
     paper's number (×), our mean (●) and each seed (○), joined by a line; FIGURE_WIDTH inches wide, written to each
-    of ``paths`` (PNG, PDF)."""
+    of ``paths`` (PNG, PDF). ``shown``: each claim's cells by its id (emml.report.claims_page.cells); ``curves``: the
+    ids of the claims read on a curve, whose numbers are frames (noted, not drawn)."""
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
@@ -20,9 +48,9 @@ def figure(decisions: list, paper: dict, claims: dict, paths: list) -> None:
     fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 0.8 + 0.22 * n), layout="constrained")
     for i, d in enumerate(decisions):
         y = n - 1 - i
-        cs = [c for c in cells(d, paper.get(d.id), claims[d.id]) if not c.frames]
+        cs = [c for c in shown[d.id] if not c.frames]
         if not cs:
-            note = "a curve's crossing in frames: see the table" if claims[d.id].kind_of.curve else "no number"
+            note = "a curve's crossing in frames: see the table" if d.id in curves else "no number"
             ax.text(0.01, y, note, va="center", fontsize=6, color="0.45")
             continue
         step = min(0.6 / len(cs), 0.18)

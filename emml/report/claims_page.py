@@ -11,10 +11,7 @@ from dataclasses import dataclass
 from emml.config.profiles import Profile
 from emml.experiments.claims.closing import CONFIDENCE
 from emml.experiments.claims.evidence import (
-    BUDGET,
     CLOSING,
-    CONTRADICTED,
-    INCONCLUSIVE,
     LEAVE,
     ONE_SEED,
     REVERSED,
@@ -27,8 +24,8 @@ from emml.experiments.claims.evidence import (
     Z,
 )
 from emml.experiments.claims.kinds import KINDS
-from emml.experiments.metrics import TASKS, train_of
 from emml.report.chance import chance_text
+from emml.report.claims_figure import FIGURE_WIDTH, figure
 
 GENERAL_RULES = [
     "**supported**: every comparison of the claim holds. **contradicted**: some comparison is reversed by the same "
@@ -106,22 +103,6 @@ def thresholds(claim) -> str:
 
 MAX_CELLS = 4
 """The cells of a claim the status table shows (the detail page has them all)."""
-STATUS_COLOURS = {
-    SUPPORTED: "#1a7f37",
-    CONTRADICTED: "#cf222e",
-    ONE_SEED: "#9a6700",
-    CLOSING: "#9a6700",
-    UNKNOWN_FLAT: "#9a6700",
-    INCONCLUSIVE: "#bc4c00",
-    BUDGET: "#6e7781",
-    UNTESTABLE: "#8c959f",
-}
-"""The figure's colour for each status (its tick label)."""
-TASK_COLOURS = {**{task: train_of(task).colour for task in TASKS}, "diag": "C2"}
-"""A claim's colour: its task's, as its training split's curve is drawn (emml/experiments/metrics.py); a diag/* figure
-C2."""
-FIGURE_WIDTH = 7.0
-"""Inches: the figure prints across a two-column page (or a one-column one) at its own size."""
 
 
 def page_names(name: str) -> dict[str, str]:
@@ -420,7 +401,7 @@ def detail_page(decisions: list, profile: Profile, paper: dict, claims: dict, ch
         if d.missing:
             lines += ["", f"Missing runs ({len(d.missing)}): " + ", ".join(f"`{m}`" for m in d.missing) + "."]
         if d.costs:
-            lines += ["", "The campaign steps that train them (emml campaign reference --status):", ""]
+            lines += ["", "The campaign steps that train them (emml campaign status reference):", ""]
             lines += [f"- {c}" for c in d.costs]
     return "\n".join(lines) + "\n"
 
@@ -448,7 +429,6 @@ def write_pages(
     write_text(page, quick_page(decisions, profile, paper, claims, findings), then=RERUN)  # whole or not at all
     write_text(detail, detail_page(decisions, profile, paper, claims, chance, tables), then=RERUN)
     figs = [folder / names["png"], folder / names["pdf"]]
-    from emml.report.claims_figure import figure
-
-    figure(decisions, paper, claims, figs)
+    shown = {d.id: cells(d, paper.get(d.id), claims[d.id]) for d in decisions}
+    figure(decisions, shown, {d.id for d in decisions if claims[d.id].kind_of.curve}, figs)
     return [page, detail, *figs]

@@ -57,7 +57,7 @@ def test_a_runs_curves_are_drawn_in_the_declared_colours():
 
 
 def test_a_claims_colour_is_its_tasks_declared_one():
-    from emml.report.claims_page import TASK_COLOURS
+    from emml.report.claims_figure import TASK_COLOURS
 
     for task in metrics.TASKS:
         assert TASK_COLOURS[task] == metrics.train_of(task).colour
