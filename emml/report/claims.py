@@ -477,7 +477,7 @@ def write_claims(
     chance = blind_prior(profile, results_root)
     arms = eqa_test.read_arms(profile, results_root, run_root)  # each run's gate from its run dir (issue 82)
     names = page_names(profile.name)
-    gate = gate_figure.figure(arms[0], [folder / names["gate_png"], folder / names["gate_pdf"]])
+    gate = gate_figure.figure(arms[0], [folder / names["gate_png"], folder / names["gate_pdf"]]) if arms else []
     eqa = eqa_test.finding(arms, eqa_test.paper_value(), chance, profile.name, names["gate_png"] if gate else None)
     paths = write_pages(folder, decisions, profile, paper, claims, chance, set(tables), eqa)
     return paths[0], decisions

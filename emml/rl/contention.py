@@ -16,7 +16,8 @@ def _is_learner(argv: list[str]) -> bool:
     for i, arg in enumerate(argv[:-1]):
         if os.path.basename(arg) == "emml" or (arg == "-m" and argv[i + 1] == "emml.cli"):
             rest = argv[i + 1 :] if arg != "-m" else argv[i + 2 :]
-            return bool(rest) and rest[0] in LEARNER_COMMANDS and "--status" not in rest
+            status = "--status" in rest or rest[:2] == ["campaign", "status"]  # a campaign's status trains nothing
+            return bool(rest) and rest[0] in LEARNER_COMMANDS and not status
     return False
 
 

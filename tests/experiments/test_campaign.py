@@ -203,7 +203,8 @@ def test_cli_status_and_an_unknown_campaign(tracking):
     # issue 63: `emml campaign status NAME`, the flag kept as its alias; anything else in status's place is refused
     assert runner.invoke(app, ["campaign", "status", "reference", *roots]).output == result.output
     result = runner.invoke(app, ["campaign", "reference", "status", *roots])
-    assert result.exit_code == 2 and "expected `emml campaign NAME` or `emml campaign status NAME`" in result.output
+    assert result.exit_code == 2
+    assert "expected `emml campaign run NAME` or `emml campaign status NAME`" in result.output
 
 
 def test_a_pinned_campaign_runs_the_worktrees_code_into_the_checkouts_roots(tmp_path, campaign_lock, monkeypatch):
@@ -446,7 +447,7 @@ def test_the_resume_line_repeats_every_option_that_changes_what_is_resumed(track
     result = CliRunner().invoke(app, ["campaign", "reference", *args])
     assert result.exit_code == 130, result.output
     again = shlex.split(result.output.strip().split("resume with: ", 1)[1])
-    assert again[:3] == ["emml", "campaign", "reference"] and sorted(again[3:]) == sorted(args)
+    assert again[:4] == ["emml", "campaign", "run", "reference"] and sorted(again[4:]) == sorted(args)
     assert project_path(tracking["run_root"]) == project_path(again[again.index("--run-root") + 1])
     # issue 54: without the roots, the resumed campaign started new runs under the default ones
     assert seen == {"run_root": tracking["run_root"], "results_root": tracking["results_root"], "jobs": 3,

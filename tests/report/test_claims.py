@@ -129,7 +129,9 @@ def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, m
     monkeypatch.setattr(
         eqa, "read_arms", lambda profile, root, run_root=None: got.setdefault("arms", (profile.name, root)) and []
     )
-    monkeypatch.setattr(eqa, "finding", lambda arms, paper, chance, profile: ["EQA", arms, paper, chance, profile])
+    monkeypatch.setattr(
+        eqa, "finding", lambda arms, paper, chance, profile, figure=None: ["EQA", arms, paper, chance, profile, figure]
+    )
     out = tmp_path / "a" / "b"
     path, decisions = claims.write_claims("quick", out, "RESULTS", {"k": "v"}, "RUNS")
     assert path == out / "claims-quick.md" and path.read_text() == "PAGE\n" and decisions == ["decided"]
@@ -139,7 +141,7 @@ def test_the_page_is_written_from_the_decisions_of_the_results_given(tmp_path, m
     assert (folder, decided, profile.name, paper) == (out, ["decided"], "quick", {i: f"paper {i}" for i in ids})
     assert list(loaded) == ids and chance == prior and tables == {"table2"}
     # issue 62's finding, from the results given and the same blind prior, at the paper's 0.58
-    assert got["arms"] == ("quick", "RESULTS") and findings == ["EQA", [], 0.58, prior, "quick"]
+    assert got["arms"] == ("quick", "RESULTS") and findings == ["EQA", [], 0.58, prior, "quick", None]
 
 
 def test_the_campaign_costs_each_unfinished_run_by_its_step(monkeypatch):

@@ -70,3 +70,13 @@ def test_a_command_beside_a_learner_yields_the_cpu_to_it():
     )
     assert probe([])[:2] == [f"{os.nice(0)} 2 {os.SCHED_OTHER}", "None"]
     assert probe([4242], "SCHED_IDLE")[:2] == [f"{os.nice(0)} 2 {os.SCHED_IDLE}", "None"]
+
+
+def test_a_campaigns_status_is_no_learner_in_either_spelling_and_its_run_is():
+    from emml.rl.contention import _is_learner
+
+    assert _is_learner(["/x/.venv/bin/emml", "campaign", "run", "reference"])
+    assert _is_learner(["python", "-m", "emml.cli", "campaign", "reference", "--no-pin"])  # the deprecated spelling
+    assert not _is_learner(["/x/.venv/bin/emml", "campaign", "status", "reference"])
+    assert not _is_learner(["/x/.venv/bin/emml", "campaign", "reference", "--status"])
+    assert not _is_learner(["/x/.venv/bin/emml", "reports"])

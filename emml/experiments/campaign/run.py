@@ -140,4 +140,4 @@ def resume_command(
         ("--results-root", results_root and project_path(results_root)),
         ("--no-pin", not pinned),
     ]
-    return command_line(["campaign", name], options, plugins)
+    return command_line(["campaign", "run", name], options, plugins)

@@ -91,7 +91,7 @@ def test_a_claim_reads_a_test_column_or_its_train_twin_and_nothing_else(tmp_path
 )
 def test_a_claim_of_an_unknown_table_or_shape_is_named_by_file_and_key_path(tmp_path, text, message):
     """Issue 65: an unknown table said "table='table9' is unknown", naming neither the file nor claims[0].table (and
-    stopped `emml campaign reference --status`)."""
+    stopped `emml campaign status reference`)."""
     path = tmp_path / "claims.toml"
     path.write_text(text)
     with pytest.raises(ValueError, match=rf"^{path}{message}") as e:
