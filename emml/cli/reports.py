@@ -176,8 +176,7 @@ def video(
     ((_, model, cfg),) = _models(checkpoint)
     _own_engines()
     out = _out(out)
-    tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
-    for task in tasks:
+    for task in cfg.env.played:
         for i in range(episodes):
             ep = record_episode(model, cfg.env, task, seed + i)
             path = episode_gif(ep, out / f"{cfg.table}-{checkpoint.parent.name}-{task}-s{seed + i}.gif")

@@ -12,6 +12,10 @@ from emml.config.env_kinds import DOOM_ID, ENV_KINDS, HOUSE_ID, kinds_of
 RESOLUTIONS_16_9 = ((256, 144), (320, 180), (400, 225), (512, 288), (640, 360), (800, 450), (1024, 576))
 """ViZDoom's 16:9 screen resolutions (width, height), the aspect of the paper's 300×168 input."""
 
+TASKS = ("sgn", "eqa")
+"""The tasks by id (0 SGN, 1 EQA) and as a sentence's ``kind``, metrics and log lines name them: the one list
+(`DoomConfig.tasks` plays both, or one of them)."""
+
 VOCABULARY_SOURCES = ("all", "train_instructions")
 """Names a run's `DoomConfig.vocabulary` may give instead of a word list (`Vocabulary.from_dataset`, emml/tasks)."""
 
@@ -25,7 +29,7 @@ class DoomConfig:
     split: Literal["train", "test"] = "train"
     """'train' or 'test' instructions/questions (Table 7)."""
     tasks: Literal["both", "sgn", "eqa"] = "both"
-    """'both' (SGN and EQA, 50/50 per episode), 'sgn' or 'eqa' (single-task ablation, Table 3)."""
+    """'both' (SGN and EQA, 50/50 per episode), 'sgn' or 'eqa' (single-task ablation, Table 3): `played`."""
     height: int = 168
     """Observation height in pixels (Appendix A: 3×168×300)."""
     width: int = 300
@@ -84,6 +88,11 @@ class DoomConfig:
     """The environment this class configures (not a field); it plays the kinds of env_kinds.py with this id."""
     DIFFICULTIES: ClassVar[tuple[str, ...]] = kinds_of(DOOM_ID)
     """The allowed `difficulty` values (not a field): Easy and Hard (§4)."""
+
+    @property
+    def played(self) -> tuple[str, ...]:
+        """The tasks the env draws episodes of, in `TASKS` order: both for 'both', else the one named."""
+        return TASKS if self.tasks == "both" else (self.tasks,)
 
     def validate(self) -> DoomConfig:
         check_choice("difficulty", self.difficulty, self.DIFFICULTIES)

@@ -158,17 +158,16 @@ class DoomEnv(gym.Env):
         self.render_mode = render_mode
         self.dataset = load_dataset(cfg.dataset)
         self.vocab = resolve_vocabulary(cfg.vocabulary, self.dataset)
-        kinds = TASKS if cfg.tasks == "both" else (cfg.tasks,)
-        self.sentences = {k: self.dataset.select(k, cfg.split) for k in kinds}
+        self.sentences = {k: self.dataset.select(k, cfg.split) for k in cfg.played}
         if cfg.instructions:
             wanted = [self.dataset.find(t) for t in cfg.instructions]
             for s in wanted:
-                if s.split != cfg.split or s.kind not in kinds:
+                if s.split != cfg.split or s.kind not in cfg.played:
                     raise ValueError(
                         f"instructions: {s.text!r} is a {s.split} {s.kind} sentence, not in split={cfg.split!r} "
                         f"tasks={cfg.tasks!r}"
                     )
-            self.sentences = {k: tuple(s for s in wanted if s.kind == k) for k in kinds}
+            self.sentences = {k: tuple(s for s in wanted if s.kind == k) for k in cfg.played}
             self.sentences = {k: v for k, v in self.sentences.items() if v}
         for sents in self.sentences.values():
             for s in sents:

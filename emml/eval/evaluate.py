@@ -63,7 +63,7 @@ def eval_settings(env_cfg: DoomConfig) -> list[tuple[str, str, tuple[str, ...] |
     from emml.tasks.language import load_dataset, resolve_vocabulary
 
     ds = load_dataset(env_cfg.dataset)
-    tasks = ("sgn", "eqa") if env_cfg.tasks == "both" else (env_cfg.tasks,)
+    tasks = env_cfg.played
     if not env_cfg.instructions:
         known = set(resolve_vocabulary(env_cfg.vocabulary, ds).words)
         return [

@@ -140,8 +140,7 @@ def figures(
     path = out / figure_name("channels", table, name)
     channels_figure(models, cfg.env, path)
     paths.append(path)
-    tasks = ("sgn", "eqa") if cfg.env.tasks == "both" else (cfg.env.tasks,)
-    for task in tasks:
+    for task in cfg.env.played:
         for seed in seeds:
             ep = record_episode(model, cfg.env, task, seed)
             path = out / figure_name(f"attention-{task}", table, name, f"-s{seed}")

@@ -62,7 +62,7 @@ from emml.runs.rundir import (
 from emml.runs.runlock import hold_run
 from emml.runs.segments import begin_segment
 from emml.runs.tracking import Tracker, display_name
-from emml.tasks.language import TASKS, load_dataset, resolve_vocabulary
+from emml.tasks.language import load_dataset, resolve_vocabulary
 
 log = logging.getLogger(__name__)
 
@@ -358,7 +358,7 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
             dynamic_ncols=True,
             smoothing=0.1,
         )
-        tasks = TASKS if cfg.env.tasks == "both" else (cfg.env.tasks,)  # the tasks the run plays, as lines say them
+        tasks = cfg.env.played  # the tasks the run plays, as lines say them
         since_line = dict.fromkeys(TIME_SPLIT, 0.0)  # the log line's split: since the previous line
         log_mark = start_mark = (time.perf_counter(), frames)
         while update < cfg.num_updates:

@@ -14,11 +14,10 @@ from pathlib import Path
 
 import tomllib
 
+from emml.config.env import TASKS as TASKS  # the tasks' one list (the config declares what a run plays)
 from emml.config.schema import VOCABULARY_SOURCES, check_choice  # the config's allowed values (also imported from here)
 
 SPLITS = ("train", "test")
-TASKS = ("sgn", "eqa")
-"""The tasks by id (0 SGN, 1 EQA) and as a sentence's ``kind``, metrics and log lines name them: the one list."""
 
 
 @dataclass(frozen=True)
