@@ -19,9 +19,6 @@ PACKAGE = Path(emml.__file__).parent
 """The package read by the guards."""
 MAX_LINES = 500
 """The most lines a module of emml may have: a module this long has more than one job."""
-PENDING_LONG = {"emml/experiments/tables.py": 560}
-"""Modules known over `MAX_LINES` when the guard was written, each with its count then: one that grows fails, and
-an entry whose module is back under the limit fails until it is removed here. Empty is the goal."""
 
 
 def modules(package: Path) -> dict[str, Path]:
@@ -159,22 +156,16 @@ def oversized(package: Path, limit: int = MAX_LINES) -> list[tuple[str, int]]:
     return sorted(((f, n) for f, n in counts.items() if n > limit), key=lambda fn: (-fn[1], fn[0]))
 
 
-def size_findings(package: Path, pending: dict, limit: int = MAX_LINES) -> list[str]:
-    """What the size guard fails on: each module over ``limit`` lines that is not in ``pending`` or has grown past
-    its count there, and each entry of ``pending`` back under the limit."""
-    found = dict(oversized(package, limit))
-    out = [f"{f} ({n} lines)" for f, n in found.items() if n > pending.get(f, limit)]
-    return out + [f"{f}: {limit} lines or fewer now, remove it from PENDING_LONG" for f in pending if f not in found]
-
-
 def test_no_import_circle_among_emmls_modules():
     report = circle_report(PACKAGE)
     assert not report, f"import circles (function-local imports count; move the shared piece to its owner):\n{report}"
 
 
 def test_no_module_of_emml_is_over_the_line_limit():
-    found = size_findings(PACKAGE, PENDING_LONG)
-    assert not found, f"modules over {MAX_LINES} lines (split each by job): " + ", ".join(found)
+    found = oversized(PACKAGE)
+    assert not found, f"modules over {MAX_LINES} lines (split each by job): " + ", ".join(
+        f"{f} ({n} lines)" for f, n in found
+    )
 
 
 def test_the_layout_reads_the_real_package():
@@ -256,13 +247,3 @@ def test_the_guards_fail_on_a_planted_circle_and_a_planted_long_module(tmp_path,
         test_no_import_circle_among_emmls_modules()
     with pytest.raises(AssertionError, match=r"emml/b\.py \(501 lines\)"):
         test_no_module_of_emml_is_over_the_line_limit()
-
-
-def test_a_pending_long_module_is_tolerated_at_its_count_only(tmp_path):
-    package = plant(tmp_path, {"long.py": "x = 1\n" * 501})
-    assert size_findings(package, {"emml/long.py": 501}) == []
-    assert size_findings(package, {"emml/long.py": 500}) == ["emml/long.py (501 lines)"]  # it grew
-    (package / "long.py").write_text("x = 1\n" * 500)
-    assert size_findings(package, {"emml/long.py": 501}) == [
-        "emml/long.py: 500 lines or fewer now, remove it from PENDING_LONG"
-    ]

@@ -18,7 +18,9 @@ from emml.config.paths import project_path
 from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides, check_choice
 from emml.experiments.pool import STOP_GRACE_S, LaunchReport, PlannedRun, collect, run_pool, train_one
-from emml.experiments.tables import RunSpec, Table, load_table
+from emml.experiments.runspec import RunSpec
+from emml.experiments.table_data import Table
+from emml.experiments.tables import load_table
 from emml.runs.naming import run_name
 
 BACKENDS = ("local", "slurm")

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml.config.schema import TrainConfig
-from emml.experiments.tables import RunSpec
+from emml.experiments.runspec import RunSpec
 
 
 @dataclass

@@ -1,26 +1,28 @@
-"""The experiment registry: reproduce/tableN.toml → `Table` → `RunSpec`s (one per setting and seed).
+"""Reading a table file: reproduce/tableN.toml (or an experiment's, or one's own) → a checked `Table`
+(emml/experiments/table_data.py), whose `runs` are the `RunSpec`s to train (one per setting and seed).
 
 A table file reads like the paper's table (Chaplot et al. 2019, arXiv:1902.01385): `[[rows]]` are its rows (a
 model, optionally with config overrides), `[columns]` its columns (difficulties × aux × metrics). Each
 (row, difficulty, aux) is a *setting*; a setting is trained once per seed of the profile (reproduce/profiles.toml).
 A row with `metric_overrides` trains one setting per metric (Table 3's "DA Single-Task": SGN cells from SGN-only
 runs, EQA cells from EQA-only runs). Run names derive from the config (`emml.runs.naming.run_name`), and two runs of a
-table may not share one. A malformed file fails with the file, the key and what is wrong.
+table may not share one. This module declares the keys and values a file may hold and checks each: a malformed file
+fails with the file, the key and what is wrong. A table is checked once per content (`LOADED`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import tomllib
 
 from emml.config.env_kinds import ENV_KINDS
-from emml.config.profiles import Profile, resolve_profile
+from emml.config.profiles import resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides
-from emml.experiments.metrics import BY_NAME, METRICS, TRANSFER_METRICS
+from emml.experiments.metrics import METRICS, TRANSFER_METRICS
+from emml.experiments.runspec import Transfer
+from emml.experiments.table_data import MoreSeeds, Row, Table
 from emml.experiments.table_files import find_table, list_tables, table_path
-from emml.runs.naming import run_name
 
 STATUSES = ("active", "placeholder")
 DIFFICULTIES = tuple(ENV_KINDS)
@@ -30,240 +32,7 @@ COLUMN_KEYS = ("difficulties", "aux", "metrics")
 ROW_KEYS = ("label", "model", "overrides", "metric_overrides", "noaux_overrides", "from_table", "more_seeds")
 MORE_SEEDS_KEYS = ("profile", "difficulty", "aux", "seeds")
 TRANSFER_KEYS = ("model", "overrides", "words", "detector")
-TRANSFER_RUN_ROW = "Training run (before transfer)"
-"""The `RunSpec.row` of a transfer table's runs: one training setting serves every row (its curve's label)."""
 TRANSFER_ROW_KEYS = ("label", "instructions", "extra")
-
-
-@dataclass(frozen=True)
-class Transfer:
-    """A transfer table's one training setting (per difficulty, aux and seed) and what is appended after it
-    (§5.4): every row reads its instructions' scores from those runs (emml/eval/transfer.py)."""
-
-    model: str
-    """Model registry name of the trained policy (Dual-Attention)."""
-    overrides: dict
-    """TrainConfig overrides of the training runs (SGN only, the training instructions' vocabulary)."""
-    words: tuple[str, ...]
-    """The new words, in the order their detector channels are appended."""
-    detector: str
-    """Detector kind (emml.eval.transfer.DETECTORS)."""
-
-
-@dataclass(frozen=True)
-class RunSpec:
-    """One training run of a table: a setting (row, difficulty, aux, overrides) and a seed."""
-
-    table: str
-    """Table name (tableN), also the MLflow experiment and the results/<table>/ folder."""
-    row: str
-    """The paper's row label the run fills (e.g. 'Dual-Attention', 'w/o SA')."""
-    model: str
-    """Model registry name (`emml models`)."""
-    difficulty: str
-    """'easy' or 'hard'."""
-    aux: bool
-    """Trained with the auxiliary task."""
-    seed: int
-    """Seed (from the profile's `seeds`)."""
-    overrides: dict = field(default_factory=dict)
-    """TrainConfig fields by dotted name (e.g. {'env.shaping': False}) applied after the profile."""
-    metrics: tuple[str, ...] = ()
-    """The results columns this run fills in its row."""
-    transfer: Transfer | None = None
-    """Transfer tables: what to append and score after training (emml/eval/transfer.py); None otherwise."""
-    instructions: tuple[str, ...] = ()
-    """Transfer tables: the instructions scored after training (every row's)."""
-    departures: tuple[str, ...] = ()
-    """The keys of `overrides` that depart from the paper rather than define the row (a row's `noaux_overrides`):
-    the reports list them as deviations, where the row's own overrides are the experiment."""
-
-    def to_config(self, profile: Profile | str, **fields) -> TrainConfig:
-        """The run's TrainConfig under `profile` (a name is looked up; extra `fields`, e.g. run_root, go to
-        TrainConfig)."""
-        return resolve_profile(profile).config(
-            self.difficulty,
-            self.overrides,
-            model=self.model,
-            aux=self.aux,
-            seed=self.seed,
-            table=self.table,
-            **fields,
-        )
-
-    def run_name(self, profile: Profile | str) -> str:
-        profile = resolve_profile(profile)
-        return run_name(self.to_config(profile), profile)
-
-
-@dataclass(frozen=True)
-class MoreSeeds:
-    """Seeds one setting of a row trains beyond its profile's (`more_seeds` in a table file): the stated model's
-    spread (issue 82: Table 2's Dual-Attention, Easy · Aux, on five seeds at the quick profile)."""
-
-    profile: str
-    """The profile they apply under (reproduce/profiles.toml); no other profile plans them."""
-    difficulty: str
-    """The setting's difficulty column."""
-    aux: bool
-    """The setting's aux column."""
-    seeds: tuple[int, ...]
-    """The seeds added after the profile's own."""
-
-
-@dataclass(frozen=True)
-class Row:
-    """A row of the paper's table."""
-
-    label: str
-    """The paper's label, used to join with reproduce/paper/<table>.csv."""
-    model: str
-    """Model registry name."""
-    overrides: dict = field(default_factory=dict)
-    """Config overrides for every run of the row."""
-    metric_overrides: dict = field(default_factory=dict)
-    """metric → extra overrides: the row's cells of that metric come from runs with them."""
-    instructions: tuple[str, ...] = ()
-    """Transfer tables: the test instructions the row's cells average over."""
-    extra: bool = False
-    """Transfer tables: a row of ours below the paper's (test instructions its table does not list)."""
-    from_table: str | None = None
-    """The row's runs are that table's (same run names, run dirs and results rows), not trained again: Table 3's
-    "DA Multi-Task" is Table 2's Dual-Attention."""
-    noaux_overrides: dict = field(default_factory=dict)
-    """Extra overrides for the row's runs without the auxiliary task only (over `overrides` and `metric_overrides`):
-    Dual-Attention's No Aux runs keep the answer loss to the GA2 gate (issue 48, docs/fidelity.md 'No Aux')."""
-    more_seeds: tuple[MoreSeeds, ...] = ()
-    """Settings of the row that train more seeds than the profile's, under one named profile (`MoreSeeds`)."""
-
-    def seeds(self, seeds: list[int], profile: str | None, difficulty: str, aux: bool) -> list[int]:
-        """The seeds of one setting: the profile's, then its `more_seeds` under that profile."""
-        more = [
-            s
-            for m in self.more_seeds
-            if (m.profile, m.difficulty, m.aux) == (profile, difficulty, aux)
-            for s in m.seeds
-        ]
-        return list(seeds) + [s for s in more if s not in seeds]
-
-    def settings(self, metrics: tuple[str, ...]) -> list[tuple[dict, tuple[str, ...]]]:
-        """(overrides, metrics filled) for each distinct setting of the row."""
-        if not self.metric_overrides:
-            return [(dict(self.overrides), metrics)]
-        return [({**self.overrides, **self.metric_overrides[m]}, (m,)) for m in metrics]
-
-    def for_aux(self, overrides: dict, aux: bool) -> tuple[dict, tuple[str, ...]]:
-        """A setting's overrides for its runs with (``aux``) or without the auxiliary task, and which of them depart
-        from the paper (`RunSpec.departures`: the No Aux overrides)."""
-        extra = {} if aux else self.noaux_overrides
-        return {**overrides, **extra}, tuple(extra)
-
-
-@dataclass(frozen=True)
-class Table:
-    """A paper table as data: rows, columns and where its numbers come from."""
-
-    name: str
-    """File stem: table2, table3, …"""
-    path: Path
-    """The TOML file."""
-    title: str
-    """The paper's caption (shortened where long)."""
-    paper_label: str
-    """The LaTeX label of the paper's table."""
-    status: str
-    """'active' (declares runs) or 'placeholder' (completed by its own issue; no runs)."""
-    row_header: str = "Model"
-    """Header of the row-label column."""
-    rows: tuple[Row, ...] = ()
-    difficulties: tuple[str, ...] = ()
-    aux: tuple[bool, ...] = ()
-    metrics: dict = field(default_factory=dict)
-    """Column label (SGN) → results column (sgn_test), in the paper's order."""
-    transfer: Transfer | None = None
-    """A transfer table (Table 4): rows are instruction types read from one training setting."""
-
-    @property
-    def placeholder(self) -> bool:
-        return self.status == "placeholder"
-
-    def columns(self) -> list[tuple[str, bool, str]]:
-        """(difficulty, aux, metric) for every cell column, in the paper's order."""
-        return [(d, a, m) for d in self.difficulties for a in self.aux for m in self.metrics.values()]
-
-    def runs(self, seeds: list[int], profile: str | None = None) -> list[RunSpec]:
-        """Every run: rows × difficulties × aux × row settings × seeds (a transfer table: difficulties × aux ×
-        seeds, every row read from them); ``profile``: the profile's name, whose rows' `more_seeds` are added (None:
-        the seeds given only)."""
-        out = []
-        if self.transfer is not None:
-            t = self.transfer
-            texts = tuple(x for row in self.rows for x in row.instructions)
-            metrics = tuple(self.metrics.values())
-            for difficulty in self.difficulties:
-                for aux in self.aux:
-                    for seed in seeds:
-                        out.append(
-                            RunSpec(
-                                self.name,
-                                TRANSFER_RUN_ROW,
-                                t.model,
-                                difficulty,
-                                aux,
-                                seed,
-                                t.overrides,
-                                metrics,
-                                t,
-                                texts,
-                            )
-                        )
-            return out
-        for row in self.rows:
-            for difficulty in self.difficulties:
-                for aux in self.aux:
-                    for overrides, metrics in row.settings(tuple(self.metrics.values())):
-                        settings, departures = row.for_aux(overrides, aux)
-                        owner = row.from_table or self.name
-                        for seed in row.seeds(seeds, profile, difficulty, aux):
-                            out.append(
-                                RunSpec(
-                                    owner,
-                                    row.label,
-                                    row.model,
-                                    difficulty,
-                                    aux,
-                                    seed,
-                                    dict(settings),
-                                    metrics,
-                                    departures=departures,
-                                )
-                            )
-        return out
-
-    def cell_runs(self, row: str, difficulty: str, aux: bool, metric: str, runs: list[RunSpec]) -> list[RunSpec]:
-        """The runs (one per seed) whose `metric` fills the cell."""
-        return [
-            r
-            for r in runs
-            if (r.row == row or self.transfer is not None)
-            and r.difficulty == difficulty
-            and r.aux == aux
-            and metric in r.metrics
-        ]
-
-    def curve_rows(self) -> list[str]:
-        """The `RunSpec.row` values to draw one training curve each for: the rows, or a transfer table's one
-        training setting."""
-        return [TRANSFER_RUN_ROW] if self.transfer is not None else [r.label for r in self.rows]
-
-    def cell_columns(self, row: str, metric: str) -> list[str]:
-        """The results columns whose mean is a run's value for the cell: [metric], or for a transfer table one
-        `<metric>:<instruction>` column per instruction of the row (`Metric.column`: Table 4's sgn_transfer, as
-        emml/eval/transfer.py writes it)."""
-        if self.transfer is None:
-            return [metric]
-        declared = BY_NAME[metric]
-        return [declared.column(x) for r in self.rows if r.label == row for x in r.instructions]
 
 
 def load_table(name: str, path: Path | None = None) -> Table:

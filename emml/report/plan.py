@@ -13,7 +13,9 @@ from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig
 from emml.experiments.launch import plan_runs
 from emml.experiments.pool import PlannedRun
-from emml.experiments.tables import RunSpec, Table, load_table
+from emml.experiments.runspec import RunSpec
+from emml.experiments.table_data import Table
+from emml.experiments.tables import load_table
 
 
 @dataclass(frozen=True)

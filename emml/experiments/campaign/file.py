@@ -9,7 +9,7 @@ from pathlib import Path
 import tomllib
 
 from emml.config.paths import REPRODUCE_DIR
-from emml.experiments.tables import RunSpec
+from emml.experiments.runspec import RunSpec
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
 STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "claim", "note")
