@@ -102,7 +102,7 @@ def test_figures_are_named_by_table_and_run_so_tables_sharing_a_run_name_keep_bo
         return figure
 
     for table in ("table3", "table4"):
-        cfg = SimpleNamespace(table=table, aux=True, env=SimpleNamespace(tasks="sgn"))
+        cfg = SimpleNamespace(table=table, aux=True, env=SimpleNamespace(tasks="sgn", played=("sgn",)))
         monkeypatch.setattr(rundir, "load_model", lambda path, cfg=cfg: (None, cfg))
         monkeypatch.setattr(visualize, "channels_figure", draw(table))
         monkeypatch.setattr(visualize, "attention_figure", draw(table))
