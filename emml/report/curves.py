@@ -14,7 +14,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 from emml.config.profiles import Profile  # noqa: E402
 from emml.experiments.metrics import BY_NAME, DECLARED, train_of  # noqa: E402
 from emml.report.aggregate import reference_row  # noqa: E402
-from emml.report.savefig import PAGE_INCHES, frames_axis, save, wrap  # noqa: E402
+from emml.report.savefig import PAGE_HEIGHT_INCHES, PAGE_INCHES, caption_path, frames_axis, save, wrap  # noqa: E402
+from emml.runs.atomic import write_text  # noqa: E402
+from emml.runs.diskspace import RERUN  # noqa: E402
 from emml.runs.store import metric_history  # noqa: E402
 
 TRAIN_KEYS = (("train/success_sgn", "SGN"), ("train/success_eqa", "EQA"))
@@ -32,7 +34,7 @@ then every periodically evaluated metric as declared (emml/experiments/metrics.p
 
 
 def plot_run(run_id: str, path: Path, title: str) -> Path:
-    fig, ax = plt.subplots(figsize=(PAGE_INCHES, 3.5))
+    fig, ax = plt.subplots(figsize=(PAGE_INCHES, 3.5), layout="constrained")
     for key, label, color, style in SERIES:
         hist = metric_history(run_id, key)
         if not hist:
@@ -50,8 +52,7 @@ def plot_run(run_id: str, path: Path, title: str) -> Path:
     ax.set_title(wrap(title, PAGE_INCHES - 0.2, plt.rcParams["axes.titlesize"]))
     ax.legend(loc="upper left")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    save(fig, path, dpi=120)
+    save(fig, path)
     plt.close(fig)
     return path
 
@@ -99,8 +100,10 @@ def plot_table(
     """Greedy accuracy vs frames for every row of table `name` under `profile`, on the table's own metrics (SGN and
     EQA test for Table 2): a panel per (metric, difficulty, aux) that has a curve (no empty panel), one line per row
     (mean over seeds, 95% bootstrap band), the paper's number for the row marked at the right edge, the task's chance
-    dotted, and under the panels the deviations from the paper of the runs drawn, read from their configs
-    (emml/report/deviations.py). Runs come from results/<name>/<profile>.csv (their run_id), curves from MLflow,
+    dotted. The figure is at most `PAGE_INCHES` × `PAGE_HEIGHT_INCHES` (rows of panels lower when many); what it
+    shows and the deviations from the paper of the runs drawn, read from their configs (emml/report/deviations.py),
+    are its caption, written beside it (`caption_path`: the table's page prints it under the figure). Runs come
+    from results/<name>/<profile>.csv (their run_id), curves from MLflow,
     else from the run dir's metrics.csv (under ``run_root``, default: the profile's); a run with neither is skipped
     with a note. When no run has a curve here, existing figures are kept rather than replaced by empty ones. Returns
     (paths, notes)."""
@@ -175,12 +178,8 @@ def plot_table(
     shown_metrics = list(dict.fromkeys(m for (m, _, _) in panels))
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
     shown = [deviations.shown_run(run, run_root, rows.get(r)) for r, run in drawn.items()]
-    footer = wrap(deviations.sentence(deviations.summarise(shown)), PAGE_INCHES - 0.1, FOOTER_POINTS) if shown else ""
-    heights = [PANEL_INCHES] * len(shown_metrics)
-    if footer:  # a row of its own under the panels: the layout makes room for every line of it
-        heights.append((footer.count("\n") + 1) * FOOTER_POINTS * 1.3 / 72)
-    fig = plt.figure(figsize=(PAGE_INCHES, sum(heights) + 1.2), layout="constrained")
-    grid = fig.add_gridspec(len(heights), len(settings), height_ratios=heights)
+    fig = plt.figure(figsize=(PAGE_INCHES, figure_height(len(shown_metrics))), layout="constrained")
+    grid = fig.add_gridspec(len(shown_metrics), len(settings))
     ref = reference_row(table)
     width = PAGE_INCHES / len(settings)
     legend: dict = {}
@@ -228,27 +227,37 @@ def plot_table(
     longest = max(len(t) for t in legend)
     ncol = max(1, min(len(legend), int(PAGE_INCHES * 72 / (0.6 * plt.rcParams["legend.fontsize"] * longest + 30))))
     fig.legend(list(legend.values()), list(legend), loc="outside lower center", ncol=ncol)
-    note = "" if profile == "paper" else f" Profile '{profile}' is not the paper's protocol: its deviations below."
-    title = (
-        f"{name} [{profile}]: greedy accuracy (the table's metric, periodic evaluation), seed mean, 95% bootstrap "
-        f"band; the paper's number marked at the right edge; dotted: chance, the best a model that sees no frame can "
-        f"score (enumerated from the task).{note}"
-    )
+    title = f"{name} [{profile}]: greedy accuracy (the table's metric), seed mean, 95% bootstrap band"
     fig.suptitle(wrap(title, PAGE_INCHES - 0.1, plt.rcParams["figure.titlesize"]))
-    if footer:
-        ax = fig.add_subplot(grid[-1, :])
-        ax.axis("off")
-        ax.text(0, 1, footer, fontsize=FOOTER_POINTS, ha="left", va="top", transform=ax.transAxes)
     for p in paths:
         save(fig, p)
     plt.close(fig)
+    runs = deviations.sentence(deviations.summarise(shown)) if shown else ""
+    write_text(caption_path(paths[0]), caption(name, profile, runs) + "\n", then=RERUN)
     return paths, notes
 
 
-FOOTER_POINTS = 7
-"""The size of the footer's text (the deviations of the runs drawn)."""
+def caption(name: str, profile: str, deviations: str) -> str:
+    """The curves' caption (markdown): what the figure draws, and ``deviations``, those of the runs it draws (one
+    paragraph, `emml.report.deviations.sentence`; empty: none read)."""
+    protocol = "" if profile == "paper" else f" Profile '{profile}' is not the paper's protocol."
+    text = (
+        f"*Figure: {name} [{profile}], greedy accuracy (the table's metric, periodic evaluation) against frames: the "
+        "seed mean and its 95% bootstrap band per row; the paper's number marked (◀) at the right edge; dotted: "
+        f"chance, the best a model that sees no frame can score (enumerated from the task).{protocol}*"
+    )
+    return f"{text} **The runs drawn.** {deviations}" if deviations else text
+
+
 PANEL_INCHES = 1.9
 """The height of a row of panels; the figure is `PAGE_INCHES` wide, each setting a column."""
+CHROME_INCHES = 1.2
+"""The figure's height beside its panels: the title above them, the legend under them."""
+
+
+def figure_height(rows: int) -> float:
+    """Inches: `rows` rows of panels `PANEL_INCHES` tall, lower where that would pass `PAGE_HEIGHT_INCHES`."""
+    return CHROME_INCHES + rows * min(PANEL_INCHES, (PAGE_HEIGHT_INCHES - CHROME_INCHES) / max(rows, 1))
 
 
 def _history(run_id: str, key: str) -> list[tuple[int, float]] | None:

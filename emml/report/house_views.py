@@ -20,7 +20,7 @@ from emml.agents.house_oracle import HouseOracle  # noqa: E402
 from emml.config.schema import HouseConfig  # noqa: E402
 from emml.envs.doom import ANSWER  # noqa: E402
 from emml.envs.house import HouseEnv  # noqa: E402
-from emml.report.savefig import save  # noqa: E402
+from emml.report.savefig import PAGE_INCHES, save, wrap  # noqa: E402
 
 QUESTIONS = ("what color is the fireplace", "what color is the bed", "what color is the office_chair")
 """One training question per view (Table 8), each about a piece in a different room."""
@@ -41,20 +41,22 @@ def answer_view(env: HouseEnv, question: str, seed: int) -> tuple[np.ndarray, st
 
 
 def house_views(path: Path, seed: int = 0, questions: tuple[str, ...] = QUESTIONS) -> Path:
-    """Write the figure: one panel per question, its view captioned with the question and the answer."""
+    """Write the figure, a page's text wide (`PAGE_INCHES`): one panel per question, its view captioned with the
+    question and the answer."""
     env = HouseEnv(HouseConfig(tasks="eqa", split="train"), render_mode="rgb_array")
     try:
         views = [answer_view(env, q, seed + i) for i, q in enumerate(questions)]
     finally:
         env.close()
     h, w = views[0][0].shape[:2]
-    fig, axes = plt.subplots(1, len(views), figsize=(3.2 * len(views), 3.2 * h / w + 0.5))
+    panel = PAGE_INCHES / len(views)  # a view's width: the page's text width shared
+    fig, axes = plt.subplots(1, len(views), figsize=(PAGE_INCHES, panel * h / w + 0.8), layout="constrained")
     for ax, q, (frame, answer) in zip(np.atleast_1d(axes), questions, views):
         ax.imshow(frame)
-        ax.set_title(f"{q}? {answer}", fontsize=8)
+        ax.set_title(wrap(f"{q}? {answer}", panel - 0.1, plt.rcParams["axes.titlesize"]))
         ax.axis("off")
-    fig.suptitle("Example first-person views of the House (emml/House-v0; colours drawn per episode)", fontsize=9)
-    fig.tight_layout()
+    title = "Example first-person views of the House (emml/House-v0; colours drawn per episode)"
+    fig.suptitle(wrap(title, PAGE_INCHES - 0.1, plt.rcParams["figure.titlesize"]))
     save(fig, path, dpi=150)
     plt.close(fig)
     return path

@@ -143,6 +143,7 @@ def report_table(
     from emml.report.aggregate import summary
     from emml.report.commits import commits_note
     from emml.report.field import plot_field
+    from emml.report.savefig import caption_path
     from emml.report.tex import tex_table
 
     plan = plan_report(name, profile, results_root, run_root)
@@ -166,7 +167,9 @@ def report_table(
     field = plot_field(table, prof, cells, out)
     figures = [p for p in (out / f"{name}-{profile}-curves.png",) if p.exists()] + field[:1]
     md = [f"# {name} ({profile})", "", headline(table, prof, cells), ""]
-    md += [f"![{p.stem}]({p.name})" for p in figures] + ([""] if figures else [])
+    for p in figures:  # each figure, its caption under it where one is written beside it (the curves' notes)
+        note = caption_path(p)
+        md += [f"![{p.stem}]({p.name})", ""] + ([note.read_text().strip(), ""] if note.exists() else [])
     md += [text, ""]
     if devs is not None:
         md += [deviations.markdown(devs), ""]

@@ -27,7 +27,7 @@ import torch  # noqa: E402
 from emml.config.schema import DoomConfig  # noqa: E402
 from emml.envs.doom import MOVES  # noqa: E402
 from emml.eval.evaluate import obs_to_torch, playing  # noqa: E402
-from emml.report.savefig import PAGE_INCHES, save, wrap  # noqa: E402
+from emml.report.savefig import PAGE_HEIGHT_INCHES, PAGE_INCHES, save, wrap  # noqa: E402
 
 CHANNEL_WORDS = ("red", "green", "torch", "pillar", "smallest", "tall", "armor")
 """The rows of the channel figure: colours, objects, a size word and a superlative (no aux label exists for it)."""
@@ -110,6 +110,7 @@ def attention_figure(ep: Episode, path: str | Path, rows: int = 6) -> plt.Figure
     steps = np.unique(np.linspace(0, len(ep.frames) - 1, min(rows, len(ep.frames))).round().astype(int))
     frame_h, frame_w = ep.frames[0].shape[:2]
     step_inches = 0.45 + PAGE_INCHES * 0.36 * frame_h / frame_w  # a frame panel's height at its share of the width
+    step_inches = min(step_inches, (PAGE_HEIGHT_INCHES - 1.6) / len(steps))  # lower frames: the figure fits a page
     fig = plt.figure(figsize=(PAGE_INCHES, 1.6 + step_inches * len(steps)), layout="constrained")
     grid = fig.add_gridspec(
         len(steps) + 1, 3, width_ratios=[1.6, 1.6, 1.2], height_ratios=[1.6] + [step_inches] * len(steps)
@@ -171,8 +172,9 @@ def channels_figure(
     cols = 2 + len(models)
     h, w = frame.shape[:2]
     panel = (PAGE_INCHES - 1.2) / cols  # a panel's width: the page's, less the words' column and the colour scale
+    row = min(0.15 + panel * h / w, (PAGE_HEIGHT_INCHES - 0.7) / max(len(words), 1))  # smaller maps: fits a page
     fig, axes = plt.subplots(
-        len(words), cols, figsize=(PAGE_INCHES, 0.7 + len(words) * (0.15 + panel * h / w)), squeeze=False,
+        len(words), cols, figsize=(PAGE_INCHES, 0.7 + len(words) * row), squeeze=False,
         layout="constrained",
     )  # fmt: skip
     for r, word in enumerate(words):

@@ -2,6 +2,7 @@
 a results CSV in tmp_path pointing at them (never results)."""
 
 import pandas as pd
+import pytest
 
 from emml.report.curves import _mean_band, plot_table
 from emml.runs.tracking import Tracker
@@ -107,17 +108,19 @@ def test_no_curve_and_no_earlier_figure_writes_no_empty_figure(tracking, tmp_pat
     assert any("no figure written" in n for n in notes)
 
 
-def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(tracking, tmp_path, monkeypatch):
-    """The footer is read from the drawn run's saved config: change a field there and it changes."""
+def test_the_caption_states_its_runs_deviations_and_is_the_same_bytes_twice(tracking, tmp_path, monkeypatch):
+    """The caption beside the figure (not in it) is read from the drawn run's saved config: change a field there and
+    it changes."""
     import json
 
     import emml.report.curves as curves
     from emml.config.profiles import profile_config
     from emml.experiments.tables import load_table
+    from emml.report.savefig import caption_path
 
-    footers = []
+    texts = []
     real = curves.save
-    monkeypatch.setattr(curves, "save", lambda fig, path, **kw: (footers.append(_texts(fig)), real(fig, path, **kw))[1])
+    monkeypatch.setattr(curves, "save", lambda fig, path, **kw: (texts.append(_texts(fig)), real(fig, path, **kw))[1])
     name = "dual_attention-easy-aux-s0-quick"
     csv = tmp_path / "results" / "table3" / "quick.csv"
     csv.parent.mkdir(parents=True)
@@ -132,16 +135,27 @@ def test_the_figure_states_its_runs_deviations_and_is_the_same_bytes_twice(track
     (run / "results.json").write_text(json.dumps({"config": config}))
     kw = dict(results_root=tmp_path / "results", out=tmp_path / "reports", run_root=tmp_path / "runs")
     paths, _ = plot_table("table3", "quick", **kw)
-    first = [p.read_bytes() for p in paths]
-    assert "input 84×150 (paper 168×300, App. A) [the run]" in footers[-1]
-    assert "x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5) [the run]" in footers[-1]
+    note = caption_path(paths[0])
+    first = [p.read_bytes() for p in (*paths, note)]
+    assert "input 84×150 (paper 168×300, App. A) [the run]" in note.read_text()
+    assert "x_S = h·w·vec(x_spat) (paper vec(x_spat), text after Eq. 5) [the run]" in note.read_text()
+    assert "input 84×150" not in texts[-1] and "Deviations" not in texts[-1]  # the figure carries no notes
     plot_table("table3", "quick", **kw)
-    assert [p.read_bytes() for p in paths] == first  # no date, no version stamped: make reports changes no byte
+    assert [p.read_bytes() for p in (*paths, note)] == first  # no date, no version: make reports changes no byte
     config["env"].update(height=168, width=300)
     (run / "results.json").write_text(json.dumps({"config": config}))
     plot_table("table3", "quick", **kw)
-    assert "input" not in footers[-1] and "x_S = h·w·vec(x_spat)" in footers[-1]
-    assert [p.read_bytes() for p in paths] != first
+    assert "input" not in note.read_text() and "x_S = h·w·vec(x_spat)" in note.read_text()
+
+
+def test_many_rows_of_panels_are_lowered_to_fit_a_page():
+    from emml.report.curves import CHROME_INCHES, PANEL_INCHES, figure_height
+    from emml.report.savefig import PAGE_HEIGHT_INCHES
+
+    assert figure_height(2) == pytest.approx(CHROME_INCHES + 2 * PANEL_INCHES)  # room: the panels' own height
+    for rows in (4, 5, 8):
+        assert figure_height(rows) <= PAGE_HEIGHT_INCHES + 1e-9
+    assert figure_height(8) == pytest.approx(PAGE_HEIGHT_INCHES)  # lowered to the page, not below it
 
 
 def _texts(fig) -> str:
@@ -168,7 +182,7 @@ def test_the_figure_is_a_page_wide_nothing_cut_x_in_m_frames_dual_attention_over
     plot_table("table2", "quick", **kw)
     fig = figs[0]
     assert fig.get_size_inches()[0] == PAGE_INCHES
-    assert outside(fig) == []  # every title, label, tick label, legend entry and the footer inside the canvas
+    assert outside(fig) == []  # every title, label, tick label and legend entry inside the canvas
     panels = [ax for ax in fig.axes if ax.get_title()]
     assert {ax.get_title() for ax in panels} == {
         f"{m} test: {d}, {a}" for m in ("SGN", "EQA") for d in ("Easy", "Hard") for a in ("No Aux", "Aux")
