@@ -97,7 +97,7 @@ class PackedTrainer:
             update, frames = opened[0][2], opened[0][3]
             learner = PackedLearner(stacked, optimizer, self.cfg)
             for t in self.trainers:
-                t._consistent = (update, frames)
+                t.consistent = (update, frames)
             finals = [(m, m.pop("_frames")) for m in train_loop(self.trainers, learner, update, frames)]
         except BaseException as e:  # KILLED on Ctrl-C or a termination signal, else FAILED (Tracker.abort)
             if learner is not None and isinstance(e, (KeyboardInterrupt, SystemExit)):

@@ -95,6 +95,11 @@ class Trainer:
         self.git_sha = git_sha()  # the code this process runs: read once, before the tree can change under it
         self.started_at: str | None = None
         """When the run first started (UTC ISO; its checkpoint's, kept on resume; None for a checkpoint from before)."""
+        self.consistent: tuple[int, int] | None = None
+        """(update, frames) of the last whole update while the model and optimizer are that update's; None while an
+        update steps them (`train_loop` sets it), so that a stop keeps only a whole update (`checkpoint_on_stop`)."""
+        self.saved_update = -1
+        """The update of the last checkpoint this process saved (-1: none yet)."""
 
     # --- public ---------------------------------------------------------------------------------------------
     def train(self) -> RunResult:
@@ -106,7 +111,7 @@ class Trainer:
         if isinstance(opened, RunResult):
             return opened
         model, optimizer, update, frames, resumed = opened
-        self._consistent = (update, frames)
+        self.consistent = (update, frames)
         try:
             metrics = self._loop(model, optimizer, update, frames)
         except BaseException as e:  # KILLED on Ctrl-C, SIGTERM/SIGHUP (install_signal_handlers), else FAILED
@@ -200,7 +205,7 @@ class Trainer:
         if saved is None:  # at once, so that a run killed before its first update resumes this MLflow run, not a second
             try:
                 first = optimizer or make_optimizer(model.parameters(), cfg.ppo, captures(cfg))
-                self._checkpoint(model, first, update, frames, False)
+                self.checkpoint(model, first, update, frames, False)
             except BaseException as e:  # a full disk, a run dir gone read-only: the run ends FAILED, not RUNNING
                 self.tracker.abort(e)
                 raise
@@ -221,7 +226,7 @@ class Trainer:
             return False
         return not any(step == frames and key.startswith("eval/") for step, key, _ in read_mirror(self.dir / METRICS))
 
-    def _eval(self, model, frames: int, final: bool = False) -> dict:
+    def evaluate_at(self, model, frames: int, final: bool = False) -> dict:
         """Greedy accuracies (logged under eval/): over `final_eval_episodes` per (task, split) for the run's score
         (``final``), `eval_episodes` for the curves."""
         t_start = time.perf_counter()
@@ -248,11 +253,11 @@ class Trainer:
     def checkpoint_on_stop(self, model, optimizer) -> None:
         """A stopped run (Ctrl-C, SIGTERM) keeps the updates it finished since its last checkpoint: unless it stopped
         inside an update (model and optimizer half-stepped), its state is that of its last whole update."""
-        at = getattr(self, "_consistent", None)
-        if at is not None and at[0] > getattr(self, "_saved_update", -1):
-            self._checkpoint(model, optimizer, *at, finished=False)
+        at = self.consistent
+        if at is not None and at[0] > self.saved_update:
+            self.checkpoint(model, optimizer, *at, finished=False)
 
-    def _checkpoint(self, model, optimizer, update: int, frames: int, finished: bool) -> None:
+    def checkpoint(self, model, optimizer, update: int, frames: int, finished: bool) -> None:
         """``optimizer``: the optimizer, or its state_dict (a packed run's slice, emml/rl/packed.py)."""
         save_checkpoint(
             self.dir / CHECKPOINT,
@@ -269,9 +274,9 @@ class Trainer:
                 "started_at": self.started_at,
             },
         )
-        self._saved_update = update
+        self.saved_update = update
 
-    def _write_results(self, metrics: dict, frames: int) -> None:
+    def write_results(self, metrics: dict, frames: int) -> None:
         times = {"started_at": self.started_at, "ended_at": utc_now()} if self.started_at else {"ended_at": utc_now()}
         payload = results_payload(self.cfg, metrics, frames, self.git_sha, self.tracker.run_id, times)
         if getattr(metrics, "questions", None):  # EQA per question (emml.eval.evaluate.Scores, issue 81)
@@ -332,7 +337,7 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
     """The one training loop, of a run (`PlainLearner`) or of N packed runs (one learner, one sampler over every
     run's actors): collect `num_steps` steps per actor, one update, then each run's metrics, evaluations and
     checkpoints at its cadences; at the end each run's final evaluation, results and finished checkpoint. Returns
-    each run's final metrics (with ``_frames``). A run's ``_consistent`` says whether its model and optimizer are
+    each run's final metrics (with ``_frames``). A run's ``consistent`` says whether its model and optimizer are
     those of a whole update (`Trainer.checkpoint_on_stop`)."""
     cfg, device, n = trainers[0].cfg, trainers[0].device, len(trainers)
     B, T = cfg.num_envs, cfg.num_steps
@@ -347,7 +352,7 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
         if update < cfg.num_updates:  # resumed where a stop cut an evaluation short: that point first
             for r, t in enumerate(trainers):
                 if t.eval_missed(frames):
-                    t._eval(learner.run_model(r), frames)
+                    t.evaluate_at(learner.run_model(r), frames)
         total = cfg.num_updates * cfg.frames_per_update
         # a progress bar on a terminal only: piped to a file its \r frames would fill the log (the lines stay)
         bar = tqdm(
@@ -372,12 +377,12 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                 # a SIGTERM here stops the run after this update and its point of the curve, which it then keeps
                 with stop_after():
                     for t in trainers:
-                        t._consistent = None  # the update changes the model and optimizer step by step
+                        t.consistent = None  # the update changes the model and optimizer step by step
                     stats = learner.update(buffer, mask)
                     update += 1
                     frames += B * T
                     for t in trainers:
-                        t._consistent = (update, frames)
+                        t.consistent = (update, frames)
                     now = time.perf_counter()
                     seconds = sampler.timing | {"learn": now - t_learn}
                     fps = B * T * n / (now - t_start)
@@ -413,21 +418,21 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                 since_line = dict.fromkeys(TIME_SPLIT, 0.0)
             if next_eval is not None and frames >= next_eval and update < cfg.num_updates:
                 for r, t in enumerate(trainers):
-                    t._eval(learner.run_model(r), frames)
+                    t.evaluate_at(learner.run_model(r), frames)
                 next_eval += cfg.eval_every
             if update % cfg.checkpoint_every == 0 or update == cfg.num_updates:
                 for r, t in enumerate(trainers):
-                    t._checkpoint(learner.run_model(r), learner.optimizer_state(r), update, frames, finished=False)
+                    t.checkpoint(learner.run_model(r), learner.optimizer_state(r), update, frames, finished=False)
         bar.close()
     finals = []
     for r, t in enumerate(trainers):
         run_model, state = learner.run_model(r), learner.optimizer_state(r)
         final = {}
         if cfg.score:  # a measurement run is not scored
-            final = t._eval(run_model, frames, final=True)
-            t._checkpoint(run_model, state, update, frames, finished=False)
-            t._write_results(final, frames)
-        t._checkpoint(run_model, state, update, frames, finished=True)
+            final = t.evaluate_at(run_model, frames, final=True)
+            t.checkpoint(run_model, state, update, frames, finished=False)
+            t.write_results(final, frames)
+        t.checkpoint(run_model, state, update, frames, finished=True)
         finals.append({**final, "_frames": frames})
     return finals
 

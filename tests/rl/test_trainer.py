@@ -529,17 +529,17 @@ def test_a_run_stopped_during_an_evaluation_evaluates_there_when_resumed(trackin
     has its point (before session 14 it went on to the next one: PACMAN's 900k point was lost so)."""
     from emml.rl.trainer import Trainer
 
-    real_eval = Trainer._eval
+    real_eval = Trainer.evaluate_at
 
     def stopped(self, model, frames, final=False):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(Trainer, "_eval", stopped)
+    monkeypatch.setattr(Trainer, "evaluate_at", stopped)
     cfg = smoke(tracking, frames=256, checkpoint_every=100, eval_every=128, eval_episodes=1, final_eval_episodes=1)
     with pytest.raises(KeyboardInterrupt):
         train(cfg, quiet=True)
     assert load_checkpoint(run_dir(cfg) / CHECKPOINT)["frames"] == 128  # the update before the evaluation
-    monkeypatch.setattr(Trainer, "_eval", real_eval)
+    monkeypatch.setattr(Trainer, "evaluate_at", real_eval)
     result = train(cfg, quiet=True)
     assert result.resumed and result.frames == 256
     assert [s for s, _ in metric_history(result.run_id, "eval/sgn_train")] == [128, 256]
