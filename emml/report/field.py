@@ -37,7 +37,7 @@ from emml.report.aggregate import (  # noqa: E402
     reference_row,
     stratified_bootstrap,
 )
-from emml.report.savefig import PAGE_INCHES, save, wrap  # noqa: E402
+from emml.report.savefig import PAGE_HEIGHT_INCHES, PAGE_INCHES, save, wrap  # noqa: E402
 
 TAUS = np.linspace(0.0, 1.0, 51)
 """The thresholds of the performance profiles (accuracy), every 0.02."""
@@ -119,22 +119,59 @@ def _estimate(ax, y: float, e, color: str, name: str, several: bool) -> None:
         ax.plot([e.value], [y], "o", color=color, mfc="white", mew=1.5, ms=6, zorder=3, label=f"_single {name}")
 
 
-def field_figure(table, profile: Profile, cells):
-    """The figure (one row of three panels per setting and metric where two rows or more have runs: one row alone
-    compares with nothing); None for a transfer table (every row reads the same runs) or when no such cell. The
-    reference row (Dual-Attention) in bold and drawn over the others."""
+def field_figures(table, profile: Profile, cells) -> list:
+    """The figures (one row of three panels per setting and metric where two rows or more have runs: one row alone
+    compares with nothing), as many as it takes for each to fit a page (`PAGE_HEIGHT_INCHES`: the rows of panels
+    packed in the table's order, `pages`); [] for a transfer table (every row reads the same runs) or when no such
+    cell. The reference row (Dual-Attention) in bold and drawn over the others."""
     if table.transfer is not None:
-        return None
+        return []
     data = [d for d in panel_data(table, cells) if len(d["rows"]) >= 2]
     if not data:
-        return None
-    ref = reference_row(table)
+        return []
     lines = max(_tick(row, 1).count("\n") + 1 for d in data for row in d["rows"])
     heights = [0.75 + ROW_INCHES * lines * len(d["rows"]) for d in data]
+    cut = pages(heights)
+    return [
+        _figure(table, profile, [data[i] for i in page], [heights[i] for i in page], (k, len(cut)))
+        for k, page in enumerate(cut, 1)
+    ]
+
+
+def field_figure(table, profile: Profile, cells):
+    """The first of `field_figures`, or None."""
+    figs = field_figures(table, profile, cells)
+    for fig in figs[1:]:
+        plt.close(fig)
+    return figs[0] if figs else None
+
+
+FRAME_INCHES = 1.4
+"""A figure's height beyond its rows of panels: the title above them, the legend under them."""
+
+
+def pages(heights: list[float], limit: float = PAGE_HEIGHT_INCHES) -> list[list[int]]:
+    """The rows of panels (their heights) packed in order onto pages of at most ``limit`` inches with the title and
+    legend (`FRAME_INCHES`); a row taller than a page alone is a page of its own."""
+    out: list[list[int]] = []
+    used = limit  # no page open
+    for i, h in enumerate(heights):
+        if out and used + h <= limit:
+            out[-1].append(i)
+            used += h
+        else:
+            out.append([i])
+            used = FRAME_INCHES + h
+    return out
+
+
+def _figure(table, profile: Profile, data: list[dict], heights: list[float], page: tuple[int, int]):
+    """One page of the field figure: ``data``'s rows of panels, page ``page`` = (k, of n)."""
+    ref = reference_row(table)
     fig, axes = plt.subplots(
         len(data),
         3,
-        figsize=(PAGE_INCHES, 1.4 + sum(heights)),
+        figsize=(PAGE_INCHES, FRAME_INCHES + sum(heights)),
         squeeze=False,
         gridspec_kw={"height_ratios": heights},
         layout="constrained",
@@ -199,8 +236,9 @@ def field_figure(table, profile: Profile, cells):
     ncol = max(1, min(len(handles), int(PAGE_INCHES * 72 / (0.6 * plt.rcParams["legend.fontsize"] * longest + 30))))
     fig.legend(list(handles.values()), list(handles), loc="outside lower center", ncol=ncol)
     name = profile.name
+    part = f" ({page[0]} of {page[1]})" if page[1] > 1 else ""
     title = (
-        f"{table.name} [{name}]: rliable per setting and metric where two rows or more have runs; (n) = runs in "
+        f"{table.name} [{name}]{part}: rliable per setting and metric where two rows or more have runs; (n) = runs in "
         f"the cell; 95% CIs from resampling each cell's runs ({REPS:,} resamples, seed {SEED}; {PROFILE_REPS:,} for "
         "the profiles' bands)"
     )
@@ -225,16 +263,18 @@ def _bold(ax, names: list[str], ref: str | None) -> None:
 
 
 def plot_field(table, profile: Profile, cells, out: Path) -> list[Path]:
-    """`field_figure` written as reports/<table>-<profile>-rliable.png and .pdf; [] for a transfer table or when no
-    setting has two rows with runs, and then a figure of that name left by an earlier report is removed (no page
-    links it; a reader would take it for the results' own)."""
-    paths = [out / f"{table.name}-{profile.name}-rliable.png", out / f"{table.name}-{profile.name}-rliable.pdf"]
-    fig = field_figure(table, profile, cells)
-    if fig is None:
-        for p in paths:
-            p.unlink(missing_ok=True)
-        return []
-    for p in paths:
-        save(fig, p)
-    plt.close(fig)
+    """`field_figures` written as reports/<table>-<profile>-rliable.png and .pdf, then -rliable-2.png and .pdf, …
+    (PNG, PDF per page); [] for a transfer table or when no setting has two rows with runs. A page an earlier
+    report wrote beyond these is removed (no page links it; a reader would take it for the results' own)."""
+    stem = f"{table.name}-{profile.name}-rliable"
+    figs = field_figures(table, profile, cells)
+    paths = []
+    for k, fig in enumerate(figs, 1):
+        name = stem if k == 1 else f"{stem}-{k}"
+        for suffix in (".png", ".pdf"):
+            paths.append(save(fig, out / f"{name}{suffix}"))
+        plt.close(fig)
+    for old in [out / f"{stem}.png", out / f"{stem}.pdf", *out.glob(f"{stem}-*.png"), *out.glob(f"{stem}-*.pdf")]:
+        if old not in paths:
+            old.unlink(missing_ok=True)
     return paths

@@ -165,7 +165,8 @@ def report_table(
         flat.columns = [" · ".join(c) for c in flat.columns]
     shown = path.relative_to(project_root()) if path.is_relative_to(project_root()) else path
     field = plot_field(table, prof, cells, out)
-    figures = [p for p in (out / f"{name}-{profile}-curves.png",) if p.exists()] + field[:1]
+    curves = [p for p in (out / f"{name}-{profile}-curves.png",) if p.exists()]
+    figures = curves + [p for p in field if p.suffix == ".png"]  # every page of the field figure
     md = [f"# {name} ({profile})", "", headline(table, prof, cells), ""]
     for p in figures:  # each figure, its caption under it where one is written beside it (the curves' notes)
         note = caption_path(p)

@@ -52,3 +52,34 @@ def test_no_figure_where_no_setting_has_two_rows(tmp_path):
         p.write_bytes(b"old")
     assert plot_field(table, plan.profile, cells, tmp_path) == []
     assert [p.exists() for p in (*stale, other)] == [False, False, True]
+
+
+def test_the_rows_of_panels_are_packed_in_order_onto_pages_that_fit():
+    """`pages`: rows of panels in the table's order, each page at most the limit with its title and legend
+    (FRAME_INCHES 1.4); a row taller than a page alone is a page of its own."""
+    from emml.report.field import FRAME_INCHES, pages
+
+    assert FRAME_INCHES == 1.4
+    assert pages([3.15] * 8, limit=9.0) == [[0, 1], [2, 3], [4, 5], [6, 7]]  # 1.4 + 6.3 = 7.7; a third: 10.85
+    assert pages([2.0, 2.0, 2.0, 1.6, 3.0], limit=9.0) == [[0, 1, 2, 3], [4]]  # 1.4 + 7.6 = 9.0 exactly fits
+    assert pages([2.0, 2.0, 2.0, 1.7], limit=9.0) == [[0, 1, 2], [3]]  # 9.1 does not
+    assert pages([12.0, 1.0], limit=9.0) == [[0], [1]]  # too tall alone: a page of its own, not packed with more
+    assert pages([]) == []
+
+
+def test_every_page_is_written_and_a_page_an_earlier_report_left_is_removed(tmp_path, monkeypatch):
+    import emml.report.field as field
+
+    table = load_table("table2")
+    fake_results("table2", tmp_path / "results")
+    plan = plan_report(table, PROFILE, tmp_path / "results")
+    cells = build_cells(plan, table_results(table, plan.profile, tmp_path / "results"), paper_numbers("table2"))
+    stale = [tmp_path / f"table2-{PROFILE}-rliable-{k}.png" for k in (2, 9)]
+    for p in stale:
+        p.write_bytes(b"old")
+    monkeypatch.setattr(field, "pages", lambda heights: [[0], list(range(1, len(heights)))])  # two pages
+    paths = plot_field(table, plan.profile, cells, tmp_path)
+    stem = f"table2-{PROFILE}-rliable"
+    assert [p.name for p in paths] == [f"{stem}.png", f"{stem}.pdf", f"{stem}-2.png", f"{stem}-2.pdf"]
+    assert all(p.stat().st_size > 1000 for p in paths)  # the page-2 figure, not the stale bytes
+    assert not stale[1].exists()
