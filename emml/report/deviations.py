@@ -199,7 +199,7 @@ def markdown(d: Deviations) -> str:
 
 
 def sentence(d: Deviations) -> str:
-    """The deviations in one paragraph (a LaTeX caption, a figure's footer)."""
+    """The deviations in one paragraph (a LaTeX caption, a figure's caption beside it)."""
     devs = "; ".join(f"{line} [{holders}]" for line, holders in d.deviations) or "none"
     ours = "; ".join(f"{line} [{holders}]" for line, holders in d.choices) or "none"
     return f"Deviations from the paper: {devs}. Where the paper is silent, ours: {ours}. Configs: {d.sources}."
