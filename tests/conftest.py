@@ -148,19 +148,6 @@ def pytest_configure(config):
         config.stash[YIELDED] = f"beside emml learner(s) {', '.join(map(str, learners))}: tests run at {yield_cpu()}"
 
 
-def pytest_collection_modifyitems(config, items):
-    """The tests marked `long(seconds)` first, the longest first (pytest's sort is stable: the rest keep their
-    order). pytest-xdist hands tests out in this order, so each long one starts while the other workers have the
-    rest of the suite to run beside it; collected last, one of them ran alone on one worker for its last two minutes
-    (CI, 2 cores)."""
-
-    def seconds(item) -> float:
-        mark = item.get_closest_marker("long")
-        return -mark.args[0] if mark else 0.0
-
-    items.sort(key=seconds)
-
-
 YIELDED = pytest.StashKey[str]()
 """What `pytest_configure` did to keep from slowing a training beside the suite (shown in the report header)."""
 

@@ -48,7 +48,6 @@ def test_bad_input_is_named_before_compute(no_leftovers):
     assert result.exit_code == 2 and "dataset='house3d'" in result.output
 
 
-@pytest.mark.long(27)
 def test_diagnose_a_checkpoint(tracking, no_leftovers):
     from emml.config.profiles import profile_config
     from emml.rl.trainer import train

@@ -6,8 +6,6 @@ declares."""
 import re
 from pathlib import Path
 
-import pytest
-
 from emml.report.index import write_reports
 from tests.report.test_efficiency import write_curves
 from tests.report.test_tables import fake_results, fake_run_dirs
@@ -32,7 +30,6 @@ def broken_links(folder: Path) -> list[str]:
     return out
 
 
-@pytest.mark.long(30)
 def test_every_relative_link_of_every_page_resolves(tracking, tmp_path):
     for table in ("table2", "table3"):  # no Table 4 or 5 run: their claims must not link pages never written
         fake_results(table, tmp_path / "results")

@@ -2,8 +2,6 @@
 (never results): a headline and the figures first, the rliable figures written with TrueType fonts, and `emml reports`
 twice the same bytes (the `.tex`: tests/report/test_tex.py)."""
 
-import pytest
-
 from emml.report.index import write_reports
 from emml.report.tables import report_table
 from tests.report.test_efficiency import write_curves
@@ -31,7 +29,6 @@ def test_a_page_opens_with_its_headline_and_figures_and_lists_the_crossings(tmp_
     assert {p.rsplit("/", 1)[1] for p in data["paths"]} >= {"table3-quick-rliable.png", "table3-quick-rliable.pdf"}
 
 
-@pytest.mark.long(80)
 def test_emml_reports_twice_changes_no_byte(tracking, tmp_path):
     for table in ("table2", "table3"):
         fake_results(table, tmp_path / "results")

@@ -46,7 +46,6 @@ def test_the_env_seed_formula_interleaves_packed_runs_as_plain_runs_seed_them():
     assert env_seeds([0, 1], 3, 4) == [x for pair in zip(plain[0], plain[1]) for x in pair]  # actor b·N + r
 
 
-@pytest.mark.long(38)
 def test_a_smoke_training_gives_the_parameters_of_the_loops_before_it(tracking, no_leftovers):
     """Plain and packed runs through the one loop end with the parameters the two loops gave before issue 35,
     bit for bit, where torch and the CPU are those the reference was measured on (float results differ between

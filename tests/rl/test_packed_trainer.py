@@ -17,7 +17,6 @@ from emml.runs.store import metric_history
 from tests.rl.test_trainer import smoke
 
 
-@pytest.mark.long(45)
 def test_two_seeds_train_packed_each_into_its_own_run(tracking, no_leftovers):
     cfgs = [smoke(tracking, seed=s, aux=True, frames=128, eval_episodes=1) for s in (0, 1)]
     results = train_packed(cfgs, quiet=True)

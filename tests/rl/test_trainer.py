@@ -195,7 +195,6 @@ def _one_run_one_value_per_step(cfg, killed, pid, sampler_started: bool = True) 
     assert [(r.info.run_id, r.info.status) for r in runs] == [(result.run_id, "FINISHED")]  # none left RUNNING
 
 
-@pytest.mark.long(25)
 def test_resume_after_sigkill_between_checkpoints_logs_each_step_once(tracking, no_leftovers):
     # killed after it logged an update that its last checkpoint does not hold: the resumed run redoes that update
     cfg, killed, pid = _train_and_sigkill(tracking, lambda c, steps: c["update"] >= 4 and max(steps()) > c["frames"])
@@ -260,7 +259,6 @@ def test_bad_config_fails_before_any_compute(over, field, tracking, no_leftovers
     assert not os.path.exists(tracking["run_root"]) and not os.path.exists(tracking["results_root"])
 
 
-@pytest.mark.long(35)
 def test_every_evaluation_logs_the_diagnostics(tracking, no_leftovers):
     """diag/* beside eval/* at each evaluation: attention and AP for Dual-Attention, AP alone for a baseline."""
     for model, has_attention in (("dual_attention", True), ("ga", False)):
@@ -375,7 +373,6 @@ def test_a_checkpoint_from_before_final_eval_episodes_resumes_and_finishes(track
 LEARNING_QUESTIONS = ["what color is the pillar", "what color is the tall pillar", "what color is the short pillar"]
 
 
-@pytest.mark.long(98)
 def test_learning_beats_chance(tracking, no_leftovers):
     """EQA on Easy about the pillars (answers red or green: chance 0.5), smoke resolution, with aux labels.
     PPO must learn to answer and the answer head to read the colour. Measured with this seed (0) at 16k frames
@@ -432,7 +429,6 @@ the code before issue 12) seed 0 ends at 0.23 with actor sensitivity 0.01 (chanc
 fails there."""
 
 
-@pytest.mark.long(127)
 def test_sgn_policy_acts_on_a_grounded_state(tracking, no_leftovers):
     """Instruction following on a small Easy SGN task: three colour instructions, the referent on any of the five
     slots, the paper's learning rate and losses, demo scale (60×108, 4 actors × 64 steps). The words are grounded
@@ -503,7 +499,6 @@ def test_double_buffered_sampling_trains_exactly_like_lockstep(tracking, no_left
     assert all(torch.allclose(params[1][k], params[2][k], rtol=0, atol=1e-5) for k in params[1])
 
 
-@pytest.mark.long(24)
 def test_workers_hosting_several_envs_train_exactly_alike(tracking, no_leftovers):
     """envs_per_worker changes which process steps an env, not what it does: same parameters, bit for bit."""
     import torch
