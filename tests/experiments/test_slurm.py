@@ -49,7 +49,6 @@ def resumable_train(cfg, quiet=False, parent_run_id=None):
         (1, {"model": "da_no_sa", "aux": "true"}, 4),  # one run: in the job's own process
     ],
 )
-@pytest.mark.long(37)
 def test_a_job_trains_its_pack_and_requeues_itself_at_its_time_limit(tracking, no_leftovers, pack, only, threads):
     pytest.importorskip("submitit")
     report = run_table(

@@ -58,7 +58,6 @@ def fits(saved: Saved) -> list[str]:
     return wrong
 
 
-@pytest.mark.long(60)
 def test_every_figure_the_reports_write_is_inside_its_canvas_png_and_pdf_and_fits_a_page(tmp_path, monkeypatch):
     """`emml reports` (write_reports) on the fixture's Tables 2, 3 and 4, and an experiment's curves and page (the
     index lists no experiment); the curves' notes are their caption on the page, under the figure."""
