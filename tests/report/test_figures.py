@@ -8,7 +8,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 import emml.report.savefig as savefig
 from emml.report.savefig import PAGE_HEIGHT_INCHES, PAGE_INCHES, caption_path
