@@ -46,9 +46,11 @@ def _check_project_files(
     named in one line), and the ViZDoom engines that killed emml processes left are ended."""
     import os
 
-    from emml.models.plugins import ENV_VAR, PluginError, add_plugins
+    from emml.config.paths import PLUGINS_ENV_VAR
 
-    if plugins or os.environ.get(ENV_VAR):
+    if plugins or os.environ.get(PLUGINS_ENV_VAR):  # the model zoo (torch) imported only for plugins to add
+        from emml.models.plugins import PluginError, add_plugins
+
         try:
             add_plugins(plugins)
         except PluginError as e:

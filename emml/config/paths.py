@@ -18,6 +18,9 @@ def project_root() -> Path:
     return Path.cwd()
 
 
+PLUGINS_ENV_VAR = "EMML_PLUGINS"
+"""The plugins of this process and its children: paths or dotted modules, os.pathsep between them (read here, where
+nothing heavy is imported, so that the CLI checks for plugins without loading the model zoo and torch)."""
 PIN_DIR = ".campaign"
 """Under a checkout (git-ignored): the git worktrees campaigns run from, one per commit (`<checkout>/.campaign/<sha>/`,
 emml.experiments.campaign.pin_worktree), and the lock that lets one campaign run per checkout."""

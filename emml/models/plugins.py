@@ -25,8 +25,10 @@ import sys
 import zlib
 from pathlib import Path
 
-ENV_VAR = "EMML_PLUGINS"
-"""The plugins of this process and its children: paths or dotted modules, os.pathsep between them."""
+from emml.config.paths import PLUGINS_ENV_VAR
+
+ENV_VAR = PLUGINS_ENV_VAR
+"""The plugins of this process and its children (emml/config/paths.py `PLUGINS_ENV_VAR`)."""
 ENTRY_POINT_GROUP = "emml.models"
 """The entry-point group installed distributions declare their model modules in."""
 

@@ -461,3 +461,22 @@ def test_the_slurm_path_can_be_tried_without_a_cluster_and_its_resume_line_keeps
                      "--cpus", "8", "--pack", "2", "--wait", "--slurm-cluster", "local"]  # fmt: skip
     bad = runner.invoke(app, ["run", "table3", "--backend", "slurm", "--slurm-cluster", "moon"])
     assert bad.exit_code == 2 and "moon" in bad.output
+
+
+def test_a_command_without_plugins_does_not_load_the_model_zoo_before_it_runs():
+    """The CLI's check for plugins reads their env var from emml/config/paths.py: without plugins to add, the
+    model zoo (and torch, 4-7 s on a busy 2-core machine) is not imported before the command itself needs it."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from typer.testing import CliRunner\n"
+        "from emml.cli import app\n"
+        "r = CliRunner().invoke(app, ['campaign', 'status', 'nope'])\n"
+        "print(r.exit_code, 'torch' in sys.modules, 'emml.models.plugins' in sys.modules)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "EMML_PLUGINS"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.stdout.split() == ["2", "False", "False"], out.stdout + out.stderr
