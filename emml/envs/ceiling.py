@@ -34,7 +34,6 @@ import functools
 import hashlib
 import json
 import math
-import os
 import tempfile
 from dataclasses import asdict, dataclass
 from fractions import Fraction
@@ -46,6 +45,7 @@ import pandas as pd
 from emml.config.env import env_config_class
 from emml.config.env_kinds import ENV_KINDS, HOUSE_ID
 from emml.config.schema import check_choice
+from emml.envs.wad import replace_with
 from emml.tasks.episodes import Episode, sample_colours, sample_episode
 from emml.tasks.language import SPLITS, TASKS, Dataset, Sentence, load_dataset, normalize
 
@@ -215,14 +215,7 @@ def _cached(path: Path, compute) -> tuple[SentenceCeiling, ...]:
     except (OSError, ValueError, TypeError, KeyError, ZeroDivisionError):
         pass  # absent, or not a file this code wrote: enumerate it again
     out = compute()
-    fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump([_to_json(s) for s in out], f)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    replace_with(path, json.dumps([_to_json(s) for s in out]).encode())
     return out
 
 

@@ -108,13 +108,19 @@ def write_once(blob: bytes, prefix: str) -> Path:
     writers agree, and atomic, so a reader never sees half a file."""
     path = Path(tempfile.gettempdir()) / f"{prefix}-{hashlib.sha1(blob).hexdigest()[:12]}.wad"
     if not path.exists():
-        # a private temp name per writer (forked workers share id(blob), so a name built from it collides)
-        fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                f.write(blob)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        replace_with(path, blob)
     return path
+
+
+def replace_with(path: Path, blob: bytes) -> None:
+    """``path`` replaced by ``blob`` atomically (a reader never sees half a file), through a private temp name per
+    writer (forked workers share id(blob), so a name built from it collides); the temp file removed on failure. The
+    engines' temp-dir files' writer (emml/runs/atomic.py writes the project's own files)."""
+    fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(blob)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
