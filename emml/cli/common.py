@@ -10,8 +10,9 @@ from typing import Literal
 
 import typer
 
+from emml.config.env import INTERPOLATIONS
 from emml.config.env_kinds import DOOM_ID, ENV_KINDS, GYM_ENVS, kinds_of
-from emml.config.schema import CONTROLS, DEVICES, EQ1_WORDS, SENTENCE_ACTIVATIONS
+from emml.config.schema import CONTROLS, DEVICES, EQ1_WORDS, SENTENCE_ACTIVATIONS, SPLITS, TASK_CHOICES, TASKS
 
 # --- the choices of the options: metavar, validation before anything runs, shell completion -------------------------
 # Literal types, built from the data that declares each set (typer shows them as <a|b>, refuses another value naming
@@ -23,16 +24,19 @@ DoomDifficulty = Literal[kinds_of(DOOM_ID)]
 """The Doom room's difficulties: easy | hard."""
 EnvName = Literal[tuple(e.name for e in GYM_ENVS.values())]
 """The environments by their command-line name: doom | house."""
-Tasks = Literal["sgn", "eqa", "both"]
-Task = Literal["sgn", "eqa"]
-Split = Literal["train", "test"]
-Splits = Literal["train", "test", "both"]
+Tasks = Literal[TASK_CHOICES]
+"""What a run plays: both | sgn | eqa (`DoomConfig.tasks`)."""
+Task = Literal[TASKS]
+Split = Literal[SPLITS]
+SPLITS_OR_BOTH = (*SPLITS, "both")
+"""A command that reads one split or both (train | test | both)."""
+Splits = Literal[SPLITS_OR_BOTH]
 Control = Literal[CONTROLS]
 Eq1Words = Literal[EQ1_WORDS]
 Activation = Literal[SENTENCE_ACTIVATIONS]
 Backend = Literal["local", "slurm"]
 SlurmCluster = Literal["slurm", "local", "debug"]
-Interpolation = Literal["linear", "area", "nearest"]
+Interpolation = Literal[INTERPOLATIONS]
 BenchPart = Literal["both", "model", "e2e"]
 
 

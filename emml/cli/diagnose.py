@@ -10,6 +10,7 @@ import typer
 from emml.cli.common import (
     _CONTROLS,
     JSON_HELP,
+    SPLITS_OR_BOTH,
     Activation,
     Control,
     Eq1Words,
@@ -56,7 +57,7 @@ def diagnose(
     from emml.eval.diagnose import diagnose_checkpoint, summary_line
     from emml.eval.diagnose_eqa import eqa_table
     from emml.eval.diagnose_sgn import diagnose_sgn_checkpoint, sgn_table
-    from emml.tasks.language import check_choice
+    from emml.tasks.language import SPLITS, check_choice
 
     _check_checkpoint(checkpoint)
     if record and not gate:
@@ -65,10 +66,10 @@ def diagnose(
         return _gate(checkpoint, record, as_json)
     _own_engines()
     try:
-        check_choice("split", split, ("train", "test", "both"))
+        check_choice("split", split, SPLITS_OR_BOTH)
         result = diagnose_checkpoint(checkpoint, episodes, step0_episodes, seed, eqa_episodes, control)
         if sgn_outcomes:
-            splits = ("train", "test") if split == "both" else (split,)
+            splits = SPLITS if split == "both" else (split,)
             result["sgn_outcomes"] = diagnose_sgn_checkpoint(checkpoint, sgn_outcomes, splits=splits, control=control)
     except ValueError as e:  # a control the model cannot take, a split that is not one
         _fail(str(e))

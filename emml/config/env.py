@@ -15,6 +15,15 @@ RESOLUTIONS_16_9 = ((256, 144), (320, 180), (400, 225), (512, 288), (640, 360), 
 TASKS = ("sgn", "eqa")
 """The tasks by id (0 SGN, 1 EQA) and as a sentence's ``kind``, metrics and log lines name them: the one list
 (`DoomConfig.tasks` plays both, or one of them)."""
+TASK_CHOICES = ("both", *TASKS)
+"""Values of `DoomConfig.tasks`: both tasks (50/50 per episode), or one of `TASKS` (the single-task ablation)."""
+SPLITS = ("train", "test")
+"""The dataset splits (Table 7, Table 8): the instructions and questions a run trains on, and those held out. The
+one list: `DoomConfig.split`, the datasets (emml/tasks), the evaluation's settings and the metrics read it."""
+INTERPOLATIONS = ("area", "linear", "nearest")
+"""Values of `DoomConfig.interpolation`: the resize filters from render to observation size."""
+LABEL_GRIDS = ("receptive_field", "even")
+"""Values of `DoomConfig.label_grid`: how label pixels meet the conv3 grid."""
 
 VOCABULARY_SOURCES = ("all", "train_instructions")
 """Names a run's `DoomConfig.vocabulary` may give instead of a word list (`Vocabulary.from_dataset`, emml/tasks)."""
@@ -26,9 +35,9 @@ class DoomConfig:
 
     difficulty: str = "easy"
     """'easy': agent fixed, objects at 5 fixed slots in view; 'hard': random agent pose and object positions."""
-    split: Literal["train", "test"] = "train"
+    split: Literal[SPLITS] = "train"
     """'train' or 'test' instructions/questions (Table 7)."""
-    tasks: Literal["both", "sgn", "eqa"] = "both"
+    tasks: Literal[TASK_CHOICES] = "both"
     """'both' (SGN and EQA, 50/50 per episode), 'sgn' or 'eqa' (single-task ablation, Table 3): `played`."""
     height: int = 168
     """Observation height in pixels (Appendix A: 3×168×300)."""
@@ -63,10 +72,10 @@ class DoomConfig:
     episode)."""
     render: str = "auto"
     """ViZDoom render resolution 'WxH' (16:9); 'auto' takes the smallest one at least the observation size."""
-    interpolation: Literal["area", "linear", "nearest"] = "linear"
+    interpolation: Literal[INTERPOLATIONS] = "linear"
     """Resize filter from render to observation size: 'linear' (our choice: 5× faster than 'area', the reference
     env's cv2.INTER_AREA, and alike at the 0.94 scale of 320×180 → 300×168), 'area' or 'nearest'."""
-    label_grid: Literal["receptive_field", "even"] = "receptive_field"
+    label_grid: Literal[LABEL_GRIDS] = "receptive_field"
     """How label pixels meet the conv3 grid (paper silent): 'receptive_field', the cell whose receptive field is
     centred nearest (emml/config/geometry.py), or 'even', an even partition of the frame (off by up to one cell at
     the right and bottom edges, since conv3 has no padding)."""

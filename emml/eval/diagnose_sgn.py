@@ -28,7 +28,7 @@ from collections import Counter
 import numpy as np
 import torch
 
-from emml.config.schema import DoomConfig
+from emml.config.schema import SPLITS, DoomConfig
 from emml.envs.vector import make_env
 from emml.eval.diagnose_eqa import actor_words
 from emml.eval.evaluate import eval_settings, play, playing
@@ -205,7 +205,7 @@ def diagnose_sgn(
     env_cfg: DoomConfig,
     episodes: int,
     seed: int,
-    splits: tuple[str, ...] = ("train", "test"),
+    splits: tuple[str, ...] = SPLITS,
     device="cpu",
     batch: int = 8,
 ) -> dict:
@@ -236,7 +236,7 @@ def diagnose_sgn(
     return result
 
 
-def diagnose_sgn_checkpoint(path, episodes: int, seed: int | None = None, splits=("train", "test"), control=None):
+def diagnose_sgn_checkpoint(path, episodes: int, seed: int | None = None, splits=SPLITS, control=None):
     """`diagnose_sgn` on a checkpoint's model (its own config and vocabulary, ``control`` as in
     `emml.runs.rundir.load_model`), from episode seed `emml.runs.rundir.EVAL_SEED` unless told."""
     from emml.runs.rundir import EVAL_SEED, load_model

@@ -21,9 +21,12 @@ import torch
 
 from emml.config.schema import DoomConfig
 from emml.envs.vector import make_env
+from emml.eval.metrics import EVALUATED, evaluated
 from emml.runs.rundir import EVAL_SEED, load_model
 
-SETTINGS = (("sgn", "train"), ("sgn", "test"), ("eqa", "train"), ("eqa", "test"))
+SETTINGS = tuple((m.task, m.split) for m in EVALUATED)
+"""The (task, split) pairs a run is scored on, in the order they are played: each has its declared metric, whose
+column the score is written to (emml/eval/metrics.py)."""
 PER_QUESTION = ("eqa",)
 """The tasks whose successes are also counted per question (`Scores.questions`)."""
 
@@ -124,9 +127,10 @@ def evaluate(
         sentences: list[str] = []
         with playing(model, cfg, min(batch, episodes)) as envs:
             outcomes = play(model, envs, [(seed + i, None) for i in range(episodes)], device, sentences=sentences)
-        results[f"{task}_{split}"] = float(np.mean(outcomes))
+        column = evaluated(task, split).name
+        results[column] = float(np.mean(outcomes))
         if task in PER_QUESTION:
-            questions[f"{task}_{split}"] = question_counts(sentences, outcomes)
+            questions[column] = question_counts(sentences, outcomes)
     return Scores(results, questions)
 
 

@@ -44,7 +44,7 @@ import torch
 from torch import nn
 
 from emml.config.checks import Positive, PositiveNumber, check
-from emml.config.schema import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, check_choice
+from emml.config.schema import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, SPLITS, check_choice
 from emml.envs.vector import make_env
 from emml.eval.diagnose_eqa import gate_missing
 from emml.eval.evaluate import eval_settings
@@ -67,7 +67,6 @@ SEEDS = 3
 """Encoder seeds per readout: 0, 1, ..."""
 INITS = ("checkpoint", "fresh")
 """Values of ``init``: the retrained GRU and Linear start from the checkpoint's, or from a fresh draw."""
-SPLITS = ("train", "test")
 CLOSED_BELOW = 0.01
 """A gate channel below this for every question is closed: its word adds nothing to Eq. 5's logits (under ReLU it
 is exactly 0 and gets no gradient: a dead channel)."""

@@ -25,12 +25,14 @@ import torch
 from torch import nn
 
 from emml.config.schema import DoomConfig
+from emml.eval.metrics import TRANSFER_METRIC
 from emml.tasks.language import Vocabulary
 
 DETECTORS = ("labels",)
 """Detector kinds `make_detector` builds: 'labels' (perfect detectors from the engine's label buffer)."""
-METRIC = "sgn_transfer"
-"""Results column prefix: one column ``sgn_transfer:<instruction>`` per evaluated instruction."""
+METRIC = TRANSFER_METRIC.name
+"""Results column prefix: one column ``<METRIC>:<instruction>`` per evaluated instruction (the declared transfer
+metric's, emml/eval/metrics.py)."""
 
 
 class LabelDetector(nn.Module):
@@ -167,8 +169,8 @@ def transfer_checkpoint(
 
 
 def metric_column(instruction: str) -> str:
-    """The results column of one instruction's transfer accuracy."""
-    return f"{METRIC}:{instruction}"
+    """The results column of one instruction's transfer accuracy (`Metric.column` of the declared transfer metric)."""
+    return TRANSFER_METRIC.column(instruction)
 
 
 def record_transfer(cfg, words, instructions, detector: str = "labels", seed: int = 10_000) -> dict[str, float]:

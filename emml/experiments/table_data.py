@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from emml.experiments.metrics import BY_NAME
+from emml.eval.metrics import BY_NAME
 from emml.experiments.runspec import RunSpec, Transfer
 
 TRANSFER_RUN_ROW = "Training run (before transfer)"

@@ -19,7 +19,7 @@ import tomllib
 from emml.config.env_kinds import ENV_KINDS
 from emml.config.profiles import resolve_profile
 from emml.config.schema import TrainConfig, apply_overrides
-from emml.experiments.metrics import METRICS, TRANSFER_METRICS
+from emml.eval.metrics import METRICS, TRANSFER_METRICS
 from emml.experiments.runspec import Transfer
 from emml.experiments.table_data import MoreSeeds, Row, Table
 from emml.experiments.table_files import find_table, list_tables, table_path

@@ -15,7 +15,7 @@ from emml.config.env_kinds import ENV_KINDS, env_label
 from emml.config.paths import REPRODUCE_DIR, project_path
 from emml.config.profiles import Profile
 from emml.config.schema import TrainConfig
-from emml.experiments.metrics import label as metric_label
+from emml.eval.metrics import label as metric_label
 from emml.experiments.table_data import Table
 from emml.report.plan import ReportPlan
 from emml.runs.results import read_results

@@ -13,13 +13,13 @@ from pathlib import Path
 from emml.config.env_kinds import ENV_KINDS
 from emml.config.profiles import Profile
 from emml.envs.ceiling import split_ceiling
+from emml.eval.metrics import BY_NAME, CHANCE_COLUMNS, label
 from emml.experiments.claims.evidence import Chance
-from emml.experiments.metrics import BY_NAME, CHANCE_COLUMNS, label
 
 BLIND_MODEL = "text_only"
 """The model that sees no frame (the claims mark its row: its score is no evidence of having learned)."""
 COLUMNS = CHANCE_COLUMNS
-"""The columns chance is given for: each metric's declared `chance` (emml/experiments/metrics.py)."""
+"""The columns chance is given for: each metric's declared `chance` (emml/eval/metrics.py)."""
 SOURCE = (
     "the best fixed answer per question (EQA) and the best fixed object slot per instruction (SGN), enumerated from "
     "the episode generator (emml/envs/ceiling.py)"

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field
 
 from emml.config.profiles import Profile, resolve_profile
+from emml.eval.metrics import TRAIN_COLUMNS, train_of
 from emml.experiments.claims.evidence import (
     BUDGET,
     CLOSING,
@@ -33,7 +34,6 @@ from emml.experiments.claims.evidence import (
     status,
     task_of,
 )
-from emml.experiments.metrics import TRAIN_COLUMNS, train_of
 from emml.report.chance import BLIND_MODEL, blind_prior, paper_prior
 from emml.report.claims_settle import Curves, borrow, literal, next_seed, settle_all, settle_costs, spreads
 from emml.report.plan import ReportPlan, plan_report

@@ -4,6 +4,7 @@ they are drawn (colours, width) and imports nothing of the page."""
 
 from __future__ import annotations
 
+from emml.eval.metrics import TASKS, train_of
 from emml.experiments.claims.evidence import (
     BUDGET,
     CLOSING,
@@ -14,7 +15,6 @@ from emml.experiments.claims.evidence import (
     UNKNOWN_FLAT,
     UNTESTABLE,
 )
-from emml.experiments.metrics import TASKS, train_of
 
 STATUS_COLOURS = {
     SUPPORTED: "#1a7f37",
@@ -28,7 +28,7 @@ STATUS_COLOURS = {
 }
 """The figure's colour for each status (its tick label)."""
 TASK_COLOURS = {**{task: train_of(task).colour for task in TASKS}, "diag": "C2"}
-"""A claim's colour: its task's, as its training split's curve is drawn (emml/experiments/metrics.py); a diag/* figure
+"""A claim's colour: its task's, as its training split's curve is drawn (emml/eval/metrics.py); a diag/* figure
 C2."""
 FIGURE_WIDTH = 7.0
 """Inches: the figure prints across a two-column page (or a one-column one) at its own size."""

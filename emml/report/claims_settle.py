@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+from emml.eval.metrics import CURVE_METRICS
 from emml.experiments.claims.evidence import Check, Score
 from emml.experiments.claims.settle import MORE_FRAMES, settle
-from emml.experiments.metrics import CURVE_METRICS
 
 WARM = re.compile(r"-warm(\d+)-")
 """A No Aux run under the warm-up (issue 61's rule: the answer kept off the image for its first N frames)."""

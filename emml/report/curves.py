@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from emml.config.profiles import Profile  # noqa: E402
-from emml.experiments.metrics import BY_NAME, DECLARED, train_of  # noqa: E402
+from emml.eval.metrics import BY_NAME, DECLARED, train_of  # noqa: E402
 from emml.report.aggregate import reference_row  # noqa: E402
 from emml.report.savefig import PAGE_HEIGHT_INCHES, PAGE_INCHES, caption_path, frames_axis, save, wrap  # noqa: E402
 from emml.runs.atomic import write_text  # noqa: E402
@@ -30,7 +30,7 @@ SERIES = (
     ),
 )
 """A run's curves (`plot_run`): its training episodes' success per task in the colour of the task's training split,
-then every periodically evaluated metric as declared (emml/experiments/metrics.py), the training splits first."""
+then every periodically evaluated metric as declared (emml/eval/metrics.py), the training splits first."""
 
 
 def plot_run(run_id: str, path: Path, title: str) -> Path:

@@ -28,9 +28,9 @@ each row had two cells more than it)."""
 
 def _diagnostics_table(run_id: str) -> list[str]:
     """One row per evaluation: frames, greedy SGN accuracy and the diag/* figures logged with it."""
-    from emml.experiments.metrics import BY_NAME
+    from emml.eval.metrics import BY_NAME
 
-    sgn = [BY_NAME[m] for m in ("sgn_train", "sgn_test")]  # the SGN splits, as declared (emml/experiments/metrics.py)
+    sgn = [BY_NAME[m] for m in ("sgn_train", "sgn_test")]  # the SGN splits, as declared (emml/eval/metrics.py)
     keys = [*(m.key for m in sgn), *(f"diag/{k}" for k in SCALARS)]
     curves = {k: dict(metric_history(run_id, k)) for k in keys}
     steps = sorted(set().union(*(c.keys() for c in curves.values())))

@@ -14,8 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from emml.eval.metrics import BY_NAME, CURVE_METRICS, label
 from emml.experiments.claims.evidence import LEAVE, Chance, frames_text
-from emml.experiments.metrics import BY_NAME, CURVE_METRICS, label
 
 __all__ = ["LEAVE", "frames_text", "first_crossing", "run_efficiency", "table_efficiency", "markdown"]
 UNIFORM_CHANCE = Chance()

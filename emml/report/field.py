@@ -83,7 +83,7 @@ def panel_data(table, cells) -> list[dict]:
     and per row with runs there (in the table's row order) its index in the table, its runs' values (seed order) and
     the paper's number (None where the paper has none)."""
     from emml.config.env_kinds import env_label
-    from emml.experiments.metrics import BY_NAME
+    from emml.eval.metrics import BY_NAME
 
     by = {(c.row, c.difficulty, c.aux, c.metric): c for c in cells}
     labels = {v: k for k, v in table.metrics.items()}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from emml.config.paths import project_path, project_root
 from emml.config.profiles import Profile, resolve_profile
-from emml.experiments.metrics import TRAIN_COLUMNS
+from emml.eval.metrics import TRAIN_COLUMNS
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
 from emml.runs.rundir import CHECKPOINT, RunDirError, config_of, finished_run, path_of, variant_dir

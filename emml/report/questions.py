@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from emml.experiments.metrics import label as metric_label
+from emml.eval.metrics import label as metric_label
 from emml.report.cells import Cell, level_label
 from emml.runs.results import questions_path, read_questions
 

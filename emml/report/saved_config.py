@@ -12,7 +12,7 @@ from emml.runs.rundir import write_json as _write
 
 
 def _is_metric(column: str) -> bool:
-    from emml.experiments.metrics import is_metric
+    from emml.eval.metrics import is_metric
 
     return is_metric(column)
 

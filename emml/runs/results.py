@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from emml.config.env import SPLITS
 from emml.runs.atomic import replacing
 from emml.runs.records import note, torn_tail
 from emml.runs.runlock import waiting_lock
@@ -207,7 +208,7 @@ def question_rows(run_name: str, run_id: str, questions: dict[str, dict[str, dic
     rows = []
     for setting, counts in questions.items():
         task, _, split = setting.partition("_")
-        if split not in ("train", "test"):
+        if split not in SPLITS:
             raise ValueError(f"questions: setting {setting!r} is not '<task>_<split>' with split 'train' or 'test'")
         for question, c in counts.items():
             rows.append((run_name, str(run_id), task, split, question, int(c["successes"]), int(c["episodes"])))

@@ -14,10 +14,9 @@ from pathlib import Path
 
 import tomllib
 
+from emml.config.env import SPLITS as SPLITS  # the splits' one list, as the tasks' (the config's)
 from emml.config.env import TASKS as TASKS  # the tasks' one list (the config declares what a run plays)
 from emml.config.schema import VOCABULARY_SOURCES, check_choice  # the config's allowed values (also imported from here)
-
-SPLITS = ("train", "test")
 
 
 @dataclass(frozen=True)

@@ -157,3 +157,28 @@ def test_evaluate_checkpoint_compiles_the_model_only_when_asked(compiled, monkey
     monkeypatch.setattr(module, "evaluate", lambda m, env, episodes, **k: seen.setdefault("played", (m, env, episodes)))
     module.evaluate_checkpoint("ckpt", 7, compiled=compiled)
     assert seen.get("compiled") is (model if compiled else None) and seen["played"] == (model, "env", 7)
+
+
+def test_evaluate_writes_each_score_to_its_declared_metric(monkeypatch):
+    """The columns are the declaration's (emml/eval/metrics.py), not spelled by the evaluation: a metric renamed
+    there is the column the scores and the per-question counts are written to."""
+    import emml.eval.evaluate as evaluation
+    from emml.eval import metrics
+
+    renamed = [dataclasses.replace(m, name="eqa_heldout") if m.name == "eqa_test" else m for m in metrics.DECLARED]
+    monkeypatch.setattr(metrics, "DECLARED", tuple(renamed))
+    engine_free = contextmanager_playing(evaluation.playing)
+    monkeypatch.setattr(evaluation, "playing", engine_free)
+    words = Vocabulary.from_dataset(load_dataset("doom")).words
+    scores = evaluate(_Answers(list(words), "red"), DoomConfig(**SMOKE, vocabulary=words), 3)
+    assert list(scores) == ["sgn_train", "sgn_test", "eqa_train", "eqa_heldout"]  # task by task, split by split
+    assert list(scores.questions) == ["eqa_train", "eqa_heldout"]
+
+
+def contextmanager_playing(playing):
+    """`playing` on engine-free envs (`_FakeEnv`)."""
+
+    def engine_free(model, cfg, n=1, make=None):
+        return playing(model, cfg, n, make=lambda c: _FakeEnv())
+
+    return engine_free

@@ -1,11 +1,11 @@
 """The pages follow the metric declaration (issue 64 item 1): change a metric's label, colour or chance floor in
-emml/experiments/metrics.py and every reader prints the new one."""
+emml/eval/metrics.py and every reader prints the new one."""
 
 import dataclasses
 
 import pytest
 
-from emml.experiments import metrics
+from emml.eval import metrics
 from emml.experiments.claims.evidence import Chance
 from emml.experiments.claims.kinds import metric_text
 from emml.report import cells, curves, efficiency

@@ -14,8 +14,8 @@ from pathlib import Path
 import tomllib
 
 from emml.config.paths import REPRODUCE_DIR
+from emml.eval.metrics import CURVE_METRICS, metric, train_of
 from emml.experiments.claims.kinds import KINDS
-from emml.experiments.metrics import CURVE_METRICS, metric, train_of
 from emml.experiments.tables import load_table
 
 CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"

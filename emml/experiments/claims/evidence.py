@@ -7,7 +7,7 @@ the paper's own tables (its numbers as one seed each), so a rule the paper's own
 
 - Chance is what a blind model scores here (`Chance`): the Text only row of the same source, per difficulty, task
   and split (the paper's Table 2 row for the paper; ours for our runs), never below the uniform chance (each metric's
-  declared `uniform`: emml/experiments/metrics.py).
+  declared `uniform`: emml/eval/metrics.py).
 - A row has learned when its training split is above chance + LEAVE (`learned`: the mean over every seed the row
   has); a row with no training score (the paper's tables) is read on the cell itself. A row that learned and loses
   is contradicted; a row that did not learn says nothing against the paper (not supported at this budget).
@@ -26,8 +26,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from emml.experiments.metrics import BY_NAME
-from emml.experiments.metrics import metric as _metric
+from emml.eval.metrics import BY_NAME
+from emml.eval.metrics import metric as _metric
 
 SUPPORTED, CONTRADICTED, INCONCLUSIVE, BUDGET, UNTESTABLE = (
     "supported",

@@ -36,7 +36,7 @@ def setting_text(difficulty: str, aux: bool | None) -> str:
 
 
 def metric_text(metric: str) -> str:
-    from emml.experiments.metrics import label
+    from emml.eval.metrics import label
 
     return label(metric)
 

@@ -1,22 +1,29 @@
-"""The metrics, each declared once (issue 64 item 1): its results column, the label the paper's tables head it with,
-its task and split, whether it is an accuracy, which chance it is held against, its curve's colour, the metrics-mirror
-(MLflow) key its curve is read from, and whether it is a training-split column.
+"""The metrics, each declared once: its results column, the label the paper's tables head it with, its task and
+split, whether it is an accuracy, which chance it is held against, its curve's colour, the metrics-mirror (MLflow)
+key its curve is read from, and whether it is a training-split column.
 
-Every reader reads this: the table files' allowed columns (emml/experiments/tables.py), the claims
-(emml/experiments/claims/), the chance (emml/report/chance.py, emml/experiments/claims/evidence.py), the pages'
-labels (emml/report/tables.py, field.py, efficiency.py), the curves and their colours (emml/report/curves.py), the
-train columns (emml/report/index.py, claims.py) and the results payload (emml/report/saved_config.py). The trainer's
-greedy evaluation writes the values (emml/eval/evaluate.py: `eval/<task>_<split>`, `final/...`; Table 4's
-`sgn_transfer:<instruction>`, emml/eval/transfer.py), a wing below this one.
+It lives in the evaluation's wing because the evaluation writes the values: the greedy evaluation scores each
+(task, split) into its metric's column (`evaluated`, emml/eval/evaluate.py), Table 4's transfer into its metric's
+`<name>:<instruction>` columns (`TRANSFER_METRIC`, emml/eval/transfer.py). The layers (pyproject.toml) let every wing
+above read it, and no wing below it needs it; declared in emml/experiments/ it was out of the writers' reach.
+
+Every reader reads this: the trainer's log keys (emml/rl/), the table files' allowed columns
+(emml/experiments/tables.py), the claims (emml/experiments/claims/), the chance (emml/report/chance.py,
+emml/experiments/claims/evidence.py), the pages' labels (emml/report/tables.py, field.py, efficiency.py), the curves
+and their colours (emml/report/curves.py), the train columns (emml/report/index.py, claims.py) and the results
+payload (emml/report/saved_config.py).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from emml.tasks.language import TASKS as TASKS  # the tasks, re-exported beside the splits of each metric
+from emml.config.env import SPLITS, TASKS
 
-SPLITS = ("train", "test", "transfer")
+TRANSFER = "transfer"
+"""The split of a metric scored on instructions with words the run never trained on (Table 4)."""
+METRIC_SPLITS = (*SPLITS, TRANSFER)
+"""A metric's split: a dataset split (emml/config/env.py, `SPLITS`) or the transfer's new instructions."""
 
 
 @dataclass(frozen=True)
@@ -30,7 +37,8 @@ class Metric:
     task: str
     """'sgn' or 'eqa'."""
     split: str
-    """'train', 'test', or 'transfer' (Table 4: one column `<name>:<instruction>` per new instruction)."""
+    """One of `METRIC_SPLITS`: 'train', 'test', or 'transfer' (Table 4: one column `<name>:<instruction>` per new
+    instruction)."""
     key: str
     """The metrics-mirror (MLflow) key its curve is read from: `eval/<name>`, logged every `eval_every` frames; a
     transfer metric, scored once after training, draws its runs' training split."""
@@ -75,7 +83,7 @@ DECLARED = (
         "sgn_transfer",
         "SGN",
         "sgn",
-        "transfer",
+        TRANSFER,
         "eval/sgn_train",
         "C0",
         0.2,
@@ -107,9 +115,9 @@ def train_of(task: str) -> Metric:
     return next(m for m in DECLARED if m.train_column and m.task == task)
 
 
-METRICS = tuple(m.name for m in DECLARED if m.split != "transfer")
+METRICS = tuple(m.name for m in DECLARED if m.split != TRANSFER)
 """Results columns a cell of a table may read (written by the trainer's greedy evaluation)."""
-TRANSFER_METRICS = tuple(m.name for m in DECLARED if m.split == "transfer")
+TRANSFER_METRICS = tuple(m.name for m in DECLARED if m.split == TRANSFER)
 """What a transfer table's cells read: the mean of their instructions' `<name>:<instruction>` columns."""
 CURVE_METRICS = tuple(m.name for m in DECLARED if m.periodic)
 """The results columns whose greedy evaluation is logged periodically as `eval/<metric>`."""
@@ -119,3 +127,19 @@ CHANCE_COLUMNS = tuple(dict.fromkeys(m.chance for m in DECLARED))
 """The columns a blind prior is measured on (emml/report/chance.py)."""
 UNIFORM = {m.task: m.uniform for m in DECLARED}
 """The floor of chance per task."""
+
+
+def evaluated(task: str, split: str) -> Metric:
+    """The metric the greedy evaluation writes for one (task, split) of a dataset (its results column, `eval/<name>`
+    curve and `final/<name>` score); a pair with no declared metric is a ValueError naming the declared ones."""
+    for m in DECLARED:
+        if (m.task, m.split) == (task, split):
+            return m
+    raise ValueError(f"no metric is declared for task={task!r}, split={split!r}; declared: {', '.join(METRICS)}")
+
+
+EVALUATED = tuple(evaluated(task, split) for task in TASKS for split in SPLITS)
+"""The metrics the greedy evaluation writes, one per (task, split), in the order it plays them: task by task, each
+split in `SPLITS` order."""
+TRANSFER_METRIC = next(m for m in DECLARED if m.split == TRANSFER)
+"""The metric Table 4's transfer writes, one column per instruction (`Metric.column`)."""
