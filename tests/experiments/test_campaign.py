@@ -87,18 +87,27 @@ def test_status_shows_a_run_held_by_a_live_process_as_running(tracking, campaign
             '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nonly = { model = "gpt" }\n',
             r"model=gpt: no run",
         ),
-        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nframes = 0\n', r"frames=0 must be a positive"),
-        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nepochs = 3\n', r"unknown key\(s\) epochs"),
+        (
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nframes = 0\n',
+            r"key 'steps\[0\].frames': must be a positive integer, got 0",
+        ),
+        (
+            '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nepochs = 3\n',
+            r"key 'steps\[0\].epochs': unknown key; allowed keys: name, table, profile, only, frames",
+        ),
         (
             '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nset = { "ppo.lr" = 1.0 }\n',
-            r"steps\[0\].set must be a table of fields among eval_every, eval_episodes",
+            r"key 'steps\[0\].set.ppo.lr': unknown key; allowed keys: eval_every, eval_episodes",
         ),
         ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nset = { eval_every = -1 }\n', r"eval_every=-1"),
         (
             '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nset = { eval_episodes = "many" }\n',
             r"steps\[0\].set 'eval_episodes'",
         ),
-        ("title = 'x'\n", r"'steps' must be a non-empty array"),
+        ("title = 'x'\n", r"key 'steps': missing"),
+        ("title = 'x'\nsteps = []\n", r"key 'steps': must be a non-empty array of tables \(\[\[steps\]\]\), got \[\]"),
+        ('[[steps]]\nname = ""\ntable = "table2"\nprofile = "smoke"\n', r"key 'steps\[0\].name': must be a non-empty"),
+        ('[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\nclaim = 3\n', r"claim': must be a claim id or a"),
         (  # issue 54: two steps of one name were merged by --step and --status
             '[[steps]]\nname = "a"\ntable = "table2"\nprofile = "smoke"\n' * 2,
             r"steps\[1\].name='a' is already the name of steps\[0\]; step names must be unique",

@@ -1,21 +1,23 @@
-"""A campaign file (reproduce/campaigns/<name>.toml): its schema, checked before any compute, and each step's runs
-in training order. What the steps are is the package's docstring (emml/experiments/campaign/__init__.py)."""
+"""A campaign file (reproduce/campaigns/<name>.toml): held to its format (emml/experiments/file_formats.py: keys,
+types, choices), then checked against the tables, profiles, claims and runs it names, before any compute; and each
+step's runs in training order. What the steps are is the package's docstring (emml/experiments/campaign/__init__.py)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import tomllib
-
 from emml.config.paths import REPRODUCE_DIR
+from emml.config.toml_files import check_file, read_toml
+from emml.experiments.file_formats import OWN_KEYS as OWN_KEYS  # what a step may not set (also imported from here)
+from emml.experiments.file_formats import CampaignFile, StepEntry
 from emml.experiments.runspec import RunSpec
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
-STEP_KEYS = ("name", "table", "profile", "only", "frames", "set", "claim", "note")
-TOP_KEYS = ("title", "steps")
-OWN_KEYS = ("frames", "run_root", "results_root")
-"""RUNTIME fields a step may not `set`: its `frames` key sets the first; the campaign's options own the roots."""
+STEP_KEYS = tuple(StepEntry.model_fields)
+"""The keys of a step (its format: emml/experiments/file_formats.py, `StepEntry`)."""
+TOP_KEYS = tuple(CampaignFile.model_fields)
+"""The keys of a campaign file (`CampaignFile`)."""
 
 
 @dataclass(frozen=True)
@@ -83,24 +85,15 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     if not path.is_file():
         known = ", ".join(list_campaigns(directory)) or "none"
         raise ValueError(f"campaign {name!r} not found ({path}); known campaigns: {known}")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"{path}: not valid TOML: {e}") from None
-    _check_keys(path, "top level", data, TOP_KEYS)
-    raw_steps = data.get("steps")
-    if not isinstance(raw_steps, list) or not raw_steps:
-        raise ValueError(f"{path}: 'steps' must be a non-empty array of tables ([[steps]])")
+    data = read_toml(path)
+    check_file(path, data, CampaignFile)
+    raw_steps = data["steps"]
     steps, profiles = [], load_profiles()
     tables = table_names()
     known_claims = load_claims()
     names: dict[str, int] = {}
     for i, raw in enumerate(raw_steps):
         where = f"steps[{i}]"
-        _check_keys(path, where, raw, STEP_KEYS)
-        for key in ("name", "table", "profile"):
-            if not isinstance(raw.get(key), str) or not raw[key]:
-                raise ValueError(f"{path}: {where}.{key} is required (a non-empty string)")
         if raw["name"] in names:  # --step and --status name steps: two of one name would be merged silently
             raise ValueError(
                 f"{path}: {where}.name={raw['name']!r} is already the name of steps[{names[raw['name']]}]; step names "
@@ -112,11 +105,9 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
         if raw["profile"] not in profiles:
             raise ValueError(f"{path}: {where}.profile={raw['profile']!r} is unknown; allowed: {', '.join(profiles)}")
         only = raw.get("only", {})
-        if not isinstance(only, dict) or any(k not in ONLY_FIELDS for k in only):
+        if any(k not in ONLY_FIELDS for k in only):
             raise ValueError(f"{path}: {where}.only must be a table of fields among {', '.join(ONLY_FIELDS)}")
         frames = raw.get("frames")
-        if frames is not None and (isinstance(frames, bool) or not isinstance(frames, int) or frames < 1):
-            raise ValueError(f"{path}: {where}.frames={frames!r} must be a positive integer")
         step = Step(
             raw["name"],
             raw["table"],
@@ -149,11 +140,9 @@ def _check_runs(path: Path, where: str, step: Step, selected: dict) -> None:
 
 
 def _claims(path: Path, where: str, raw: dict, known: dict) -> tuple[str, ...]:
-    """The step's `claim`: one id of reproduce/claims.toml or a list of them."""
+    """The step's `claim`: one id of reproduce/claims.toml or a list of them (the format checks which it is)."""
     value = raw.get("claim", [])
     ids = [value] if isinstance(value, str) else value
-    if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):
-        raise ValueError(f"{path}: {where}.claim must be a claim id or a list of them")
     for i in ids:
         if i not in known:
             raise ValueError(
@@ -163,27 +152,16 @@ def _claims(path: Path, where: str, raw: dict, known: dict) -> tuple[str, ...]:
 
 
 def _settings(path: Path, where: str, raw: dict) -> dict:
-    """A step's `set`, checked before any compute: only how a run is measured (TrainConfig.RUNTIME less OWN_KEYS),
-    each value of its field's type and range."""
+    """A step's `set` (its keys checked by the format: how a run is measured, `file_formats.SETTABLE`), each value of
+    its field's type and range, before any compute."""
     from emml.config.schema import TrainConfig, apply_overrides
 
     settings = raw.get("set", {})
-    allowed = [name for name in TrainConfig.RUNTIME if name not in OWN_KEYS]
-    if not isinstance(settings, dict) or any(k not in allowed for k in settings):
-        raise ValueError(f"{path}: {where}.set must be a table of fields among {', '.join(allowed)}")
     try:
         apply_overrides(TrainConfig(), dict(settings), source=f"{where}.set").validate()
     except ValueError as e:
         raise ValueError(f"{path}: {e}") from None
     return dict(settings)
-
-
-def _check_keys(path: Path, where: str, data, allowed: tuple[str, ...]) -> None:
-    if not isinstance(data, dict):
-        raise ValueError(f"{path}: {where} must be a table")
-    unknown = sorted(set(data) - set(allowed))
-    if unknown:
-        raise ValueError(f"{path}: {where}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(allowed)}")
 
 
 def _declared(table: str, profile: str) -> dict:

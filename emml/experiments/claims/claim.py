@@ -2,8 +2,9 @@
 Each claim's `kind` is an object of emml/experiments/claims/kinds.py (the fields it needs, its rule, its decision).
 
 The campaign's steps name the claims their runs decide (emml/experiments/campaign/progress.py, `--status`); the
-reports state each claim beside the cells that decide it. Loading checks every claim against its table (rows, metrics,
-columns) before any compute, with errors that name the file, the claim and the allowed values.
+reports state each claim beside the cells that decide it. Loading holds the file to its format
+(emml/experiments/claims/claim_format.py: keys, types, kinds, marks), then checks every claim against its table (rows,
+metrics, columns), before any compute, with errors that name the file, the claim and the allowed values.
 """
 
 from __future__ import annotations
@@ -11,36 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import tomllib
-
 from emml.config.paths import REPRODUCE_DIR
+from emml.config.toml_files import check_file, read_toml
 from emml.eval.metrics import CURVE_METRICS, metric, train_of
+from emml.experiments.claims.claim_format import MARKS, ClaimsFile
 from emml.experiments.claims.kinds import KINDS
 from emml.experiments.tables import load_table
 
 CLAIMS_FILE = REPRODUCE_DIR / "claims.toml"
-KEYS = (
-    "id",
-    "text",
-    "source",
-    "kind",
-    "table",
-    "row",
-    "rows",
-    "than",
-    "where",
-    "metrics",
-    "margin",
-    "value",
-    "mark",
-    "key",
-    "relative",
-    "inferred",
-    "on_paper",
-)
-WHERE_KEYS = ("difficulty", "aux")
-MARKS = ("chance", "0.5", "0.9")
-"""A 'faster' claim's crossing: leaving chance, reaching 0.5, reaching 0.9 (emml/report/efficiency.py)."""
 
 
 @dataclass(frozen=True)
@@ -90,31 +69,18 @@ class Claim:
 
 
 def load_claims(path: Path = CLAIMS_FILE) -> dict[str, Claim]:
-    """Every claim of the file by id, checked against its table."""
+    """Every claim of the file by id, held to the file's format, then checked against its table."""
     try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as e:
-        raise ValueError(f"{path}: cannot be read as TOML: {e}") from None
+        data = read_toml(path)
+    except OSError as e:
+        raise ValueError(f"{path}: cannot be read: {e}") from None
+    check_file(path, data, ClaimsFile)
     claims: dict[str, Claim] = {}
-    if not isinstance(data.get("claims", []), list):
-        raise ValueError(f"{path}: claims must be an array of tables ([[claims]]), got {data['claims']!r}")
-    for i, raw in enumerate(data.get("claims", [])):
+    for i, raw in enumerate(data["claims"]):
         where = f"{path}: claims[{i}]"
-        if not isinstance(raw, dict):
-            raise ValueError(f"{where}: must be a table ([[claims]]), got {raw!r}")
-        unknown = sorted(set(raw) - set(KEYS))
-        if unknown:
-            raise ValueError(f"{where}: key {unknown[0]!r} is unknown; allowed: {', '.join(KEYS)}")
-        for key in ("id", "text", "source", "kind", "table"):
-            if key not in raw:
-                raise ValueError(f"{where}: {key} is required")
         if raw["id"] in claims:
             raise ValueError(f"{where}: id={raw['id']!r} is used twice; ids must be unique")
-        if raw["kind"] not in KINDS:
-            raise ValueError(f"{where}.kind={raw['kind']!r} is unknown; allowed: {', '.join(KINDS)}")
         claims[raw["id"]] = _claim(where, raw)
-    if not claims:
-        raise ValueError(f"{path}: no [[claims]]")
     return claims
 
 
@@ -163,8 +129,6 @@ def _claim(where: str, raw: dict) -> Claim:
         raise ValueError(f"{where}.relative: kind={figure!r} only")
     for part, selection in (("where", cells), ("relative", relative)):
         for key, value in selection.items():
-            if key not in WHERE_KEYS:
-                raise ValueError(f"{where}.{part}: {key!r} is unknown; allowed: {', '.join(WHERE_KEYS)}")
             values = table.difficulties if key == "difficulty" else table.aux
             if value not in values:
                 raise ValueError(f"{where}.{part}.{key}={value!r} is not a column of {raw['table']}; allowed: {values}")

@@ -30,16 +30,22 @@ GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_te
 @pytest.mark.parametrize(
     "body, message",
     [
-        ('kind = "wins"\nrow = "GA"\n', r"claims\[0\].kind='wins' is unknown; allowed: best, below"),
+        ('kind = "wins"\nrow = "GA"\n', r"key 'claims\[0\].kind': 'wins' is not allowed; choose one of best, below"),
         ('kind = "best"\n', r"kind='best' needs 'row'"),
         ('kind = "best"\nrow = "GPT"\n', r"row 'GPT' is not a row of table2; allowed: Text only"),
         ('kind = "best"\nrow = "GA"\nwhere = { difficulty = "house" }\n', r"where.difficulty='house' is not a column"),
-        ('kind = "best"\nrow = "GA"\nwhere = { seed = 0 }\n', r"where: 'seed' is unknown; allowed: difficulty, aux"),
+        (
+            'kind = "best"\nrow = "GA"\nwhere = { seed = 0 }\n',
+            r"key 'claims\[0\].where.seed': unknown key; allowed keys: difficulty, aux$",
+        ),
         ('kind = "level"\nrows = ["GA"]\nthan = "FiLM"\n', r"kind='level' needs 'margin'"),
-        ('kind = "best"\nrow = "GA"\nweight = 2\n', r"key 'weight' is unknown"),
+        (
+            'kind = "best"\nrow = "GA"\nweight = 2\n',
+            r"key 'claims\[0\].weight': unknown key; allowed keys: id, text, source, kind, table, row",
+        ),
         (
             'kind = "faster"\nrows = ["GA"]\nthan = "FiLM"\nmark = "0.7"\n',
-            r"mark='0.7' is not allowed; allowed: chance",
+            r"key 'claims\[0\].mark': '0.7' is not allowed; choose one of chance, 0.5, 0.9$",
         ),
         ('kind = "best"\nrow = "GA"\nmark = "0.5"\n', r"mark='0.5' is not allowed; allowed: kind='faster' only"),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\n', r"kind='diagnostic' needs 'key'"),
@@ -47,7 +53,7 @@ GOOD = 'id = "x"\ntext = "t"\nsource = "s"\ntable = "table2"\nmetrics = ["sgn_te
         ('kind = "best"\nrow = "GA"\nrelative = { aux = true }\n', r"relative: kind='diagnostic' only"),
         (
             'kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\nkey = "diag/x"\nrelative = { aux = "yes" }\n',
-            r"relative.aux='yes' is not a column of table2",
+            r"key 'claims\[0\].relative.aux': must be true or false, got 'yes'",
         ),
         ('kind = "diagnostic"\nrows = ["GA"]\nvalue = 0.5\nkey = "eval/x"\n', r"key='eval/x': kind='diagnostic' only"),
     ],
@@ -85,8 +91,12 @@ def test_a_claim_reads_a_test_column_or_its_train_twin_and_nothing_else(tmp_path
             '[[claims]]\nid = "x"\ntext = "t"\nsource = "s"\ntable = "table9"\nkind = "best"\nrow = "GA"\n',
             r": claims\[0\]\.table: 'table9' is unknown; choose one of 'table2', ",
         ),
-        ('claims = "all of them"\n', r": claims must be an array of tables \(\[\[claims\]\]\), got 'all of them'"),
-        ("claims = [1]\n", r": claims\[0\]: must be a table \(\[\[claims\]\]\), got 1"),
+        (
+            'claims = "all of them"\n',
+            r": key 'claims': must be a non-empty array of tables \(\[\[claims\]\]\), got 'all of them'",
+        ),
+        ("claims = [1]\n", r": key 'claims\[0\]': must be a table, got 1"),
+        ("# no claims\n", r": key 'claims': missing"),
     ],
 )
 def test_a_claim_of_an_unknown_table_or_shape_is_named_by_file_and_key_path(tmp_path, text, message):
