@@ -12,7 +12,7 @@ import typer
 
 from emml.config.env import INTERPOLATIONS
 from emml.config.env_kinds import DOOM_ID, ENV_KINDS, GYM_ENVS, kinds_of
-from emml.config.schema import CONTROLS, DEVICES, EQ1_WORDS, SENTENCE_ACTIVATIONS, SPLITS, TASK_CHOICES, TASKS
+from emml.config.schema import ACTIVATIONS, CONTROLS, DEVICES, EQ1_WORDS, SPLITS, TASK_CHOICES, TASKS
 
 # --- the choices of the options: metavar, validation before anything runs, shell completion -------------------------
 # Literal types, built from the data that declares each set (typer shows them as <a|b>, refuses another value naming
@@ -33,7 +33,7 @@ SPLITS_OR_BOTH = (*SPLITS, "both")
 Splits = Literal[SPLITS_OR_BOTH]
 Control = Literal[CONTROLS]
 Eq1Words = Literal[EQ1_WORDS]
-Activation = Literal[SENTENCE_ACTIVATIONS]
+Activation = Literal[ACTIVATIONS]
 Backend = Literal["local", "slurm"]
 SlurmCluster = Literal["slurm", "local", "debug"]
 Interpolation = Literal[INTERPOLATIONS]

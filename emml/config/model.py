@@ -14,8 +14,11 @@ from emml.config.model_options import check_model_options, model_option, option_
 
 SENTENCE_READOUTS: tuple[str, ...] = ("last", "mean")
 """Values of `ModelConfig.sentence_readout`: the GRU's last output (the paper's reading) or the mean of its outputs."""
-SENTENCE_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
-"""Values of `ModelConfig.sentence_activation`: the paper's ReLU on x_sent's Linear, or softplus (never 0)."""
+ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
+"""The activations an option may put on a Linear's output: the paper's ReLU, or softplus (as non-negative, but never
+0, so that no unit can die). The one list of the values of `ModelConfig.sentence_activation` (x_sent's Linear), of the
+baselines' option `answer_activation` (their answer head: `emml.models.baselines.BaselineOptions`, which declares it)
+and of `emml probe-eqa --activation`; `emml.models.encoders.activation` gives each its function."""
 EQ1_WORDS: tuple[str, ...] = ("all", "content")
 """Values of Dual-Attention's option `eq1_words` (`emml.models.fusion.DualAttentionOptions`, which declares it; here
 for the command line, which imports no torch): Eq. 1 gates x_I with every word of the text (the paper's x_BoW), or
@@ -24,10 +27,8 @@ ANSWER_GRADS: tuple[str, ...] = ("all", "gate", "centered")
 """Values of Dual-Attention's option `answer_grad` (`emml.models.fusion.DualAttentionOptions`): Eq. 5's answer loss
 trains the conv and x_sent (the paper's, end to end), x_sent only, or both with its gradient into x_I centred over
 the cells."""
-ANSWER_ACTIVATIONS: tuple[str, ...] = ("relu", "softplus")
-"""Values of the baselines' option `answer_activation` (`emml.models.baselines.BaselineOptions`, which declares it;
-here for the command line, which imports no torch): the activation on their answer head's logits, the appendix's
-ReLU or softplus (never 0)."""
+X_IMAGES: tuple[str, ...] = ("sigmoid", "relu")
+"""Values of `ModelConfig.x_image`: what the fusion reads as x_I from the conv3 logits."""
 CONTROLS: tuple[str, ...] = ("none", "detectors", "target_mask", "type_gate")
 """Values of `ModelConfig.control`: the model itself, and the three diagnostic controls."""
 LABEL_CONTROLS: tuple[str, ...] = ("detectors", "target_mask")
@@ -66,7 +67,7 @@ class ModelConfig:
     'which') in x_sent. Measured in docs/fidelity.md (issue 34): with 'last', a test question ending in a word no
     training question ends in gets the GA2 gate of the instructions ending in it ('what color is the torch'
     answered 'torch')."""
-    sentence_activation: str = model_option("relu", name="xsent{}", choices=SENTENCE_ACTIVATIONS)
+    sentence_activation: str = model_option("relu", name="xsent{}", choices=ACTIVATIONS)
     """The activation on x_sent's Linear (§3: "the linear layer with ReLU activations"; "ReLU activations for
     sentence embedding ensure aggregation"): 'relu', the paper's, the default; or, opt-in, 'softplus', as
     non-negative but never 0, so that no gate channel can die. Measured in docs/fidelity.md (issue 34): under ReLU a
@@ -82,7 +83,7 @@ class ModelConfig:
     labels, end to end from the start, the answer loss pins whole conv3 channels within ~100k frames (Dual-Attention,
     GA, FiLM: docs/fidelity.md, "No Aux"). The trainer sets it from the frames trained (`EmmlModel.at_frames`), so a
     resumed run resumes the schedule. Run name: 'warm<N>'."""
-    x_image: str = model_option("sigmoid", choices=("sigmoid", "relu"))
+    x_image: str = model_option("sigmoid", choices=X_IMAGES)
     """What the fusion reads as x_I from the conv3 logits z: 'sigmoid' (Appendix A: sigmoid on conv3) or 'relu'
     (§3.1 after Eq. 2: 'ReLU activations in the convolutional feature maps'); the aux task predicts sigmoid(z)
     either way. The paper contradicts itself; measured in docs/fidelity.md."""

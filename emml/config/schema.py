@@ -51,13 +51,14 @@ from emml.config.env import (
     match_env_class,
 )
 from emml.config.model import (
+    ACTIVATIONS,
     ANSWER_GRADS,
     CONTROLS,
     EQ1_WORDS,
     LABEL_CONTROLS,
-    SENTENCE_ACTIVATIONS,
     SENTENCE_READOUTS,
     SHARED_MODEL_OPTIONS,
+    X_IMAGES,
     ModelConfig,
 )
 from emml.config.model_options import CHOICES, NAME_PART, check_model_options, model_option, option_fields
@@ -87,13 +88,14 @@ __all__ = [  # the configs' one import point: what is defined here, and the name
     "HouseConfig",
     "env_config_class",
     "match_env_class",
+    "ACTIVATIONS",
     "ANSWER_GRADS",
     "CONTROLS",
     "EQ1_WORDS",
     "LABEL_CONTROLS",
-    "SENTENCE_ACTIVATIONS",
     "SENTENCE_READOUTS",
     "SHARED_MODEL_OPTIONS",
+    "X_IMAGES",
     "ModelConfig",
     "CHOICES",
     "NAME_PART",

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 from emml.config.env_kinds import ENV_KINDS
-from emml.config.schema import DoomConfig
+from emml.config.schema import X_IMAGES, DoomConfig
 from emml.envs.doom import DoomEnv
 from emml.eval.evaluate import eval_settings, obs_to_torch, playing
 
@@ -79,7 +79,7 @@ def x_image_saturation(logits: np.ndarray, x_image: str = "sigmoid", counted: np
     elif x_image == "relu":
         pinned, x = (z <= 0).all(axis=(0, 2, 3)), np.maximum(z, 0.0)
     else:
-        raise ValueError(f"x_image={x_image!r} is unknown; allowed: sigmoid, relu")
+        raise ValueError(f"x_image={x_image!r} is unknown; allowed: {', '.join(X_IMAGES)}")
     spatial_std = x.reshape(*x.shape[:2], -1).std(-1).mean(0)  # (V,): per frame over cells, then over frames
     channels = {
         int(c): {

@@ -44,7 +44,7 @@ import torch
 from torch import nn
 
 from emml.config.checks import Positive, PositiveNumber, check
-from emml.config.schema import EQ1_WORDS, SENTENCE_ACTIVATIONS, SENTENCE_READOUTS, SPLITS, check_choice
+from emml.config.schema import ACTIVATIONS, EQ1_WORDS, SENTENCE_READOUTS, SPLITS, check_choice
 from emml.envs.vector import make_env
 from emml.eval.diagnose_eqa import gate_missing
 from emml.eval.evaluate import eval_settings
@@ -97,7 +97,7 @@ class ProbeOptions:
     """Words Eq. 1 sums the channels of: one of EQ1_WORDS."""
     init: Literal[INITS] = "checkpoint"
     """Where the retrained GRU and Linear start: one of INITS."""
-    activation: Literal[SENTENCE_ACTIVATIONS] = "relu"
+    activation: Literal[ACTIVATIONS] = "relu"
     """x_sent's activation on the retrained Linear (`ModelConfig.sentence_activation` values: relu, the paper's, or
     softplus)."""
 

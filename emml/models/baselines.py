@@ -11,8 +11,9 @@ import torch
 from torch import Tensor, nn
 
 from emml.config.checks import Positive
-from emml.config.model import ANSWER_ACTIVATIONS
+from emml.config.model import ACTIVATIONS
 from emml.config.schema import model_option
+from emml.models.encoders import activation_function
 from emml.models.fusion import Fusion, FusionOptions, FusionOutput, gated_attention
 
 
@@ -20,7 +21,7 @@ from emml.models.fusion import Fusion, FusionOptions, FusionOutput, gated_attent
 class BaselineOptions(FusionOptions):
     """The option of the baselines with the appendix's answer head (Text only, Image only, Concat, GA, FiLM)."""
 
-    answer_activation: str = model_option("relu", name="head{}", choices=ANSWER_ACTIVATIONS)
+    answer_activation: str = model_option("relu", name="head{}", choices=ACTIVATIONS)
     """The activation on the answer head's logits (appendix, "Baseline details": "a linear layer f with ReLU
     activations followed by softmax"): 'relu', the paper's, the default; or, opt-in, 'softplus', as non-negative but
     never 0. Measured in docs/fidelity.md ("The baselines' answer head"): under ReLU a logit whose Linear output is
@@ -39,17 +40,18 @@ class AnswerHead(nn.Module):
         super().__init__()
         self.linear = nn.Linear(state_dim, vocab_size)
         self.activation = "relu"
+        """The activation's name, one of `ACTIVATIONS` (`use`)."""
+        self.function = activation_function(self.activation)
+        """The activation on the logits."""
 
     def use(self, activation: str) -> AnswerHead:
-        """Put ``activation`` (one of `ANSWER_ACTIVATIONS`) on the logits; returns self."""
-        if activation not in ANSWER_ACTIVATIONS:
-            raise ValueError(f"answer_activation={activation!r} must be one of {', '.join(ANSWER_ACTIVATIONS)}")
+        """Put ``activation`` (one of `ACTIVATIONS`) on the logits; returns self."""
+        self.function = activation_function(activation, "answer_activation")
         self.activation = activation
         return self
 
     def forward(self, state: Tensor) -> Tensor:
-        z = self.linear(state)
-        return torch.relu(z) if self.activation == "relu" else nn.functional.softplus(z)
+        return self.function(self.linear(state))
 
 
 class _Baseline(Fusion):

@@ -15,8 +15,10 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from emml.config.checks import check_choice
 from emml.config.geometry import CONV_LAYERS as _CONV_LAYERS  # one source of the conv geometry
 from emml.config.geometry import MIN_INPUT_SIZE, conv_output_size  # noqa: F401  (re-exported)
+from emml.config.model import ACTIVATIONS
 from emml.models.gru import gru_scan
 
 BLOCKS_FROM = (64, 25_000)
@@ -105,6 +107,17 @@ class ImageEncoder(nn.Module):
         return logits.to(torch.float32, memory_format=torch.contiguous_format)
 
 
+ACTIVATION_FUNCTIONS = dict(zip(ACTIVATIONS, (torch.relu, F.softplus), strict=True))
+"""The function of each activation an option may name (`emml.config.model.ACTIVATIONS`, in its order)."""
+
+
+def activation_function(name: str, field: str = "activation"):
+    """The function of activation ``name``; one that is not in `ACTIVATIONS` is a ValueError naming ``field`` and the
+    allowed values."""
+    check_choice(field, name, ACTIVATIONS)
+    return ACTIVATION_FUNCTIONS[name]
+
+
 DEDUPE_FROM = 64
 """Batches of at least this many rows encode each distinct instruction once (the PPO update's T·B rows hold one
 instruction per episode: ~40 distinct in 1,024 at 84×150, a quarter of the encoder's time); acting's few rows
@@ -136,7 +149,7 @@ class TextEncoder(nn.Module):
         self.readout = readout
         """Which GRU output the Linear reads: 'last' (after the last word) or 'mean' (over the words);
         `ModelConfig.sentence_readout`."""
-        self.activation = torch.relu if activation == "relu" else F.softplus
+        self.activation = activation_function(activation)
         """x_sent's activation on the Linear: ReLU (§3) or softplus; `ModelConfig.sentence_activation`."""
         self.unrolled = False
         """Run the GRU as its equations in linear ops (`gru_scan`) rather than the fused `nn.GRU` kernel: what

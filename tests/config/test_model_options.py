@@ -66,3 +66,27 @@ def test_the_configs_leave_a_models_own_options_to_its_declaration():
         TrainConfig(model_options={"name": "ga"}).validate()
     with pytest.raises(AttributeError, match="ModelConfig of model 'dual_attention' has no option 'ga1'"):
         ModelConfig().ga1  # noqa: B018 - its fusion's options are filled in by the model registry
+
+
+def test_each_set_of_choices_has_one_home_that_every_reader_reads():
+    """The activations (x_sent's, the baselines' answer head's, the EQA probe's, the command line's) and x_image's
+    values are listed once, in emml/config/model.py: a second list (a mutant giving the baselines
+    ('relu', 'softplus', 'tanh')) would let one option accept what another refuses."""
+    import typing
+    from dataclasses import fields
+
+    from emml.cli.common import Activation
+    from emml.config.model import ACTIVATIONS, X_IMAGES
+    from emml.config.model_options import CHOICES
+    from emml.eval.probe_eqa import ProbeOptions
+    from emml.models.baselines import BaselineOptions
+    from tests.spelled import spelled
+
+    declared = {f.name: f.metadata.get(CHOICES) for f in [*fields(ModelConfig), *fields(BaselineOptions)]}
+    assert declared["sentence_activation"] is ACTIVATIONS and declared["answer_activation"] is ACTIVATIONS
+    assert declared["x_image"] is X_IMAGES
+    probe = typing.get_type_hints(ProbeOptions)["activation"]
+    assert typing.get_args(probe) == typing.get_args(Activation) == ACTIVATIONS
+    home = "emml/config/model.py:"
+    for values in (ACTIVATIONS, X_IMAGES):
+        assert [s for s in spelled(values) if not s.startswith(home)] == []

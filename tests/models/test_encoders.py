@@ -177,3 +177,22 @@ def test_the_softplus_activation_keeps_every_channel_alive_and_the_default_is_re
     for enc in (relu, soft):
         enc(tokens)[1][:, 3].sum().backward()
     assert relu.linear.bias.grad[3] == 0 and soft.linear.bias.grad[3] > 0  # only softplus can bring it back
+
+
+def test_every_declared_activation_has_its_function_and_another_name_is_refused():
+    from emml.config.model import ACTIVATIONS
+    from emml.models.baselines import AnswerHead
+    from emml.models.encoders import ACTIVATION_FUNCTIONS, activation_function
+
+    assert tuple(ACTIVATION_FUNCTIONS) == ACTIVATIONS
+    z = torch.tensor([-2.0, 0.5])
+    torch.testing.assert_close(activation_function("relu")(z), torch.relu(z))
+    torch.testing.assert_close(activation_function("softplus")(z), torch.nn.functional.softplus(z))
+    with pytest.raises(ValueError, match="activation='tanh' is not allowed; choose one of 'relu', 'softplus'"):
+        TextEncoder(vocab_size=6, activation="tanh")
+    head = AnswerHead(4, 3)
+    torch.testing.assert_close(
+        head.use("softplus")(torch.ones(1, 4)), torch.nn.functional.softplus(head.linear(torch.ones(1, 4)))
+    )
+    with pytest.raises(ValueError, match="answer_activation='tanh' is not allowed"):
+        head.use("tanh")
