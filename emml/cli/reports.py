@@ -215,10 +215,10 @@ def visualize_attention(
     Written as attention-TASK-TABLE-RUN-sSEED.png (named by the run's table and run)."""
     from emml.report.index import figure_name
     from emml.report.visualize import attention_figure, record_episode
-    from emml.tasks.language import check_choice
+    from emml.tasks.language import TASKS, check_choice
 
     try:
-        check_choice("task", task, ("sgn", "eqa"))
+        check_choice("task", task, TASKS)
     except ValueError as e:
         _fail(str(e))
     ((_, model, cfg),) = _models(checkpoint)

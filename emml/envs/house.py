@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emml.config.schema import HouseConfig, config_from_dict
+from emml.config.schema import TASKS, HouseConfig, config_from_dict
 from emml.envs.doom import ANSWER, FORWARD, LEFT, MOVES, RIGHT, DoomEnv
 from emml.envs.furniture import CLASS_TO_ACTOR, FURNITURE, spawn_class
 from emml.envs.house_wad import HOUSE, MAP, wad_path
@@ -67,7 +67,7 @@ class HouseEnv(DoomEnv):
 
     house = HOUSE
     """The fixed house (rooms, doorways, furniture slots, spawn)."""
-    shaped_tasks = ("sgn", "eqa")
+    shaped_tasks = TASKS
     """Appendix C: shaping by the decrease in path distance to the referent in SGN and EQA episodes alike."""
 
     def __init__(self, config: HouseConfig | None = None, render_mode: str | None = None, **kwargs):
