@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field
 
 from emml.config.profiles import Profile, resolve_profile
-from emml.eval.metrics import TRAIN_COLUMNS, train_of
+from emml.eval.metrics import train_of
 from emml.experiments.claims.evidence import (
     BUDGET,
     CLOSING,
@@ -29,15 +29,14 @@ from emml.experiments.claims.evidence import (
     Chance,
     Check,
     Score,
-    frames_text,
     mean,
     status,
     task_of,
 )
 from emml.report.chance import BLIND_MODEL, blind_prior, paper_prior
-from emml.report.claims_settle import Curves, borrow, literal, next_seed, settle_all, settle_costs, spreads
+from emml.report.claims_reading import Reading
+from emml.report.claims_settle import Curves, borrow, isnan, literal, next_seed, settle_all, settle_costs, spreads
 from emml.report.plan import ReportPlan, plan_report
-from emml.runs.rundir import METRICS, path_of
 
 __all__ = [
     "BUDGET",
@@ -126,13 +125,6 @@ class Evidence:
     literal: list[dict] = field(default_factory=list)
 
 
-def _isnan(v) -> bool:
-    try:
-        return math.isnan(float(v))
-    except (TypeError, ValueError):
-        return True
-
-
 def _wanted(where: dict, cell_metric: str, c) -> bool:
     return c.metric == cell_metric and all(
         getattr(c, "difficulty" if k == "difficulty" else "aux") == v for k, v in where.items()
@@ -143,14 +135,14 @@ def _learning(row: dict, metric: str, difficulty: str, blind: bool, chance: Chan
     """A run's training score on the task of `metric` and the bar it must pass to have learned (-inf: the blind
     row, whose score is the chance line itself)."""
     train = train_of(task_of(metric)).name
-    value = None if _isnan(row.get(train)) else float(row[train])
+    value = None if isnan(row.get(train)) else float(row[train])
     return value, (-math.inf if blind else chance.bar(train, difficulty))
 
 
 def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
     """The claim's cells read from the results of ``plan`` (the claim's table planned under a profile,
-    emml/report/plan.py: results/<table>/<profile>.csv and the tables it borrows from); 'faster' and 'diagnostic'
-    read the runs' metrics.csv under the plan's run_root."""
+    emml/report/plan.py: results/<table>/<profile>.csv and the tables it borrows from), each run's number as the
+    claim's kind reads it (`Kind.read` of a `Reading`: its results row, or its curve as every page reads it)."""
     from emml.report.cells import build_cells, paper_numbers, table_results
 
     kind = claim.kind_of
@@ -165,7 +157,7 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
     blind = {r.label for r in table.rows if r.model == BLIND_MODEL}
     involved = kind.involved(claim, table)
     ev = Evidence(chance=chance)
-    paths = {}
+    folders, run_ids = {}, {}
     for where in kind.wheres(claim):
         for m in claim.metrics:
             cell_metric = m if m in columns else m.replace("_train", "_test")  # a train twin reads the test cell's runs
@@ -175,27 +167,16 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
                 for name, value in zip(c.runs, c.values):
                     row = rows[name]
                     ev.frames.add(int(row["frames"]))
-                    if m not in columns and not kind.curve:  # a train column (sgn_train): the same run's results row
-                        if _isnan(row.get(m)):
-                            ev.missing.append(f"{name} (no {m} in its results row)")
-                            continue
-                        value = float(row[m])
                     train, bar = _learning(row, m, c.difficulty, c.row in blind, chance)
                     episodes = int(row["eval_episodes"]) * per
                     score = Score(name, int(row["seed"]), value, episodes, int(row["frames"]), train, bar, metric=m)
-                    paths[name] = path_of(run_root, planned[name].spec.table, name) / METRICS
-                    if kind.curve:
-                        score = _curve_score(claim, m, planned[name], run_root, score, row, chance)
-                        if score is None:
-                            ev.missing.append(f"{name} (no complete metrics.csv here)")
-                            continue
-                        shown[score.seed] = (
-                            frames_text(None if math.isinf(score.value) else int(score.value), score.frames)
-                            if kind.reads == "crossing"
-                            else f"{score.value:.3f}"
-                        )
-                    else:
-                        shown[score.seed] = f"{value:.3f}"
+                    run = Reading(planned[name], row, score, columns, run_root, chance)
+                    folders[name], run_ids[name] = run.folder, run.run_id
+                    score = kind.read(claim, m, run)
+                    if score is None:
+                        ev.missing.append(kind.missing(name, m))
+                        continue
+                    shown[score.seed] = kind.shown(score)
                     found.append(score)
                 ev.scores[(c.row, c.difficulty, c.aux, m)] = found
                 second = next_seed(plan, c.row, c.difficulty, c.aux, c.metric, [s.run for s in found])
@@ -217,8 +198,8 @@ def gather(claim, plan: ReportPlan, chance: Chance | None = None) -> Evidence:
                         "column": m,
                     }
                 )
-    ev.curves = Curves(paths)
-    if not kind.curve:  # a one-seed cell borrows the spread of its row's nearest cell with two seeds or more
+    ev.curves = Curves(folders, run_ids)
+    if kind.borrows:  # a one-seed cell borrows the spread of its row's nearest cell with two seeds or more
         ev.scores = borrow(ev.scores, spreads(claim, cells, rows, columns, involved), _setting)
         ev.literal = literal(ev.evidence, plan)
     return ev
@@ -326,34 +307,6 @@ def decide_paper(claim) -> Decision:
     if not claim.kind_of.one_row:
         claim = replace(claim, rows=tuple(r for r in claim.rows if r in printed))
     return judge(claim, paper_evidence(claim), PAPER)
-
-
-def _curve_score(claim, metric: str, run, run_root, score: Score, row: dict, chance: Chance):
-    """A run's number for a 'faster' claim (the frames at its first crossing of the mark, inf when it never crosses
-    by its last evaluation) or a 'diagnostic' one (the key at its last evaluation), from its metrics.csv; None when
-    the file is not here or stops short of the run's frames (a crossing after it cannot be ruled out)."""
-    from emml.report.efficiency import run_efficiency
-    from emml.runs.records import points_or_none
-
-    spec = run.spec  # a planned run (emml/report/plan.py): its name spelled once
-    if claim.kind_of.reads == "crossing":
-        eff = run_efficiency(spec, run.name, run_root, chance)
-        if not eff.found or metric not in eff.crossings:
-            return None
-        crossed = eff.crossings[metric][claim.mark]
-        if crossed is None and eff.last + eff.every < score.frames:
-            return None
-        value = math.inf if crossed is None else float(crossed)
-        return Score(score.run, score.seed, value, 0, eff.last, every=eff.every)
-    mirror = points_or_none(path_of(run_root, spec.table, run.name) / METRICS)  # damaged: None, named
-    points = sorted((step, v) for step, key, v in mirror or [] if key == claim.key)
-    if not points:
-        return None
-    # learned: either training split above its bar (the figure is about the conv both tasks read); a run with no
-    # training score has none (left out of 'learned', issue 85 item 4), never a placeholder margin
-    margins = [float(row[m]) - chance.bar(m, spec.difficulty) for m in TRAIN_COLUMNS if not _isnan(row.get(m))]
-    train = max(margins) if margins else None
-    return Score(score.run, score.seed, points[-1][1], 0, points[-1][0], train, 0.0, metric=claim.key)
 
 
 def _phrase(checks: list[Check]) -> str:

@@ -1,8 +1,8 @@
 """What the claims page reads to weigh a reversal for being settled (issue 81 item 3; the rule:
 emml/experiments/claims/settle.py): the nearest cell of the same row with two seeds or more, whose between-seed
-variance a one-seed row borrows; each run's evaluation curve (its metrics.csv, read through emml/report/efficiency.py
-and emml/runs/records.py); the run that would give a one-seed row its next seed, with its campaign step; and the
-paper-literal run beside a No Aux cell trained under the warm-up (issue 81 item 5).
+variance a one-seed row borrows; each run's evaluation curve (read as every page reads it: emml/runs/curve.py); the
+run that would give a one-seed row its next seed, with its campaign step; and the paper-literal run beside a No Aux
+cell trained under the warm-up (issue 81 item 5).
 """
 
 from __future__ import annotations
@@ -14,9 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from emml.eval.metrics import CURVE_METRICS
+from emml.eval.metrics import BY_NAME, CURVE_METRICS
 from emml.experiments.claims.evidence import Check, Score
 from emml.experiments.claims.settle import MORE_FRAMES, settle
+from emml.runs.curve import read_curve
 
 WARM = re.compile(r"-warm(\d+)-")
 """A No Aux run under the warm-up (issue 61's rule: the answer kept off the image for its first N frames)."""
@@ -54,34 +55,22 @@ def borrow(scores: dict, spreads: dict, label) -> dict:
 
 
 class Curves:
-    """Each run's evaluation curves, read once: run name → its metrics.csv (``paths``). A file is read once per
-    process while it is unchanged (`READ`: the claims of one page read the same runs' files many times)."""
+    """Each run's evaluation curves as every page reads them (`emml.runs.curve.read_curve`: its metrics.csv, else its
+    MLflow run): run name → its run dir (``folders``) and the MLflow run id of its results row (``run_ids``)."""
 
-    READ: dict = {}
-    """(path, its size and modification time) → its curves (emml/report/efficiency.py's `curves`)."""
-
-    def __init__(self, paths: dict[str, Path]):
-        self.paths = paths
+    def __init__(self, folders: dict[str, Path], run_ids: dict[str, str] | None = None):
+        self.folders = folders
+        self.run_ids = run_ids or {}
 
     def __call__(self, score: Score) -> dict[int, float] | None:
-        """The run's curve of the score's metric (frames → value); None when the run has no metrics.csv here, it is
-        damaged, or it holds no point of that key (a transfer score: no curve)."""
-        path = self.paths.get(score.run)
-        if path is None:
+        """The run's curve of the score's metric (frames → value): a greedy evaluation metric's key (eval/sgn_test
+        for sgn_test), or the score's diag/* key itself; None when the run has no curve here or none of that key (a
+        transfer score)."""
+        folder = self.folders.get(score.run)
+        if folder is None:
             return None
-        if score.metric in CURVE_METRICS:
-            from emml.report.efficiency import curves
-
-            stat = path.stat() if path.is_file() else None
-            key = (path, stat and (stat.st_size, stat.st_mtime_ns))
-            if key not in self.READ:
-                self.READ[key] = curves(path) or {}
-            points = self.READ[key].get(score.metric)
-        else:  # a diag/* figure: the mirror's points of that key, a point logged twice keeping its last value
-            from emml.runs.records import points_or_none
-
-            mirror = points_or_none(path) or []
-            points = sorted({step: v for step, key, v in mirror if key == score.metric}.items())
+        key = BY_NAME[score.metric].key if score.metric in CURVE_METRICS else score.metric
+        points = read_curve(folder, [key], self.run_ids.get(score.run)).of(key)
         return dict(points) if points else None
 
 

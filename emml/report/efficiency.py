@@ -1,7 +1,8 @@
 """Sample efficiency (issue 49): per run, the frames at which its greedy accuracy first leaves chance and first
 reaches 0.5 and 0.9, on SGN and EQA, train and test split, read from the periodic evaluation points of the run's
 metrics mirror (`runs/<table>/<run>/metrics.csv`, keys `eval/sgn_test`, `eval/eqa_train`, ...: the trainer evaluates
-greedily every `eval_every` frames on `eval_episodes` episodes per task and split).
+greedily every `eval_every` frames on `eval_episodes` episodes per task and split), as every page reads a run's curve
+(emml/runs/curve.py: its metrics.csv, else its MLflow run).
 
 The table pages show them run by run (`markdown`); the claims page decides the paper's speed claims with them ("reward
 shaping and the task indicator help with learning speed", §5.3, Figure 9: `emml/report/claims.py`, kind `faster`).
@@ -16,6 +17,7 @@ from pathlib import Path
 
 from emml.eval.metrics import BY_NAME, CURVE_METRICS, label
 from emml.experiments.claims.evidence import LEAVE, Chance, frames_text
+from emml.runs.curve import RunCurve, read_curve
 
 __all__ = ["LEAVE", "frames_text", "first_crossing", "run_efficiency", "table_efficiency", "markdown"]
 UNIFORM_CHANCE = Chance()
@@ -63,36 +65,31 @@ class RunEfficiency:
     """True when its metrics mirror is here but damaged (a line that is not a point: named once in a note)."""
 
 
-def curves(path: Path) -> dict[str, list[tuple[int, float]]] | None:
-    """metric → its greedy evaluation points (frames, accuracy) in frame order, from a metrics mirror; a point logged
-    twice (a resumed run) keeps its last value. {} when the file is absent, None when it is damaged (named once in a
-    note: `emml.runs.records.points_or_none`)."""
-    from emml.runs.records import points_or_none
-
-    points = points_or_none(path)
-    if points is None:
-        return None
-    keys = {BY_NAME[m].key: m for m in CURVE_METRICS}
-    out: dict[str, dict[int, float]] = {}
-    for step, key, value in points:
-        if key in keys:
-            out.setdefault(keys[key], {})[step] = value
-    return {m: sorted(points.items()) for m, points in out.items()}
+CURVE_KEYS = {BY_NAME[m].key: m for m in CURVE_METRICS}
+"""A curve metric's key in a run's curve (eval/sgn_test) → the metric (sgn_test)."""
 
 
-def run_efficiency(spec, name: str, run_root: str | Path, chance: Chance | None = None) -> RunEfficiency:
-    """The crossings of one declared run (a RunSpec, its run name ``name`` as planned) from its run dir under
-    `run_root`; 'leaves chance' above `chance` (default the task's blind ceiling, emml/report/chance.py) + LEAVE."""
+def curves(curve: RunCurve) -> dict[str, list[tuple[int, float]]]:
+    """metric → its greedy evaluation points (frames, accuracy) in frame order, from a run's curve as every page reads
+    it (`emml.runs.curve.read_curve`); a metric with no point is absent."""
+    return {m: curve.of(k) for k, m in CURVE_KEYS.items() if curve.of(k)}
+
+
+def run_efficiency(
+    spec, name: str, run_root: str | Path, chance: Chance | None = None, run_id: str | None = None
+) -> RunEfficiency:
+    """The crossings of one declared run (a RunSpec, its run name ``name`` as planned) from its curve (its run dir
+    under `run_root`, else MLflow run ``run_id``: `emml.runs.curve.read_curve`); 'leaves chance' above `chance`
+    (default the task's blind ceiling, emml/report/chance.py) + LEAVE."""
     from emml.report.chance import task_ceiling
-    from emml.runs.rundir import METRICS, path_of
+    from emml.runs.rundir import path_of
 
     chance = chance if chance is not None else task_ceiling()
-
     eff = RunEfficiency(name, spec.row, spec.difficulty, spec.aux, spec.seed)
-    path = path_of(run_root, spec.table, name) / METRICS
-    found = curves(path)
+    curve = read_curve(path_of(run_root, spec.table, name), CURVE_KEYS, run_id)
+    found = curves(curve)
     if not found:
-        eff.found, eff.damaged = False, found is None
+        eff.found, eff.damaged = False, curve.damaged
         return eff
     steps = sorted({s for points in found.values() for s, _ in points})
     eff.last = steps[-1]
@@ -104,14 +101,30 @@ def run_efficiency(spec, name: str, run_root: str | Path, chance: Chance | None 
     return eff
 
 
-def table_efficiency(plan, names: list[str], chance: Chance | None = None) -> list[RunEfficiency]:
+def table_efficiency(
+    plan, names: list[str], chance: Chance | None = None, run_ids: dict[str, str] | None = None
+) -> list[RunEfficiency]:
     """The crossings of the named runs of the plan's table (the runs its page shows), in the table's run order, from
-    their run dirs under the plan's run_root; chance: the task's blind ceiling (emml/report/chance.py) unless given."""
+    their curves (run dirs under the plan's run_root, else their MLflow runs: ``run_ids``, run name → run id, by
+    default their results rows'); chance: the task's blind ceiling (emml/report/chance.py) unless given."""
     from emml.report.chance import task_ceiling
 
     chance = chance if chance is not None else task_ceiling()
+    run_ids = run_ids if run_ids is not None else results_run_ids(plan)
     wanted = set(names)
-    return [run_efficiency(r.spec, r.name, plan.run_root, chance) for r in plan.runs if r.name in wanted]
+    return [
+        run_efficiency(r.spec, r.name, plan.run_root, chance, run_ids.get(r.name))
+        for r in plan.runs
+        if r.name in wanted
+    ]
+
+
+def results_run_ids(plan) -> dict[str, str]:
+    """Run name → the MLflow run id its results row records, over the plan's table and the tables it borrows from."""
+    from emml.report.cells import table_results
+
+    results = table_results(plan.table, plan.profile, plan.results_root)
+    return {} if results.empty else dict(zip(results["run_name"], results["run_id"]))
 
 
 def markdown(runs: list[RunEfficiency], metrics: tuple[str, ...] = CURVE_METRICS, chance: Chance | None = None) -> str:

@@ -18,13 +18,13 @@ from emml.report.claims import (
     PAPER,
     UNTESTABLE,
     Evidence,
-    _isnan,
     _tables_with_runs,
     decide,
     decide_paper,
     gather,
     judge,
 )
+from emml.report.claims_settle import isnan
 from emml.report.plan import plan_report
 from tests.report.test_claims_page import CLAIMS, da_ahead, edit
 from tests.report.test_efficiency import write_curves, write_points
@@ -100,8 +100,8 @@ def test_a_run_without_its_training_score_is_named_and_the_next_seed_still_read(
 
 
 def test_nan_is_what_cannot_be_read_as_a_number():
-    assert _isnan(None) and _isnan("n/a") and _isnan(float("nan"))
-    assert not _isnan("0.25") and not _isnan(0)
+    assert isnan(None) and isnan("n/a") and isnan(float("nan"))
+    assert not isnan("0.25") and not isnan(0)
 
 
 def test_judge_keeps_the_claim_and_source_and_orders_the_cells_by_metric_then_difficulty_aux_first(tmp_path):

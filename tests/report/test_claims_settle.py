@@ -96,12 +96,12 @@ def test_a_runs_curve_is_read_for_its_scores_metric_and_again_when_its_file_chan
 
     path = tmp_path / "metrics.csv"
     path.write_text("step,key,value\n100,eval/sgn_test,0.2\n200,eval/sgn_test,0.4\n200,diag/detector_ap,0.3\n")
-    curves = Curves({"r": path})
+    curves = Curves({"r": tmp_path})
     score = Score("r", 0, 0.4, 500, 200, 0.9, 0.3, metric="sgn_test")
     assert curves(score) == {100: 0.2, 200: 0.4}
     assert curves(Score("r", 0, 0.3, 0, 200, 0.9, 0.0, metric="diag/detector_ap")) == {200: 0.3}
     assert curves(Score("r", 0, 0.4, 500, 200, metric="eqa_test")) is None  # no point of that key
-    assert curves(Score("other", 0, 0.4, 500, 200, metric="sgn_test")) is None  # no metrics.csv here
+    assert curves(Score("other", 0, 0.4, 500, 200, metric="sgn_test")) is None  # not a run of the claim's cells
     path.write_text("step,key,value\n100,eval/sgn_test,0.25\n200,eval/sgn_test,0.45\n300,eval/sgn_test,0.5\n")
     assert curves(score) == {100: 0.25, 200: 0.45, 300: 0.5}
 

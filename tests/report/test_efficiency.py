@@ -5,8 +5,17 @@ from emml.config.profiles import profile_seeds
 from emml.experiments.claims.evidence import Chance
 from emml.experiments.tables import load_table
 from emml.report.claims import BUDGET, CONTRADICTED, INCONCLUSIVE, SUPPORTED, UNTESTABLE, decide
-from emml.report.efficiency import curves, first_crossing, level, markdown, run_efficiency, table_efficiency
+from emml.report.efficiency import (
+    CURVE_KEYS,
+    curves,
+    first_crossing,
+    level,
+    markdown,
+    run_efficiency,
+    table_efficiency,
+)
 from emml.report.plan import plan_report
+from emml.runs.curve import read_curve
 from tests.report.test_claims_page import CLAIMS
 from tests.report.test_tables import PROFILE, fake_results
 
@@ -124,8 +133,8 @@ def test_the_curves_keep_a_resumed_points_last_value_in_frame_order(tmp_path):
     path = tmp_path / "metrics.csv"
     lines = ["200,eval/sgn_test,0.5", "100,eval/sgn_test,0.2", "200,eval/sgn_test,0.6", "100,train/loss,3.0"]
     path.write_text("\n".join(["step,key,value", *lines, "100,eval/eqa_train,0.4"]) + "\n")
-    assert curves(path) == {"sgn_test": [(100, 0.2), (200, 0.6)], "eqa_train": [(100, 0.4)]}
-    assert curves(tmp_path / "absent.csv") == {}
+    assert curves(read_curve(tmp_path, CURVE_KEYS)) == {"sgn_test": [(100, 0.2), (200, 0.6)], "eqa_train": [(100, 0.4)]}
+    assert curves(read_curve(tmp_path / "absent", CURVE_KEYS)) == {}
 
 
 def test_a_runs_crossings_its_last_evaluation_and_its_largest_gap(tmp_path):

@@ -1,12 +1,15 @@
 """The kinds of claim (reproduce/claims.toml `kind`): each one object that says which fields it needs, which rows
-and cells it reads, its rule as the claims page states it, and how it turns the cells' scores into comparisons
+and cells it reads, how it reads a run's number (`Kind.read`: its results row, the crossing of its evaluation curve,
+a diag/* figure), its rule as the claims page states it, and how it turns the cells' scores into comparisons
 (emml/experiments/claims/evidence.py). The page asks the kind; adding a kind is one class here, its data and tests.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Protocol
 
 from emml.experiments.claims.evidence import (
     MISSING,
@@ -16,6 +19,7 @@ from emml.experiments.claims.evidence import (
     above_chance,
     diagnostic,
     faster,
+    frames_text,
     learned,
     level,
     mean,
@@ -27,6 +31,21 @@ from emml.experiments.claims.evidence import (
 Get = Callable[[str, str, bool, str], list[Score]]
 """(row, difficulty, aux, metric) → the scores of that cell (every seed found)."""
 MARK_LABELS = {"chance": "leaves chance", "0.5": "reaches 0.5", "0.9": "reaches 0.9"}
+
+
+class RunReading(Protocol):
+    """One run of a claim's cell as the claims page reads it (emml/report/claims.py): each way a kind may read its
+    number, None when the run has none here."""
+
+    def result(self, metric: str) -> Score | None:
+        """Its results row's number of ``metric`` (a training column: that column of the same row)."""
+
+    def crossing(self, metric: str, mark: str) -> Score | None:
+        """The frames at which its evaluation curve of ``metric`` first crosses ``mark`` (inf: not by its last
+        evaluation); None when its curve cannot rule out a crossing after it."""
+
+    def last(self, key: str) -> Score | None:
+        """The value of curve key ``key`` at its last evaluation."""
 
 
 def setting_text(difficulty: str, aux: bool | None) -> str:
@@ -63,8 +82,28 @@ class Kind:
 
     @property
     def curve(self) -> bool:
-        """Reads the runs' metrics.csv (the greedy evaluation curve or a diag/* figure), not their results rows."""
+        """Reads the runs' curves (the greedy evaluation curve or a diag/* figure), not their results rows."""
         return self.reads != "results"
+
+    @property
+    def borrows(self) -> bool:
+        """A one-seed cell's score borrows the between-seed spread of its row's nearest cell with more seeds, and a
+        warm-up cell is shown beside its paper-literal run: numbers read from results rows (the kinds that read a
+        curve have neither)."""
+        return not self.curve
+
+    def read(self, claim, metric: str, run: RunReading) -> Score | None:
+        """The run's number for the claim's ``metric``, read as this kind reads it (`reads`); None: none here (the
+        cell's run is missing, `missing`)."""
+        return run.result(metric)
+
+    def missing(self, name: str, metric: str) -> str:
+        """How the evidence names a run whose number `read` found none of."""
+        return f"{name} (no {metric} in its results row)"
+
+    def shown(self, score: Score) -> str:
+        """A score as the evidence prints it."""
+        return f"{score.value:.3f}"
 
     def involved(self, claim, table) -> set[str]:
         """The rows whose scores the claim reads."""
@@ -235,6 +274,15 @@ class Faster(Kind):
     def metric_label(self, claim, metric):
         return f"{metric_text(metric)}: frames until it {MARK_LABELS[claim.mark]}"
 
+    def read(self, claim, metric, run):
+        return run.crossing(metric, claim.mark)
+
+    def missing(self, name, metric):
+        return f"{name} (no complete metrics.csv here)"
+
+    def shown(self, score):
+        return frames_text(None if math.isinf(score.value) else int(score.value), score.frames)
+
     def compare(self, claim, table, d, a, m, get):
         return [
             (
@@ -266,6 +314,12 @@ class Diagnostic(Kind):
 
     def metric_label(self, claim, metric):
         return claim.key
+
+    def read(self, claim, metric, run):
+        return run.last(claim.key)
+
+    def missing(self, name, metric):
+        return f"{name} (no complete metrics.csv here)"
 
     def checks(self, claim, table, keys, get, chance=None):
         out = []

@@ -468,3 +468,41 @@ def test_each_kind_states_its_rule_under_its_name():
 
 def test_a_metric_without_a_label_is_named_as_it_is():
     assert metric_text("sgn_test") == "SGN test" and metric_text("eqa_transfer") == "eqa_transfer"
+
+
+class Reading:
+    """A run as a kind reads it (`RunReading`): each way answers what it was asked, so a kind that reads the wrong way
+    is seen."""
+
+    def __init__(self, found: bool = True):
+        self.found = found
+
+    def result(self, metric):
+        return Score("r", 0, 0.4, 500, 1_500_000, metric=metric) if self.found else None
+
+    def crossing(self, metric, mark):
+        return Score("r", 0, math.inf if mark == "0.9" else 300_000.0, 0, 1_500_000) if self.found else None
+
+    def last(self, key):
+        return Score("r", 0, 0.7, 0, 1_400_000, metric=key) if self.found else None
+
+
+def test_each_kind_reads_a_run_its_own_way_shows_it_and_names_a_run_it_found_nothing_of():
+    best = claim("best", rows=("Dual-Attention",))
+    assert KINDS["best"].read(best, "sgn_train", Reading()).metric == "sgn_train"  # its results row
+    assert KINDS["best"].shown(KINDS["best"].read(best, "sgn_test", Reading())) == "0.400"
+    assert KINDS["best"].missing("a-run", "sgn_train") == "a-run (no sgn_train in its results row)"
+    fast = KINDS["faster"]
+    assert fast.shown(fast.read(faster_claim(), "sgn_train", Reading())) == "0.30M"  # the frames of its crossing
+    assert fast.shown(fast.read(replace(faster_claim(), mark="0.9"), "sgn_train", Reading())) == ">1.50M"  # never
+    diag = KINDS["diagnostic"]
+    read = diag.read(diag_claim(), "sgn_test", Reading())
+    assert (read.metric, diag.shown(read)) == ("diag/detector_ap", "0.700")  # its key at the last evaluation
+    for kind, c in (("best", best), ("faster", faster_claim()), ("diagnostic", diag_claim())):
+        assert KINDS[kind].read(c, "sgn_test", Reading(found=False)) is None
+    assert (
+        fast.missing("a-run", "sgn_train")
+        == diag.missing("a-run", "sgn_test")
+        == "a-run (no complete metrics.csv here)"
+    )
+    assert [k for k, x in KINDS.items() if x.borrows] == [k for k, x in KINDS.items() if x.reads == "results"]
