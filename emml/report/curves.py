@@ -1,8 +1,10 @@
-"""Training curves from MLflow metric histories: training success per task vs frames (like the paper's Figures
-7 and 8), with the greedy evaluation points."""
+"""Training curves: a run's training success per task vs frames from its MLflow histories (`plot_run`, like the
+paper's Figures 7 and 8, with the greedy evaluation points), and a table's greedy evaluation curves (`plot_table`),
+each run's curve read as every page reads it (emml/runs/curve.py), all fetched before anything is drawn."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import matplotlib
@@ -14,8 +16,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 from emml.config.profiles import Profile  # noqa: E402
 from emml.eval.metrics import BY_NAME, DECLARED, train_of  # noqa: E402
 from emml.report.aggregate import reference_row  # noqa: E402
+from emml.report.cells import AUX_LABELS, DIFFICULTY_LABELS  # noqa: E402
 from emml.report.savefig import PAGE_HEIGHT_INCHES, PAGE_INCHES, caption_path, frames_axis, save, wrap  # noqa: E402
 from emml.runs.atomic import write_text  # noqa: E402
+from emml.runs.curve import RunCurve, read_curve  # noqa: E402
 from emml.runs.diskspace import RERUN  # noqa: E402
 from emml.runs.store import metric_history  # noqa: E402
 
@@ -90,6 +94,94 @@ def _mean_band(curves: list[tuple[np.ndarray, np.ndarray]]):
     return grid, mean, (np.where(flat, mean, low), np.where(flat, mean, high))
 
 
+Panel = tuple[str, str, bool]
+"""A panel of a table's curves figure: (metric, difficulty, aux)."""
+
+
+@dataclass
+class Line:
+    """One row's line in a panel: its index among the table's rows (its colour), its label, its seeds' curves."""
+
+    index: int
+    row: str
+    curves: list[tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass
+class TableCurves:
+    """What a table's curves figure draws, every curve fetched before anything is drawn (`table_curves`)."""
+
+    read: dict[str, RunCurve] = field(default_factory=dict)
+    """Run name → its curve as every page reads it (emml/runs/curve.py), for each run a panel could draw."""
+    panels: dict[Panel, list[Line]] = field(default_factory=dict)
+    """Each panel that has a curve, in the figure's order, with its rows' lines (no empty panel, no empty line)."""
+    drawn: dict = field(default_factory=dict)
+    """Run name → planned run, of every run with a curve in the figure, in the order first drawn."""
+    notes: list[str] = field(default_factory=list)
+    """A run that has no curve here, and why."""
+
+
+def panel_runs(plan, run_ids: dict) -> dict[Panel, list[tuple[int, str, list]]]:
+    """Per panel of the table (each metric, difficulty, aux) and per row (its index and label), the planned runs whose
+    curve of the metric it draws: those of the row's cell (DA Single-Task: its SGN-only run draws SGN, its EQA-only
+    run EQA; a transfer table: its training setting's runs, for every metric) with a results row (``run_ids``)."""
+    table = plan.table
+    out: dict[Panel, list[tuple[int, str, list]]] = {}
+    for metric in dict.fromkeys(table.metrics.values()):
+        for difficulty in table.difficulties:
+            for aux in table.aux:
+                out[(metric, difficulty, aux)] = [
+                    (k, row, [r for r in _row_runs(plan, row, difficulty, aux, metric) if r.name in run_ids])
+                    for k, row in enumerate(table.curve_rows())
+                ]
+    return out
+
+
+def _row_runs(plan, row: str, difficulty: str, aux: bool, metric: str) -> list:
+    if plan.table.transfer is None:
+        return plan.cell_runs(row, difficulty, aux, metric)
+    return [r for r in plan.runs if (r.spec.row, r.spec.difficulty, r.spec.aux) == (row, difficulty, aux)]
+
+
+def fetch(candidates: dict[Panel, list[tuple[int, str, list]]], run_ids: dict) -> tuple[dict[str, RunCurve], list]:
+    """Each candidate run's curve of the table's keys, read once (`emml.runs.curve.read_curve`: its run dir's
+    metrics.csv, else the MLflow run of its results row), and a note for each run that has none."""
+    keys = list(dict.fromkeys(curve_key(metric)[0] for (metric, _, _) in candidates))
+    read: dict[str, RunCurve] = {}
+    notes = []
+    for lines in candidates.values():
+        for run in (run for _, _, runs in lines for run in runs if run.name not in read):
+            read[run.name] = curve = read_curve(run.directory, keys, run_ids[run.name])
+            if curve.damaged:  # named once in a note with its line; this run only
+                notes.append(f"{run.name}: no curve: its metrics.csv is damaged (a note names the line)")
+            elif not curve.found:
+                notes.append(f"{run.name}: no curve (MLflow run {run_ids[run.name]} not here, no run dir); skipped")
+    return read, notes
+
+
+def table_curves(plan, results) -> TableCurves:
+    """The curves of table ``plan`` (its report plan) that its figure draws: its runs are those of ``results`` (the
+    rows of its results and those it borrows, with their MLflow run ids), every curve fetched first (`fetch`)."""
+    run_ids = {} if results.empty else dict(zip(results["run_name"], results["run_id"]))
+    candidates = panel_runs(plan, run_ids)
+    read, notes = fetch(candidates, run_ids)
+    out = TableCurves(read, notes=notes)
+    for panel, rows in candidates.items():
+        key = curve_key(panel[0])[0]
+        for k, row, runs in rows:
+            with_curve = [r for r in runs if read[r.name].of(key)]
+            out.drawn.update({r.name: r for r in with_curve if r.name not in out.drawn})
+            if with_curve:
+                line = Line(k, row, [_arrays(read[r.name].of(key)) for r in with_curve])
+                out.panels.setdefault(panel, []).append(line)
+    return out
+
+
+def _arrays(points: list[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:
+    steps, values = zip(*points)
+    return np.asarray(steps, float), np.asarray(values, float)
+
+
 def plot_table(
     name: str,
     profile: Profile | str,
@@ -103,138 +195,116 @@ def plot_table(
     dotted. The figure is at most `PAGE_INCHES` × `PAGE_HEIGHT_INCHES` (rows of panels lower when many); what it
     shows and the deviations from the paper of the runs drawn, read from their configs (emml/report/deviations.py),
     are its caption, written beside it (`caption_path`: the table's page prints it under the figure). Runs come
-    from results/<name>/<profile>.csv (their run_id), curves from MLflow,
-    else from the run dir's metrics.csv (under ``run_root``, default: the profile's); a run with neither is skipped
-    with a note. When no run has a curve here, existing figures are kept rather than replaced by empty ones. Returns
-    (paths, notes)."""
-    import matplotlib.transforms as mtransforms
-    from matplotlib.lines import Line2D
-
+    from results/<name>/<profile>.csv (their run_id), their curves as every page reads them (`table_curves`:
+    emml/runs/curve.py, the run dir's metrics.csv under ``run_root``, default the profile's, else the MLflow run); a
+    run with neither is skipped with a note. When no run has a curve here, existing figures are kept rather than
+    replaced by empty ones. Returns (paths, notes)."""
     from emml.report import deviations
-    from emml.report.cells import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, table_results
-    from emml.report.chance import task_ceiling
+    from emml.report.cells import table_results
     from emml.report.plan import plan_report
     from emml.report.tables import reports_dir
-    from emml.runs.records import points_or_none
-    from emml.runs.rundir import METRICS, path_of
 
-    plan = plan_report(name, profile, results_root, run_root)  # once: every run's config and name (issue 64)
-    table, prof, run_root = plan.table, plan.profile, plan.run_root
-    profile = prof.name
-    out = reports_dir(prof, out)
-    notes: list[str] = []
-    if table.placeholder:
+    plan = plan_report(name, profile, results_root, run_root)  # once: every run's config and name
+    profile = plan.profile.name
+    out = reports_dir(plan.profile, out)
+    if plan.table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
-    results = table_results(table, prof, plan.results_root)  # its own rows, and those it borrows (Table 3's DA)
-    prior = task_ceiling()  # the task's blind ceiling, enumerated (emml/envs/ceiling.py), not a run's score
-    run_ids = dict(zip(results["run_name"], results["run_id"]))
-    paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
-    metrics = list(dict.fromkeys(table.metrics.values()))
-    keys = list(dict.fromkeys(curve_key(m)[0] for m in metrics))
-    cache: dict[str, dict] = {}
-    drawn: dict = {}  # run name → PlannedRun of every run with a curve in the figure
-    panels: dict[tuple, list] = {}  # (metric, difficulty, aux) → [(row index, row, curves)]
-    for metric in metrics:
-        key = curve_key(metric)[0]
-        for difficulty in table.difficulties:
-            for aux in table.aux:
-                for k, row in enumerate(table.curve_rows()):
-                    curves = []
-                    cell = {id(r) for r in plan.cell_runs(row, difficulty, aux, metric)}
-                    for run in plan.runs:
-                        spec, rname = run.spec, run.name
-                        if spec.row != row or spec.difficulty != difficulty or spec.aux != aux:
-                            continue
-                        if table.transfer is None and id(run) not in cell:
-                            continue  # DA Single-Task: its SGN-only run draws SGN, its EQA-only run EQA
-                        if rname not in run_ids:
-                            continue
-                        if rname not in cache:
-                            cache[rname] = {kk: _history(run_ids[rname], kk) for kk in keys}
-                            mirror: list | None = []
-                            if not any(cache[rname].values()):  # another store's run: its run dir may be here
-                                mirror = points_or_none(path_of(run_root, spec.table, rname) / METRICS)
-                                cache[rname] = {kk: [(st, v) for st, x, v in mirror or [] if x == kk] for kk in keys}
-                            if mirror is None:  # damaged: named once in a note with its line; this run only
-                                notes.append(f"{rname}: no curve: its metrics.csv is damaged (a note names the line)")
-                            elif not any(cache[rname].values()):
-                                notes.append(
-                                    f"{rname}: no curve (MLflow run {run_ids[rname]} not here, no run dir); skipped"
-                                )
-                        hist = sorted(dict(cache[rname][key] or []).items())
-                        if hist:
-                            steps, values = zip(*hist)
-                            curves.append((np.asarray(steps, float), np.asarray(values, float)))
-                            drawn.setdefault(rname, run)
-                    if curves:
-                        panels.setdefault((metric, difficulty, aux), []).append((k, row, curves))
+    results = table_results(plan.table, plan.profile, plan.results_root)  # its own rows, and those it borrows
+    drawn = table_curves(plan, results)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}-{profile}-curves.png", out / f"{name}-{profile}-curves.pdf"]
-    if not panels:  # never an empty figure: keep what an earlier machine drew, or draw nothing
+    if not drawn.panels:  # never an empty figure: keep what an earlier machine drew, or draw nothing
         kept = [p for p in paths if p.exists()]
         what = "kept the existing figures" if kept else "no figure written"
-        return kept, notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
-    settings = list(dict.fromkeys((d, a) for (_, d, a) in panels))
-    shown_metrics = list(dict.fromkeys(m for (m, _, _) in panels))
+        return kept, drawn.notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    shown = [deviations.shown_run(run, run_root, rows.get(r)) for r, run in drawn.items()]
-    fig = plt.figure(figsize=(PAGE_INCHES, figure_height(len(shown_metrics))), layout="constrained")
-    grid = fig.add_gridspec(len(shown_metrics), len(settings))
-    ref = reference_row(table)
-    width = PAGE_INCHES / len(settings)
-    legend: dict = {}
-    for i, metric in enumerate(shown_metrics):
-        for j, (difficulty, aux) in enumerate(settings):
-            lines = panels.get((metric, difficulty, aux))
-            if not lines:
-                continue  # no run of this metric in this setting: no empty panel
-            ax = fig.add_subplot(grid[i, j])
-            edge = mtransforms.blended_transform_factory(ax.transAxes, ax.transData)
-            for k, row, curves in lines:
-                grid_x, mean, band = _mean_band(curves)
-                color = f"C{k % 10}"
-                main = row == ref  # the paper's model, drawn over the others
-                ax.plot(
-                    grid_x,
-                    mean,
-                    color=color,
-                    marker="o" if len(grid_x) == 1 else None,
-                    label=row,
-                    lw=2.2 if main else 1.0,
-                    zorder=3 if main else 2,
-                )
-                if band is not None:
-                    ax.fill_between(grid_x, band[0], band[1], color=color, alpha=0.2, lw=0)
-                value = paper.get((row, difficulty, aux, metric))
-                if value not in (None, ""):
-                    ax.plot([1.0], [float(value)], marker="<", ms=5, color=color, transform=edge, clip_on=False)
-            line = prior.of(curve_key(metric)[0].removeprefix("eval/"), difficulty)  # the best blind score here
-            ax.axhline(line, color="grey", lw=0.8, ls=":")
-            label = curve_key(metric)[1]
-            title = f"{label}: {DIFFICULTY_LABELS.get(difficulty, difficulty)}, {AUX_LABELS[aux]}"
-            ax.set_title(wrap(title, width - 0.2, plt.rcParams["axes.titlesize"]))
-            ax.set_ylim(-0.02, 1.02)
-            frames_axis(ax)
-            if j == 0:
-                ax.set_ylabel("greedy accuracy")
-            else:
-                ax.tick_params(labelleft=False)
-            for handle, text in zip(*ax.get_legend_handles_labels()):
-                legend.setdefault(text, handle)
-            legend.setdefault(f"blind ceiling {line:.2f}", Line2D([], [], color="grey", lw=0.8, ls=":"))
-            if any(paper.get((row, difficulty, aux, metric)) for _, row, _ in lines):
-                legend.setdefault("paper (its frames)", Line2D([], [], color="grey", marker="<", ls=""))
-    longest = max(len(t) for t in legend)
-    ncol = max(1, min(len(legend), int(PAGE_INCHES * 72 / (0.6 * plt.rcParams["legend.fontsize"] * longest + 30))))
-    fig.legend(list(legend.values()), list(legend), loc="outside lower center", ncol=ncol)
-    title = f"{name} [{profile}]: greedy accuracy (the table's metric), seed mean, 95% bootstrap band"
-    fig.suptitle(wrap(title, PAGE_INCHES - 0.1, plt.rcParams["figure.titlesize"]))
+    shown = [deviations.shown_run(run, plan.run_root, rows.get(r)) for r, run in drawn.drawn.items()]
+    fig = _figure(name, profile, plan.table, drawn.panels)
     for p in paths:
         save(fig, p)
     plt.close(fig)
     runs = deviations.sentence(deviations.summarise(shown)) if shown else ""
     write_text(caption_path(paths[0]), caption(name, profile, runs) + "\n", then=RERUN)
-    return paths, notes
+    return paths, drawn.notes
+
+
+def _figure(name: str, profile: str, table, panels: dict[Panel, list[Line]]):
+    """The figure: a row of panels per metric shown, a column per setting (difficulty, aux) shown; one legend under
+    them all."""
+    from emml.report.cells import paper_numbers
+    from emml.report.chance import task_ceiling
+
+    paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
+    prior = task_ceiling()  # the task's blind ceiling, enumerated (emml/envs/ceiling.py), not a run's score
+    settings = list(dict.fromkeys((d, a) for (_, d, a) in panels))
+    shown_metrics = list(dict.fromkeys(m for (m, _, _) in panels))
+    fig = plt.figure(figsize=(PAGE_INCHES, figure_height(len(shown_metrics))), layout="constrained")
+    grid = fig.add_gridspec(len(shown_metrics), len(settings))
+    legend: dict = {}
+    for i, metric in enumerate(shown_metrics):
+        for j, (difficulty, aux) in enumerate(settings):
+            lines = panels.get((metric, difficulty, aux))
+            if lines:  # no run of this metric in this setting: no empty panel
+                ax = fig.add_subplot(grid[i, j])
+                _panel(ax, (metric, difficulty, aux), lines, paper, reference_row(table))
+                _mark(ax, (metric, difficulty, aux), lines, paper, prior, PAGE_INCHES / len(settings), j == 0, legend)
+    longest = max(len(t) for t in legend)
+    ncol = max(1, min(len(legend), int(PAGE_INCHES * 72 / (0.6 * plt.rcParams["legend.fontsize"] * longest + 30))))
+    fig.legend(list(legend.values()), list(legend), loc="outside lower center", ncol=ncol)
+    title = f"{name} [{profile}]: greedy accuracy (the table's metric), seed mean, 95% bootstrap band"
+    fig.suptitle(wrap(title, PAGE_INCHES - 0.1, plt.rcParams["figure.titlesize"]))
+    return fig
+
+
+def _panel(ax, panel: Panel, lines: list[Line], paper: dict, ref: str) -> None:
+    """A panel's lines: each row's seed mean and band, the reference row (the paper's model) over the others, the
+    paper's number of the row marked at the right edge."""
+    import matplotlib.transforms as mtransforms
+
+    metric, difficulty, aux = panel
+    edge = mtransforms.blended_transform_factory(ax.transAxes, ax.transData)
+    for line in lines:
+        grid_x, mean, band = _mean_band(line.curves)
+        color = f"C{line.index % 10}"
+        main = line.row == ref
+        ax.plot(
+            grid_x,
+            mean,
+            color=color,
+            marker="o" if len(grid_x) == 1 else None,
+            label=line.row,
+            lw=2.2 if main else 1.0,
+            zorder=3 if main else 2,
+        )
+        if band is not None:
+            ax.fill_between(grid_x, band[0], band[1], color=color, alpha=0.2, lw=0)
+        value = paper.get((line.row, difficulty, aux, metric))
+        if value not in (None, ""):
+            ax.plot([1.0], [float(value)], marker="<", ms=5, color=color, transform=edge, clip_on=False)
+
+
+def _mark(ax, panel: Panel, lines: list[Line], paper: dict, prior, width: float, first: bool, legend: dict) -> None:
+    """A panel's chance line, title and axes (the y labels on the ``first`` column only), and its entries of the
+    figure's legend."""
+    from matplotlib.lines import Line2D
+
+    metric, difficulty, aux = panel
+    key, label = curve_key(metric)
+    chance = prior.of(key.removeprefix("eval/"), difficulty)  # the best blind score here
+    ax.axhline(chance, color="grey", lw=0.8, ls=":")
+    title = f"{label}: {DIFFICULTY_LABELS.get(difficulty, difficulty)}, {AUX_LABELS[aux]}"
+    ax.set_title(wrap(title, width - 0.2, plt.rcParams["axes.titlesize"]))
+    ax.set_ylim(-0.02, 1.02)
+    frames_axis(ax)
+    if first:
+        ax.set_ylabel("greedy accuracy")
+    else:
+        ax.tick_params(labelleft=False)
+    for handle, text in zip(*ax.get_legend_handles_labels()):
+        legend.setdefault(text, handle)
+    legend.setdefault(f"blind ceiling {chance:.2f}", Line2D([], [], color="grey", lw=0.8, ls=":"))
+    if any(paper.get((line.row, difficulty, aux, metric)) for line in lines):
+        legend.setdefault("paper (its frames)", Line2D([], [], color="grey", marker="<", ls=""))
 
 
 def caption(name: str, profile: str, deviations: str) -> str:
@@ -258,12 +328,3 @@ CHROME_INCHES = 1.2
 def figure_height(rows: int) -> float:
     """Inches: `rows` rows of panels `PANEL_INCHES` tall, lower where that would pass `PAGE_HEIGHT_INCHES`."""
     return CHROME_INCHES + rows * min(PANEL_INCHES, (PAGE_HEIGHT_INCHES - CHROME_INCHES) / max(rows, 1))
-
-
-def _history(run_id: str, key: str) -> list[tuple[int, float]] | None:
-    """The metric's history; [] when the run never logged it (a single-task run) or MLflow lacks the run, None when
-    the store cannot be read for it."""
-    try:
-        return metric_history(str(run_id), key)
-    except Exception:  # the run is not in this MLflow store (another machine's database, a fresh checkout)
-        return None
