@@ -11,7 +11,8 @@ server``) is a matter of the ``MLFLOW_TRACKING_URI`` environment variable.
   import-runs`` (emml/runs/import_runs.py, which owns the import) or resumed here), so that nothing is imported twice
   and a resumed run dir continues that run.
 * What the MLflow UI reads is set as it expects (emml/runs/provenance.py), and no path of the machine is in a param
-  or tag: a path is written relative to the checkout, a run's roots by their names (emml/runs/portable.py).
+  or tag: a run's roots by their names, a path under them from that name, another relative to the checkout
+  (emml/runs/portable.py, `named`).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from emml.config.paths import checkout_root
 from emml.envs.stops import note_stop
 from emml.runs import pending_ends, store
 from emml.runs.mirror import append_mirror, export_mirror, read_mirror
-from emml.runs.portable import ROOTS, portable, root_name
+from emml.runs.portable import ROOTS, named, root_name, run_roots
 from emml.runs.provenance import NOTE, experiment_note, source_tags
 from emml.runs.store import MAX_PARAM_LEN, MAX_TAG_LEN, StoreGaveUp, retry
 
@@ -44,29 +45,36 @@ DEFAULT_ROOT = ROOTS["run_root"]
 """The run root whose run dirs are named by their run name alone in the store (`display_name`)."""
 
 
-def flatten(params: Mapping[str, Any] | Any, prefix: str = "") -> dict[str, str]:
+def flatten(
+    params: Mapping[str, Any] | Any, prefix: str = "", roots: Mapping[str, str] | None = None
+) -> dict[str, str]:
     """Flatten nested dicts/dataclasses into ``{"a.b.c": "value"}`` strings, as a param may hold them: the run's
-    roots (``run_root``, ``results_root``) by their names (``runs``, `root_name`), every other path relative to the
-    checkout (`portable`), cut at MLflow's limit."""
+    roots (``run_root``, ``results_root``) by their names (``runs``, `root_name`), every other path as the store
+    names it (`named`: under a root from its name, else relative to the checkout; ``roots``: `run_roots`, default
+    the params' own), cut at MLflow's limit."""
     if is_dataclass(params) and not isinstance(params, type):
         params = asdict(params)
+    if roots is None:
+        roots = run_roots(params)
     out: dict[str, str] = {}
     for key, value in params.items():
         name = f"{prefix}{key}"
         if is_dataclass(value) and not isinstance(value, type):
             value = asdict(value)
         if isinstance(value, Mapping):
-            out.update(flatten(value, prefix=f"{name}."))
+            out.update(flatten(value, prefix=f"{name}.", roots=roots))
         else:
-            text = root_name(str(value), ROOTS[name]) if name in ROOTS else portable(str(value))
+            text = root_name(str(value), ROOTS[name]) if name in ROOTS else named(str(value), roots)
             out[name] = text[:MAX_PARAM_LEN]
     return out
 
 
-def tag_strings(tags: Mapping[str, Any]) -> dict[str, str]:
-    """Tags as MLflow stores them: strings (cut at its limit) with paths relative to the checkout (:func:`portable`),
-    plus the Source tags of a run that names its commit (:func:`source_tags`)."""
-    out = {k: portable(str(v))[:MAX_TAG_LEN] for k, v in tags.items()}
+def tag_strings(tags: Mapping[str, Any], roots: Mapping[str, str] | None = None) -> dict[str, str]:
+    """Tags as MLflow stores them: strings (cut at its limit) with every path as the store names it (`named`: under
+    one of the run's ``roots`` (`run_roots`) from that root's name, e.g. the checkpoint 'runs/table2/<run>/
+    checkpoint.pt', else relative to the checkout, never '..'), plus the Source tags of a run that names its commit
+    (:func:`source_tags`)."""
+    out = {k: named(str(v), roots)[:MAX_TAG_LEN] for k, v in tags.items()}
     return {**source_tags(out), **out}
 
 
@@ -101,6 +109,8 @@ class Tracker:
         self._mirror: Path | None = None
         self._mirrored: set[tuple[str, int]] = set()
         """(key, step) pairs after ``_resume_step`` already in the mirror file."""
+        self._roots: dict[str, str] = {}
+        """The run's roots (its config's ``run_root``, ``results_root``: `run_roots`) by which its tags name paths."""
 
     def mirror_to(self, path: str | os.PathLike) -> None:
         """Also append every metric point to ``path`` (CSV: step,key,value), beside the run's checkpoint: the run
@@ -182,18 +192,20 @@ class Tracker:
     def _start(self, experiment, run_name, tags, params, run_id, parent_run_id, start_time=None) -> str:
         from mlflow.entities import Param
 
-        flat = flatten(params or {})
+        raw = asdict(params) if is_dataclass(params) and not isinstance(params, type) else (params or {})
+        self._roots = run_roots(raw)
+        flat = flatten(raw, roots=self._roots)
         if parent_run_id is not None:
             tags = {**(tags or {}), "mlflow.parentRunId": parent_run_id}
         stored = stored_run(experiment, run_id, self._uri) if run_id is not None else None
         if run_id is None:
             exp_id = self._experiment_id(experiment)
-            tag_strs = tag_strings(tags or {})
+            tag_strs = tag_strings(tags or {}, self._roots)
             run = retry(lambda: self._client.create_run(exp_id, start_time, tag_strs, run_name))
             self._run_id = run.info.run_id
         elif stored is None:  # the run dir came from another store: a new run, its curve replayed
             exp_id = self._experiment_id(experiment)
-            tag_strs = tag_strings(tags or {})
+            tag_strs = tag_strings(tags or {}, self._roots)
             tag_strs[RESUMED_FROM] = run_id
             run = retry(lambda: self._client.create_run(exp_id, start_time, tag_strs, run_name))
             self._run_id = run.info.run_id
@@ -259,7 +271,8 @@ class Tracker:
         """Set (or overwrite) run tags, e.g. ``{"mlflow.parentRunId": parent}`` for nesting."""
         from mlflow.entities import RunTag
 
-        store.log_batch(self._client, self.run_id, tags=[RunTag(k, v) for k, v in tag_strings(tags).items()])
+        strings = tag_strings(tags, self._roots)
+        store.log_batch(self._client, self.run_id, tags=[RunTag(k, v) for k, v in strings.items()])
 
     def finish(self, status: str = "FINISHED", end_time: int | None = None) -> None:
         """Mark the run terminated with ``status`` (FINISHED, FAILED or KILLED), at ``end_time`` (ms; default now)."""
