@@ -1,10 +1,13 @@
 """Committed run dirs made browsable in the MLflow store (`emml import-runs`, run by `make ui`): each finished run dir
 (runs/<table>/<run>/ with results.json and metrics.csv) becomes one FINISHED run of the experiment named by its
-table (described by the table's caption), with the tags the trainer sets, its saved config as params, its whole
-curve and its final score (``final/<key>``, apart from the periodic ``eval/<key>`` curve), dated when it trained
-(`import_run`), written through MLflow's public API (``MlflowClient.log_batch``, emml/runs/store.py). The params name
-the run's roots as this checkout does (``runs``, ``results``: `run_params`), never a folder of the machine that
-trained it.
+table (described by the table's caption), with the tags the trainer sets, its saved config as params, its curve and its
+final score (``final/<key>``, apart from the periodic ``eval/<key>`` curve), dated when it trained (`import_run`),
+written through MLflow's public API (``MlflowClient.log_batch``, emml/runs/store.py). Its curve: every point of
+eval/*, diag/* and final/*, `PER_KEY` points of each per-update key, and the whole metrics.csv as its artifact
+(emml/runs/thinning.py: 45 s of CPU for the committed runs instead of 280 s). The params and tags name the
+run's roots as this checkout does (``runs``, ``results``: `run_params`) and its files from them (its checkpoint
+``runs/<table>/<run>/checkpoint.pt``; a run root outside the checkout by its folder's name, marked as outside:
+emml/runs/portable.py, `named`), never a folder of the machine that trained or imported it.
 
 Once and idempotently: a run dir whose run is already in the store (trained here, imported or resumed here before:
 `stored_run`, keyed by the MLflow run id the run dir recorded) is skipped, so a second import changes nothing.
@@ -19,19 +22,14 @@ other made; the run is created tagged with its run dir (``emml.imported_from``) 
 and a digest of its files) and marked done last (``emml.imported_run_id``), so that a run an import killed midway
 left behind (RUNNING, not done) is deleted by the next import before it imports that run dir again.
 
-When it trained: results.json's ``started_at`` and ``ended_at`` (UTC, written by the trainer since issue 53). A run
-dir from before has neither: its end is the earliest of its files' modification times and the commit that added its
-results.json (each is at or after the end), its duration its curve's frames over its frames/s plus its evaluations'
-seconds; the tag ``emml.times`` says which (`run_times`).
+When it trained: results.json's ``started_at`` and ``ended_at``, else estimated from its files and its curve
+(emml/runs/import_times.py); the tag ``emml.times`` says which.
 """
 
 from __future__ import annotations
 
-import bisect
 import hashlib
-import subprocess
 import tempfile
-import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import contextmanager
@@ -42,19 +40,21 @@ from typing import Any
 from emml.config.paths import project_path
 from emml.runs import records, store
 from emml.runs.diskspace import FULL, RERUN, NoSpaceError
-from emml.runs.portable import ROOTS, portable, root_name
+from emml.runs.import_times import commit_times, run_times
+from emml.runs.portable import ROOTS, named, root_name
 from emml.runs.preflight import ensure_store
 from emml.runs.provenance import NOTE, experiment_note
-from emml.runs.rundir import CHECKPOINT, FINAL, METRICS, RENAMED, RESULTS, RUN_FILES, RunDirError, read_results, utc_ms
+from emml.runs.rundir import CHECKPOINT, FINAL, METRICS, RENAMED, RESULTS, RUN_FILES, RunDirError, read_results
 from emml.runs.runlock import holder, waiting_lock
+from emml.runs.thinning import PER_KEY, stored_count, thinned
 from emml.runs.tracking import IMPORTED_RUN_ID, Tracker, display_name, stored_run
 
 MARKERS = RUN_FILES
 """Files any of which makes a folder a run dir (emml/runs/rundir.py)."""
 IMPORTED_FROM = "emml.imported_from"
-"""Tag of an imported run: its run dir, relative to the checkout (emml.runs.portable.portable)."""
+"""Tag of an imported run: its run dir, named from its run root (`relative`)."""
 IMPORT_KEY = "emml.import_key"
-"""Tag of a run being imported, set when it is created: its run dir (relative to the checkout) and a digest of its
+"""Tag of a run being imported, set when it is created: its run dir (as `relative` names it) and a digest of its
 files (`import_key`). A run with this tag but not ``IMPORTED_RUN_ID`` is an import cut short (SIGTERM, ``kill -9``),
 which the next import deletes (`leftover_imports`)."""
 TIMES = "emml.times"
@@ -79,23 +79,32 @@ class ImportResult:
     mlflow_run_id: str | None = None
     """This store's run of it: the one imported, or the one already here."""
     points: int = 0
-    """Metric points imported (one per key and step)."""
+    """Metric points stored (one per key and step; per-update keys thinned: emml/runs/thinning.py)."""
+    read: int = 0
+    """Metric points of the run dir (its metrics.csv, one per key and step, and its final scores)."""
 
     def line(self) -> str:
         """One line for the terminal."""
         if self.outcome == "imported":
             extra = f" ({self.reason})" if self.reason else ""
-            return f"imported {self.run_dir}: MLflow run {self.mlflow_run_id}, {self.points:,} metric points{extra}"
+            return (
+                f"imported {self.run_dir}: MLflow run {self.mlflow_run_id}, {self.points:,} of its {self.read:,} "
+                f"metric points{extra}"
+            )
         return f"{self.outcome} {self.run_dir}: {self.reason}"
 
 
-def relative(path: Path) -> str:
-    """``path`` relative to the checkout (emml.runs.portable.portable: '../..' where it is outside)."""
-    return portable(str(Path(path).resolve()))
+def relative(run_dir: Path) -> str:
+    """A run dir as the store names it, on every machine: from the name of its run root (the folder above its table
+    folder, as the ``run_root`` param names it: emml.runs.portable.root_name), 'runs/table2/<run>' in a checkout's
+    runs/, '<folder> (outside the checkout)/table2/<run>' for a root elsewhere; never '..'."""
+    run_dir = Path(run_dir).resolve()
+    root = run_dir.parent.parent
+    return named(str(run_dir), {str(root): root_name(str(root), ROOTS["run_root"])})
 
 
 def import_key(run_dir: Path) -> str:
-    """The run dir (relative to the checkout) and a digest of its results.json and metrics.csv: tag
+    """The run dir (as `relative` names it) and a digest of its results.json and metrics.csv: tag
     ``emml.import_key`` of its imported run (`IMPORT_KEY`)."""
     digest = hashlib.sha256()
     for name in (RESULTS, METRICS):
@@ -138,7 +147,7 @@ def run_tags(results: dict, run_dir: Path) -> dict:
         if value is not None:
             tags.setdefault(key, value)
     if (run_dir / CHECKPOINT).is_file():
-        tags["checkpoint"] = relative(run_dir / CHECKPOINT)
+        tags["checkpoint"] = f"{relative(run_dir)}/{CHECKPOINT}"
     tags[IMPORTED_FROM] = relative(run_dir)
     return tags
 
@@ -166,91 +175,6 @@ def final_points(results: dict, path: Path) -> list[tuple[int, str, float]]:
         return [(frames, f"{FINAL}{k}", float(v)) for k, v in metrics.items() if v is not None]
     except (TypeError, ValueError):
         raise RunDirError(f"{path}: 'frames' or a metric is not a number") from None
-
-
-def curve_seconds(points: list[tuple[int, str, float]]) -> list[tuple[int, float]]:
-    """(step, seconds of training up to it) from the curve: each update's frames over its ``charts/fps`` (frames/s
-    of the run), plus each evaluation's ``perf/eval_s``; [] when the curve has no frames/s."""
-    fps = sorted((st, v) for st, k, v in points if k == "charts/fps" and v > 0)
-    evals = dict((st, v) for st, k, v in points if k == "perf/eval_s")
-    out, total, previous = [], 0.0, 0
-    for step, value in fps:
-        total += (step - previous) / value + evals.get(step, 0.0)
-        previous = step
-        out.append((step, total))
-    return out
-
-
-def run_times(results: dict, run_dir: Path, points: list, committed: dict[Path, float]) -> tuple:
-    """(start, end in ms, where they come from, a step's time in ms) of a run dir: results.json's ``started_at`` and
-    ``ended_at`` when the trainer wrote them, else estimated (module docstring): the end from the earliest of the
-    modification times of metrics.csv and checkpoint.pt and ``committed`` (the time of the commit that added its
-    results.json), the start that end less the curve's seconds (`curve_seconds`). A step's time follows the curve's
-    seconds, stretched over start to end (a run resumed after a pause spreads the pause)."""
-    seconds = curve_seconds(points)
-    lasted = seconds[-1][1] if seconds else 0.0
-    try:
-        start = utc_ms(results["started_at"]) if results.get("started_at") else None
-        end = utc_ms(results["ended_at"]) if results.get("ended_at") else None
-    except ValueError:
-        raise RunDirError(f"{run_dir / RESULTS}: 'started_at' or 'ended_at' is not an ISO time") from None
-    if start is not None and end is not None:
-        how = RESULTS
-    else:
-        if end is None:
-            files = [n for n in (METRICS, CHECKPOINT) if (run_dir / n).is_file()]
-            bounds = {f"modified {n}": (run_dir / n).stat().st_mtime for n in files}
-            if run_dir / RESULTS in committed:
-                bounds[f"committed {RESULTS}"] = committed[run_dir / RESULTS]
-            source, last = min(bounds.items(), key=lambda x: x[1]) if bounds else ("imported", time.time())
-            end, ended = int(last * 1000), f"ended when {source}"
-        else:
-            ended = f"ended at {RESULTS}'s ended_at"
-        start = end - int(lasted * 1000)
-        how = f"estimated: {ended}, lasted the curve's frames over its frames/s ({lasted / 3600:.2f} h)"
-    steps = [st for st, _ in seconds]
-    frames = max((st for st, _, _ in points), default=0)
-
-    def when(step: int) -> int:
-        if lasted > 0:  # the time at the first update at or after the step
-            share = seconds[min(bisect.bisect_left(steps, step), len(steps) - 1)][1] / lasted
-        else:
-            share = step / frames if frames else 1.0
-        return start + int(min(max(share, 0.0), 1.0) * (end - start))
-
-    return start, end, how, when
-
-
-def commit_times(run_dirs: list[Path]) -> dict[Path, float]:
-    """The time of the commit that added each run dir's results.json, where git knows it (one git call): the end
-    of a committed run from before ``ended_at``, in a clone whose files are all as old as the clone."""
-    files = [d.resolve() / RESULTS for d in run_dirs if (d / RESULTS).is_file()]
-    if not files:
-        return {}
-    try:
-        top = subprocess.run(
-            ["git", "rev-parse", "--show-toplevel"], cwd=files[0].parent, capture_output=True, text=True, timeout=10
-        ).stdout.strip()
-        if not top:
-            return {}
-        out = subprocess.run(
-            ["git", "log", "--diff-filter=A", "--format=%x00%ct", "--name-only", "--", *map(str, files)],
-            cwd=top,
-            capture_output=True,
-            text=True,
-            timeout=60,
-        ).stdout
-    except (OSError, subprocess.SubprocessError):
-        return {}
-    found: dict[Path, float] = {}
-    when = None
-    for line in out.splitlines():
-        if line.startswith("\0"):
-            when = float(line[1:])
-        elif line and when is not None:
-            path = Path(top, line)
-            found[path] = min(found.get(path, when), when)  # the first time it was added
-    return found
 
 
 @contextmanager
@@ -281,11 +205,13 @@ def import_run(
     start_time: int | None = None,
     end_time: int | None = None,
     when: Callable[[int], int] | None = None,
+    artifacts: Iterable[Path] = (),
 ) -> str:
     """Log a finished run recorded elsewhere (a run dir's results.json and metrics.csv) as a new FINISHED run of
     ``experiment`` that started at ``start_time`` and ended at ``end_time`` (ms): ``tags``, ``params`` (flattened as
-    the tracker logs a config, emml.runs.tracking.flatten) and every metric point (step, key, value), at
-    ``when(step)`` (ms), through MLflow's public API (``MlflowClient.log_batch``, emml.runs.store.log_points). The
+    the tracker logs a config, emml.runs.tracking.flatten), every metric point given (step, key, value), at
+    ``when(step)`` (ms), through MLflow's public API (``MlflowClient.log_batch``, emml.runs.store.log_points), and
+    the files ``artifacts`` (``MlflowClient.log_artifact``). The
     tag ``IMPORTED_RUN_ID`` = ``run_id``, which marks the import done (`stored_run`), is set last, and a failure on
     the way deletes the half-made run; a run left half-made by a kill is found by the next import (its
     ``IMPORT_KEY`` tag, `leftover_imports`). Data the store refuses (a metric name MLflow does not take) is a
@@ -294,6 +220,8 @@ def import_run(
     try:
         tracker.start(experiment, run_name, tags, params, start_time=start_time)
         log_points(tracker._client, tracker.run_id, list(points), when)
+        for path in artifacts:
+            tracker.log_artifact(path)
         tracker.set_tags({IMPORTED_RUN_ID: run_id})
         tracker.finish("FINISHED", end_time=end_time)
     except BaseException as e:
@@ -377,6 +305,7 @@ def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float]
             store.retry(lambda leftover=leftover: client.delete_run(leftover))
     curve = read_points(run_dir / METRICS) if (run_dir / METRICS).is_file() else []
     points = curve + final_points(results, run_dir / RESULTS)
+    stored = thinned(points, PER_KEY)  # eval/*, diag/*, final/* whole; per-update keys PER_KEY points each
     if committed is None:
         committed = commit_times([run_dir])
     start, end, how, when = run_times(results, run_dir.resolve(), curve, committed)
@@ -388,17 +317,18 @@ def _import_run_dir(run_dir: Path, uri: str | None, committed: dict[Path, float]
             run_id,
             tags,
             run_params(results, run_dir, results_root),
-            points,
+            stored,
             uri,
             start_time=start,
             end_time=end,
             when=when,
+            artifacts=[run_dir / METRICS] if (run_dir / METRICS).is_file() else [],  # the whole curve
         )
     except ValueError as e:  # data the store refuses (a metric name it does not take)
         raise RunDirError(f"{run_dir}: {e}") from None
     set_experiment_note(experiment, uri)
     reason = f"removed {len(left)} run(s) an interrupted import left" if left else ""
-    return ImportResult(name, "imported", reason, run_id, new, len({(k, st) for st, k, _ in points}))
+    return ImportResult(name, "imported", reason, run_id, new, len(stored), len({(k, st) for st, k, _ in points}))
 
 
 CHECK_DISK = "check the disk (its space, its health) and rerun the same command"
@@ -439,15 +369,22 @@ def import_runs(
 ) -> list[ImportResult]:
     """Import every run dir at or under ``paths`` (emml import-runs); a run dir that cannot be read is 'failed'
     (its error named) and the others are imported all the same. ``log`` sees each result as it comes;
-    ``progress``: a progress bar over the run dirs with its ETA on stderr (a terminal only); ``results_root``: the
-    folder of this checkout that holds the runs' results rows (`run_params`)."""
+    ``progress``: a progress bar with its ETA on stderr (a terminal only) over the points to store (`work`), so that
+    a long run dir counts for what it costs, and one skipped or failed takes its share off the total;
+    ``results_root``: the folder of this checkout that holds the runs' results rows (`run_params`)."""
+    import sys
+
     from tqdm import tqdm
 
     dirs = run_dirs(paths)
     ensure_store(uri)  # a new store's tables are made by one process at a time, under the lock the trainer takes too
     committed = commit_times(dirs)
+    shown = progress and sys.stderr.isatty()
+    weights = {d: work(d) if shown else 1 for d in dirs}
     out = []
-    with tqdm(total=len(dirs), unit="run", disable=None if progress else True) as bar:
+    with tqdm(
+        total=sum(weights.values()), unit=" pt" if shown else " run", unit_scale=shown, disable=not shown, smoothing=0.1
+    ) as bar:
         for run_dir in dirs:
             bar.set_postfix_str(run_dir.name[:40], refresh=False)
             try:
@@ -467,5 +404,29 @@ def import_runs(
                 with bar.external_write_mode():
                     log(result)
             out.append(result)
-            bar.update()
+            if result.outcome == "imported":
+                bar.update(weights[run_dir])
+            else:  # no work done: off the total, so that the ETA is the imports' left
+                bar.total -= weights[run_dir]
+                bar.refresh()
     return out
+
+
+RUN_POINTS = 600
+"""What importing a run dir costs beyond its points, in points' time (~0.2 ms of CPU each): its store calls (the
+lookups that it is not in the store yet, its run, params, tags, artifact and end), ~0.12 s; measured over the
+committed runs (docs/tracking.md)."""
+BYTES_PER_POINT = 1800
+"""What reading and thinning a metrics.csv costs, in points' time: ~50 of its lines (~36 bytes each) per point
+stored, ~4 µs a line."""
+
+
+def work(run_dir: Path) -> int:
+    """A run dir's share of an import's progress bar, in points' time: the points it stores
+    (emml.runs.thinning.stored_count), its metrics.csv's reading (`BYTES_PER_POINT`) and `RUN_POINTS`; 0 for one
+    without results.json (skipped)."""
+    run_dir = Path(run_dir)
+    if not (run_dir / RESULTS).is_file():
+        return 0
+    size = (run_dir / METRICS).stat().st_size if (run_dir / METRICS).is_file() else 0
+    return stored_count(run_dir / METRICS) + size // BYTES_PER_POINT + RUN_POINTS

@@ -6,8 +6,16 @@ import warnings
 import pytest
 from typer.testing import CliRunner
 
-from emml.runs import portable, provenance, store, tracking
-from emml.runs.import_runs import IMPORTED_FROM, as_trained, import_run_dir, import_runs, read_points, run_dirs
+from emml.runs import provenance, store, tracking
+from emml.runs.import_runs import (
+    IMPORTED_FROM,
+    as_trained,
+    import_run_dir,
+    import_runs,
+    read_points,
+    relative,
+    run_dirs,
+)
 
 CONFIG = {
     "model": "dual_attention",
@@ -67,14 +75,16 @@ def test_a_finished_run_dir_is_imported_with_its_tags_params_curve_and_score(tmp
     score = {"sgn_test": 0.75, "sgn_transfer:go to the red pillar": 0.4}  # rescored; a score the curve lacks
     run = write_run(tmp_path, "imp-a", "da-s3-quick", "0" * 32, score=score)
     result = import_run_dir(run)
-    assert (result.outcome, result.run_id, result.points) == ("imported", "0" * 32, len(CURVE) + 2)
+    assert (result.outcome, result.run_id) == ("imported", "0" * 32)
+    assert result.points == result.read == len(CURVE) + 2  # a short curve: every point stored
     [stored] = store.find_runs("imp-a")
     assert stored["run_id"] == result.mlflow_run_id and stored["status"] == "FINISHED"
     assert stored["run_name"] == "da-s3-quick"
     tags = stored["tags"]
     expected = {"table": "imp-a", "model": "dual_attention", "aux": "True", "seed": "3", "profile": "quick"}
     expected |= {"git_sha": "abc1234", "tasks": "both", "shaping": "True", "precision": "fp32"}
-    expected |= {IMPORTED_FROM: portable.portable(str(run.resolve())), tracking.IMPORTED_RUN_ID: "0" * 32}
+    expected |= {IMPORTED_FROM: relative(run), tracking.IMPORTED_RUN_ID: "0" * 32}
+    assert relative(run) == "runs/imp-a/da-s3-quick"  # from its run root's name, wherever the checkout is
     expected |= {"trained_frames": "192", "score_eval_episodes": "500", provenance.GIT_COMMIT: "abc1234"}
     assert expected.items() <= tags.items()
     assert not {"frames", "eval_episodes"} & set(tags)  # the params' names: the target frames, the periodic episodes
