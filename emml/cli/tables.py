@@ -28,7 +28,7 @@ def list_experiments(
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ):
     """Every table with its runs, and which are finished under the profile."""
-    from emml.experiments.launch import run_states
+    from emml.experiments.plan import run_states
     from emml.experiments.table_files import list_tables
     from emml.experiments.tables import load_table
 

@@ -3,36 +3,28 @@
 Before fanning out, the MLflow experiment and one parent run per (table, profile) are created (one writer; the
 sqlite store dislikes concurrent creation), and every child run is tagged with `mlflow.parentRunId`. Runs already
 recorded in results/<table>/<profile>.csv are not launched; any other run is handed to the trainer, which resumes
-an interrupted run from its checkpoint and re-records a finished run missing from the CSV (a fresh checkout).
+an interrupted run from its checkpoint and re-records a finished run missing from the CSV (a fresh checkout). The
+runs, their states and their selection come planned from emml/experiments/plan.py.
 """
 
 from __future__ import annotations
 
-import copy
 import os
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
 from emml.config.paths import project_path
 from emml.config.profiles import Profile, resolve_profile
-from emml.config.schema import TrainConfig, apply_overrides, check_choice
-from emml.experiments.pool import STOP_GRACE_S, LaunchReport, PlannedRun, collect, run_pool, train_one
-from emml.experiments.runspec import RunSpec
-from emml.experiments.table_data import Table
+from emml.config.schema import check_choice
+from emml.experiments.plan import plan_runs, root_fields
+from emml.experiments.pool import STOP_GRACE_S, LaunchReport, collect, run_pool, train_one
 from emml.experiments.tables import load_table
-from emml.runs.naming import run_name
 
 BACKENDS = ("local", "slurm")
 PARENT_LEFT_RUNNING = "parent-running.txt"
 """In a Slurm launch's folder (runs/slurm/<table>-<profile>/): the id of the parent MLflow run a launch without
 ``wait`` left RUNNING while its jobs go on. The next launch of that table and profile ends it: FINISHED when it
 finds no run left to train, else with the status its own launch ends in (`_end_parent`)."""
-STATES = ("finished", "unrecorded", "reference", "partial", "missing")
-"""finished: a finished run dir here and its row in the results CSV; unrecorded: run dir finished but no CSV row;
-reference: a CSV row with no run dir here (results committed to the repository, or made on another machine):
-trained here, its row then replaced; partial: interrupted (a checkpoint, not finished); missing: nothing yet."""
-
 
 GPU_MEMORY_PER_RUN = 3 * 2**30
 """Bytes of GPU memory one run may take (paper protocol at 168×300: the uint8 rollout, ~155 MB, the model and the
@@ -49,117 +41,6 @@ def default_jobs(device: str = "cpu") -> int:
         free, _ = torch.cuda.mem_get_info(torch.device(device))
         jobs = max(1, min(jobs, free // GPU_MEMORY_PER_RUN))
     return jobs
-
-
-def plan_runs(
-    name: str,
-    profile: Profile,
-    fields: dict | None = None,
-    only: dict | None = None,
-    overrides: dict | None = None,
-    table: Table | None = None,
-) -> list[PlannedRun]:
-    """Every run of table `name` under `profile`, in training order: `only` selects (`select_runs`), `overrides`
-    (dotted fields of how a run runs, `with_overrides`) apply on top of each run's own; `fields` (run_root,
-    results_root, device, threads) go to every run's TrainConfig. `table`: `name` already loaded (a report's plan,
-    emml/report/plan.py), not loaded again."""
-    fields = fields or {}
-    table = table if table is not None else load_table(name)
-    planned: dict[str, PlannedRun] = {}
-    recorded: dict[Path, set[str]] = {}  # per results CSV: a row may borrow another table's runs (from_table)
-    for spec in table.runs(list(profile.seeds), profile.name):
-        cfg = spec.to_config(profile, **fields)
-        rname = run_name(cfg, profile)
-        planned[rname] = PlannedRun(spec, cfg, rname, _state(cfg, rname, table, spec, recorded))
-    chosen = select_runs({r.name: (r.spec, r.state) for r in planned.values()}, only or {})
-    runs = [planned[rname] for rname in chosen]
-    if overrides:
-        runs = [_overridden(r, overrides) for r in runs]
-    return runs
-
-
-def _state(cfg: TrainConfig, rname: str, table: Table, spec: RunSpec, recorded: dict[Path, set[str]]) -> str:
-    """The run's launcher state (STATES), from its results CSV (read once per CSV into ``recorded``) and run dir."""
-    from emml.runs.results import read_results
-    from emml.runs.rundir import CHECKPOINT, finished_run, path_of, results_csv
-
-    csv = results_csv(cfg)
-    if csv not in recorded:
-        results = read_results(csv)
-        if table.transfer is not None:  # a transfer run is recorded once its scores are in the row
-            from emml.eval.transfer import metric_column
-
-            columns = [metric_column(x) for x in spec.instructions]
-            complete = set(columns) <= set(results.columns)
-            results = results[results[columns].notna().all(axis=1)] if complete else results.iloc[:0]
-        recorded[csv] = set(results["run_name"])
-    rdir = path_of(cfg.run_root, cfg.table, rname)
-    if rname in recorded[csv]:
-        return "finished" if finished_run(rdir) else "partial" if (rdir / CHECKPOINT).exists() else "reference"
-    if (rdir / CHECKPOINT).exists():
-        return "unrecorded" if finished_run(rdir) else "partial"
-    return "missing"
-
-
-def _overridden(run: PlannedRun, overrides: dict) -> PlannedRun:
-    spec = with_overrides(run.spec, overrides)
-    return replace(run, spec=spec, cfg=apply_overrides(copy.deepcopy(run.cfg), overrides))
-
-
-def run_states(name: str, profile: Profile | str, run_root: str | None = None, results_root: str | None = None) -> dict:
-    """Run name → (RunSpec, state) for every run of table `name` under `profile` (see STATES)."""
-    runs = plan_runs(name, resolve_profile(profile), _roots(run_root, results_root))
-    return {r.name: (r.spec, r.state) for r in runs}
-
-
-ONLY_FIELDS = ("row", "model", "difficulty", "aux", "seed")
-"""RunSpec fields `emml run --only FIELD=VALUE` can select on."""
-
-
-def select_runs(states: dict, only: dict) -> dict:
-    """The runs of `states` whose fields equal every `only` value (compared as lower-case text); a value may be a
-    list of allowed values, whose order then orders the runs (a campaign's step lists them in the order it wants
-    them trained; otherwise the table's order). An unknown field, or a value no run has, fails by name with the
-    allowed fields or the values present."""
-    wanted = {
-        key: [str(v).lower() for v in (value if isinstance(value, list | tuple) else [value])]
-        for key, value in only.items()
-    }
-    for key, values in wanted.items():
-        if key not in ONLY_FIELDS:
-            allowed = ", ".join(ONLY_FIELDS)
-            raise ValueError(f"--only {key}={only[key]}: unknown field {key!r}; allowed fields are {allowed}")
-        present = sorted({str(getattr(spec, key)).lower() for spec, _ in states.values()})
-        for value in values:
-            if value not in present:
-                raise ValueError(f"--only {key}={value}: no run has it; the values present are {', '.join(present)}")
-    chosen = [
-        (rname, (spec, state))
-        for rname, (spec, state) in states.items()
-        if all(str(getattr(spec, k)).lower() in values for k, values in wanted.items())
-    ]
-
-    def rank(item) -> tuple[int, ...]:
-        return tuple(values.index(str(getattr(item[1][0], k)).lower()) for k, values in wanted.items())
-
-    return dict(sorted(chosen, key=rank))
-
-
-def with_overrides(spec: RunSpec, overrides: dict) -> RunSpec:
-    """`spec` with extra dotted TrainConfig overrides after its own: only fields of how a run runs
-    (`TrainConfig.RUNTIME`, e.g. a campaign step's frames), so that the run stays the one its table names."""
-    other = sorted(k for k in overrides if k.split(".")[0] not in TrainConfig.RUNTIME)
-    if other:
-        allowed = ", ".join(TrainConfig.RUNTIME)
-        raise ValueError(
-            f"overrides {', '.join(other)}: a launch may set only how a table's runs run ({allowed}); "
-            "declare another experiment as a row of the table"
-        )
-    return replace(spec, overrides={**spec.overrides, **overrides})
-
-
-def _roots(run_root: str | None, results_root: str | None) -> dict:
-    return {k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None}
 
 
 def run_table(
@@ -211,7 +92,7 @@ def run_table(
     jobs = jobs or default_jobs(device)
     if jobs < 1:
         raise ValueError(f"jobs={jobs} must be >= 1")
-    fields = {**_roots(run_root, results_root), "device": device}
+    fields = {**root_fields(run_root, results_root), "device": device}
     if backend == "local" and jobs > 1:
         fields["threads"] = max(1, (os.cpu_count() or 1) // jobs)
     if backend == "slurm":  # a job's runs share its CPUs (the node may have more than the job holds)

@@ -10,10 +10,8 @@ import os
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
-from emml.config.schema import TrainConfig
-from emml.experiments.runspec import RunSpec
+from emml.experiments.plan import PlannedRun
 
 
 @dataclass
@@ -43,28 +41,6 @@ class LaunchReport:
     """After a stop: the runs it left unfinished, stopped or never started (the next launch trains them)."""
     busy: dict[str, str] = field(default_factory=dict)
     """Run name → who trains it: held by another live process (its run lock), so not trained here, nor failed."""
-
-
-@dataclass(frozen=True)
-class PlannedRun:
-    """One run of a launch: its config built and its name spelled once (`plan_runs`), then handed to whoever trains
-    it (this process, a pool worker, a Slurm job) as it is."""
-
-    spec: RunSpec
-    """What the table (and a campaign step's overrides) declares."""
-    cfg: TrainConfig
-    """Its TrainConfig under the launch's profile, with the launch's run_root, results_root, device, threads."""
-    name: str
-    """Its run name (`emml.runs.naming.run_name`)."""
-    state: str
-    """Its launcher state (STATES)."""
-
-    @property
-    def directory(self) -> Path:
-        """Its run dir (`emml.runs.rundir.path_of`: from the name already spelled, not spelled again)."""
-        from emml.runs.rundir import path_of
-
-        return path_of(self.cfg.run_root, self.cfg.table, self.name)
 
 
 STOP_GRACE_S = 8.0

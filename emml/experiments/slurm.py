@@ -15,7 +15,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from emml.experiments.pool import LaunchReport, PlannedRun, collect, end_workers, run_pool, train_one
+from emml.experiments.plan import PlannedRun
+from emml.experiments.pool import LaunchReport, collect, end_workers, run_pool, train_one
 
 SERVER_SCHEMES = ("http://", "https://", "databricks", "postgresql", "mysql")
 """Tracking URIs that many jobs may write at once (a server, a database server); any other (sqlite, a file store)

@@ -1,5 +1,5 @@
 """A table's report planned once (issue 64), as its launch is: the profile resolved, the table loaded, and every
-run's config built and its name spelled once by the launch's own plan (`emml.experiments.launch.plan_runs`). The
+run's config built and its name spelled once by the launch's own plan (`emml.experiments.plan.plan_runs`). The
 page, its caption, its LaTeX, its rliable figure, its deviations, its sample efficiency and the claims read this
 value; none resolves the profile or rebuilds a run's config again (a Table 2 report built 1,448 TrainConfigs for its
 84 runs before; now 2 per run, the config and the baseline its name is compared with)."""
@@ -11,8 +11,7 @@ from pathlib import Path
 
 from emml.config.profiles import Profile, resolve_profile
 from emml.config.schema import TrainConfig
-from emml.experiments.launch import plan_runs
-from emml.experiments.pool import PlannedRun
+from emml.experiments.plan import PlannedRun, plan_runs
 from emml.experiments.runspec import RunSpec
 from emml.experiments.table_data import Table
 from emml.experiments.tables import load_table
@@ -38,6 +37,22 @@ class ReportPlan:
 
     def by_name(self) -> dict[str, PlannedRun]:
         return {r.name: r for r in self.runs}
+
+    def named(self, names) -> list[PlannedRun]:
+        """The planned runs of ``names`` (run names the plan holds, e.g. a cell's), in that order: their folders,
+        configs and states as planned."""
+        planned = self.by_name()
+        return [planned[name] for name in names]
+
+    def no_aux_of(self, run: PlannedRun) -> PlannedRun | None:
+        """The No-Aux run the table declares beside ``run``: the same row, difficulty and seed without the auxiliary
+        task (its `noaux_overrides` included: a warm-up's run, not ``run`` with aux off); None when it declares
+        none."""
+        spec = run.spec
+        beside = (spec.row, spec.difficulty, spec.seed)
+        return next(
+            (r for r in self.runs if not r.spec.aux and (r.spec.row, r.spec.difficulty, r.spec.seed) == beside), None
+        )
 
     def cell_runs(self, row: str, difficulty: str, aux: bool, metric: str) -> list[PlannedRun]:
         """The planned runs (one per seed) whose `metric` fills the cell (`Table.cell_runs`)."""

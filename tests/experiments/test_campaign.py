@@ -52,10 +52,10 @@ def test_steps_train_in_order_and_a_rerun_skips_what_is_finished(tracking, campa
         ("second", "ga-easy-noaux-warm400000-s0-smoke", "to do"),
     ]
     assert before[2].target == 128 and before[0].target == 512  # a step's frames, else the profile's
-    (first, _), (second, _) = (step_runs(step)[0] for step in plan.steps)
-    measured = second.to_config("smoke")  # a step's set, else the profile's; the run's name stays the table's
-    assert (measured.eval_every, measured.eval_episodes) == (64, 2)
-    assert (first.to_config("smoke").eval_every, first.to_config("smoke").eval_episodes) == (0, 3)
+    first, second = (step_runs(step, run_root=roots[0], results_root=roots[1])[0] for step in plan.steps)
+    assert (second.cfg.eval_every, second.cfg.eval_episodes) == (64, 2)  # a step's set, else the profile's
+    assert (first.cfg.eval_every, first.cfg.eval_episodes) == (0, 3)
+    assert second.name == second.spec.run_name("smoke") == before[2].run_name  # the run's name stays the table's
     reports = run_campaign(plan, *roots, jobs=1, log=lambda m: None, train_fn=fake_train)
     assert [c[0] for c in calls(tracking)] == [r.run_name for r in before]  # the declared order
     assert [len(r.done) for r in reports] == [2, 2]
@@ -263,35 +263,6 @@ def test_wall_time_fills_each_steps_slots_in_order_and_steps_follow_each_other()
     assert wall_seconds(rows, 2) == 20 + 7  # a: 10 then 5 beside 20; b: alone, after a's last run
     assert wall_seconds(rows, 8) == 20 + 7
     assert wall_seconds(rows, 8, node=True) == 2 * (20 + 7)  # from the GPU-node estimates
-
-
-def test_the_speed_is_the_median_of_the_latest_runs_own_medians(tmp_path):
-    """One run's many points do not outvote the others, and a run trained long ago (older, slower code) is left out
-    once three later ones of the same model and domain are there; the same model elsewhere is not read."""
-    import json
-
-    from emml.config.schema import TrainConfig
-    from emml.experiments.campaign.progress import _Speed
-
-    def run(name, started, fps, eval_s, points=1):
-        directory = tmp_path / "runs" / "table2" / f"{name}-smoke"
-        directory.mkdir(parents=True)
-        lines = [f"{64 * (i + 1)},charts/fps,{fps}\n{64 * (i + 1)},perf/eval_s,{eval_s}" for i in range(points)]
-        (directory / "metrics.csv").write_text("step,key,value\n" + "\n".join(lines) + "\n")
-        segments = [{"git_sha": "abc", "from_frame": 0, "started_at": started}] if started else []
-        (directory / "segments.json").write_text(json.dumps({"segments": segments}))
-
-    run("ga-easy-noaux-s9", "2026-01-01T00:00:00+00:00", 10.0, 100.0, points=50)  # the oldest, last by name
-    run("ga-easy-aux-s1", "2026-11-01T00:00:00+00:00", 300.0, 3.0)
-    run("ga-easy-noaux-s0", "2026-11-02T00:00:00+00:00", 200.0, 4.0)
-    run("ga-easy-aux-s2", "2026-11-03T00:00:00+00:00", 100.0, 5.0)
-    run("ga-hard-aux-s0", "2026-11-04T00:00:00+00:00", 1.0, 1000.0)  # another domain
-    cfg = TrainConfig(model="ga", profile="smoke", run_root=str(tmp_path / "runs"))
-    # pooled points: 10; the last three by name: 100; all four runs' medians: 150
-    assert _Speed().measured(cfg) == (200.0, 4.0)
-    hard = TrainConfig(model="ga", profile="smoke", run_root=str(tmp_path / "runs"))
-    hard.env.difficulty = "hard"
-    assert _Speed().measured(hard) == (1.0, 1000.0)
 
 
 def test_cli_status_says_how_many_runs_at_a_time_and_refuses_a_device_by_name(tracking):

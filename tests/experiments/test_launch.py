@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from emml.experiments.launch import run_states, run_table
+from emml.experiments.launch import run_table
+from emml.experiments.plan import run_states
 from emml.runs.checkpoint import save_checkpoint
 from emml.runs.naming import run_name
 from emml.runs.rundir import CHECKPOINT, RESULTS, record_result, run_dir
@@ -270,10 +271,10 @@ def test_a_launch_looks_its_profile_up_once_and_builds_each_run_once(tracking, m
     """The profile is resolved where the launch starts; planning its 16 runs (each config, name and state) reads
     no profiles file again, and each run's config is built once."""
     import emml.config.profiles as profiles
-    import emml.experiments.launch as launcher
+    import emml.experiments.plan as planner
     import emml.runs.naming as naming
 
-    profile, table = profiles.resolve_profile(PROFILE), launcher.load_table("table3")  # reading a table checks it
+    profile, table = profiles.resolve_profile(PROFILE), planner.load_table("table3")  # reading a table checks it
     lookups, built = [], []
     real_config = profiles.Profile.config
 
@@ -288,8 +289,8 @@ def test_a_launch_looks_its_profile_up_once_and_builds_each_run_once(tracking, m
     monkeypatch.setattr(profiles, "load_profiles", counted)
     monkeypatch.setattr(naming, "load_profiles", counted)
     monkeypatch.setattr(profiles.Profile, "config", config)
-    monkeypatch.setattr(launcher, "load_table", lambda name: table)
-    runs = launcher.plan_runs(
+    monkeypatch.setattr(planner, "load_table", lambda name: table)
+    runs = planner.plan_runs(
         "table3", profile, {"run_root": tracking["run_root"], "results_root": tracking["results_root"]}
     )
     assert len(runs) == 16 and lookups == []
@@ -302,7 +303,7 @@ def test_a_launch_may_set_only_how_runs_run(tracking):
     """Overrides on top of a table's runs (a campaign step's frames and cadences) keep each run the table's; any
     other field is refused by name before any run starts."""
     from emml.config.profiles import resolve_profile
-    from emml.experiments.launch import plan_runs
+    from emml.experiments.plan import plan_runs
 
     profile = resolve_profile(PROFILE)
     plain, measured = (plan_runs("table3", profile, overrides=o) for o in (None, {"eval_every": 0, "frames": 2048}))

@@ -11,7 +11,7 @@ from emml.config.paths import REPRODUCE_DIR
 from emml.config.toml_files import check_file, read_toml
 from emml.experiments.file_formats import OWN_KEYS as OWN_KEYS  # what a step may not set (also imported from here)
 from emml.experiments.file_formats import CampaignFile, StepEntry
-from emml.experiments.runspec import RunSpec
+from emml.experiments.plan import PlannedRun
 
 CAMPAIGNS_DIR = REPRODUCE_DIR / "campaigns"
 STEP_KEYS = tuple(StepEntry.model_fields)
@@ -31,7 +31,7 @@ class Step:
     profile: str
     """Profile (reproduce/profiles.toml)."""
     only: dict = field(default_factory=dict)
-    """RunSpec field → value or list of values (emml.experiments.launch.select_runs); lists order the runs."""
+    """RunSpec field → value or list of values (emml.experiments.plan.select_runs); lists order the runs."""
     frames: int | None = None
     """Frames to train each run to, instead of the profile's (None: the profile's)."""
     note: str = ""
@@ -44,7 +44,7 @@ class Step:
     and run, e.g. eval_every; never what it is: its name and results row stay the table's)."""
 
     def overrides(self) -> dict:
-        """The dotted TrainConfig overrides the step adds to its runs' own (emml.experiments.launch.with_overrides)."""
+        """The dotted TrainConfig overrides the step adds to its runs' own (emml.experiments.plan.with_overrides)."""
         return {**self.settings, **({"frames": self.frames} if self.frames is not None else {})}
 
 
@@ -78,7 +78,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
     """Parse reproduce/campaigns/<name>.toml; every error names the file and the key, before any compute."""
     from emml.config.profiles import load_profiles
     from emml.experiments.claims import load_claims
-    from emml.experiments.launch import ONLY_FIELDS, select_runs
+    from emml.experiments.plan import ONLY_FIELDS, select_runs
     from emml.experiments.table_files import table_names
 
     path = directory / f"{name}.toml"
@@ -130,7 +130,7 @@ def load_campaign(name: str, directory: Path = CAMPAIGNS_DIR) -> Campaign:
 def _check_runs(path: Path, where: str, step: Step, selected: dict) -> None:
     """Each run of the step as it would train, validated before anything starts (its frames at least one update,
     `TrainConfig.validate`): a bad step otherwise fails when the campaign reaches it, hours in."""
-    from emml.experiments.launch import with_overrides
+    from emml.experiments.plan import with_overrides
 
     for spec, _ in selected.values():
         try:
@@ -174,13 +174,15 @@ def _declared(table: str, profile: str) -> dict:
 
 
 def step_runs(
-    step: Step, run_root: str | None = None, results_root: str | None = None, states: dict | None = None
-) -> list[tuple[RunSpec, str]]:
-    """The step's runs in training order, each with its launcher state (emml.experiments.launch.STATES); ``states``: the
-    table's
-    run_states when already read (several steps of one table and profile read them once)."""
-    from emml.experiments.launch import run_states, select_runs, with_overrides
+    step: Step, runs: list[PlannedRun] | None = None, run_root: str | None = None, results_root: str | None = None
+) -> list[PlannedRun]:
+    """The step's runs in training order, planned (emml/experiments/plan.py) with the step's overrides on top of
+    their own, as its launch trains them. ``runs``: its table's runs under its profile when already planned (several
+    steps of one table and profile read the run dirs once); else planned here under ``run_root``/``results_root``."""
+    from emml.experiments.plan import chosen, plan_runs, root_fields
 
-    if states is None:
-        states = run_states(step.table, step.profile, run_root, results_root)
-    return [(with_overrides(spec, step.overrides()), state) for spec, state in select_runs(states, step.only).values()]
+    if runs is None:
+        from emml.config.profiles import resolve_profile
+
+        runs = plan_runs(step.table, resolve_profile(step.profile), root_fields(run_root, results_root))
+    return chosen(runs, step.only, step.overrides())

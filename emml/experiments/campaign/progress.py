@@ -9,9 +9,8 @@ import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
-from emml.config.paths import project_path
 from emml.experiments.campaign.file import Campaign, step_runs
-from emml.runs.naming import run_name
+from emml.experiments.plan import PlannedRun
 from emml.runs.records import mirror_point, note_once, points_or_none, torn_tail
 
 NODE_FPS = {"quick": 360.0, "paper": 300.0}
@@ -54,49 +53,50 @@ class RunStatus:
 
 
 def status(campaign: Campaign, run_root: str | None = None, results_root: str | None = None) -> list[RunStatus]:
-    """Every run of the campaign in order (a run two steps share is listed once, at its first step). `CannotCount`
-    when a results CSV its steps read is damaged."""
-    from emml.experiments.launch import run_states
-    from emml.runs.rundir import METRICS, run_dir
+    """Every run of the campaign in order (a run two steps share is listed once, at its first step), each read through
+    its planned run (emml/experiments/plan.py): its folder, config, name and state as its launch has them. Each table
+    is planned once per profile. `CannotCount` when a results CSV its steps read is damaged."""
+    from emml.config.profiles import resolve_profile
+    from emml.experiments.plan import plan_runs, root_fields
+    from emml.runs.rundir import METRICS
     from emml.runs.runlock import holder
 
-    out, seen, read = [], set(), {}
-    speed = _Speed()
-    fields = {k: v for k, v in (("run_root", run_root), ("results_root", results_root)) if v is not None}
+    planned: dict[tuple[str, str], list[PlannedRun]] = {}
+    fields = root_fields(run_root, results_root)
     for step in campaign.steps:
         key = (step.table, step.profile)
-        if key not in read:  # run_states reads every run dir's checkpoint: once per table and profile
+        if key not in planned:  # planning reads every run dir's checkpoint: once per table and profile
             try:
-                read[key] = run_states(step.table, step.profile, run_root, results_root)
+                planned[key] = plan_runs(step.table, resolve_profile(step.profile), fields)
             except ValueError as e:  # a damaged results CSV (ResultsError names it and the line): left out, its
                 # steps were counted as no run at all
                 raise CannotCount(
                     f"campaign {campaign.name}: cannot count its runs: {e} (step {step.name} and every step of "
                     f"{step.table} [{step.profile}] read it); fix or remove that line, then ask again"
                 ) from None
-        for spec, launch_state in step_runs(step, run_root, results_root, read[key]):
-            cfg = spec.to_config(step.profile, **fields)
-            directory = run_dir(cfg)
+    speed = _Speed([run for runs in planned.values() for run in runs])
+    out, seen = [], set()
+    for step in campaign.steps:
+        for run in step_runs(step, planned[(step.table, step.profile)]):
+            directory, cfg = run.directory, run.cfg
             if directory in seen:
                 continue
             seen.add(directory)
             target = cfg.num_updates * cfg.frames_per_update
             who = holder(directory)
             frames = _frames_logged(directory / METRICS)
-            if launch_state == "finished":
+            if run.state == "finished":
                 state, frames = "done", max(frames, target)
             elif who is not None:
                 state = "running"
-            elif launch_state in ("partial", "unrecorded"):
+            elif run.state in ("partial", "unrecorded"):
                 state = "interrupted"
             else:
                 state, frames = "to do", 0
             left = None if state == "done" else speed.seconds(cfg, max(target - frames, 0))
             fps = NODE_FPS.get(step.profile)
             node = None if state == "done" or not fps else max(target - frames, 0) / fps
-            out.append(
-                RunStatus(step.name, step.table, step.profile, run_name(cfg), state, frames, target, who, left, node)
-            )
+            out.append(RunStatus(step.name, step.table, step.profile, run.name, state, frames, target, who, left, node))
     return out
 
 
@@ -149,34 +149,41 @@ median, then their median."""
 class _Speed:
     """This machine's measured cost of a profile: training frames/s and the seconds of one evaluation, each the median
     over the `RECENT_RUNS` most recently trained closest runs of that run's own median (`charts/fps`, `perf/eval_s`
-    in its metrics mirror): same model and domain first."""
+    in its metrics mirror), among the planned runs ``runs`` (each run dir read once, however many plans hold it):
+    same model and domain first."""
 
-    def __init__(self):
-        self._cache: dict[tuple[str, str], tuple[float | None, float | None]] = {}
+    def __init__(self, runs: list[PlannedRun]):
+        self._dirs = {run.directory: run.cfg for run in runs}
+        self._cache: dict[tuple[str, str, str], tuple[float | None, float | None]] = {}
 
     def measured(self, cfg) -> tuple[float | None, float | None]:
         from emml.runs.rundir import METRICS, last_started
 
-        difficulty = cfg.env.difficulty
-        key = (cfg.profile, cfg.model, difficulty)
+        model, difficulty = cfg.model, cfg.env.difficulty
+        key = (cfg.profile, model, difficulty)
         if key not in self._cache:
-            root = project_path(cfg.run_root)
+            here = {d: c for d, c in self._dirs.items() if c.profile == cfg.profile and (d / METRICS).exists()}
             # the closest runs measured here: the same model in the same domain (a House episode is 420 steps and
             # its maps larger), then any model there, then the same model anywhere, then any run of the profile
-            patterns = [f"{cfg.model}-{difficulty}-*", f"*-{difficulty}-*", f"{cfg.model}-*", "*"]
-            files = []
-            for pattern in patterns:
-                files = sorted(root.glob(f"*/{pattern}-{cfg.profile}/{METRICS}"))
-                if files:
+            closest = (
+                lambda c: c.model == model and c.env.difficulty == difficulty,
+                lambda c: c.env.difficulty == difficulty,
+                lambda c: c.model == model,
+                lambda c: True,
+            )
+            dirs = []
+            for close in closest:
+                dirs = [d for d, c in here.items() if close(c)]
+                if dirs:
                     break
-            files.sort(key=lambda path: (last_started(path.parent), str(path)))  # the latest last; stable by name
+            dirs.sort(key=lambda d: (last_started(d), str(d)))  # the latest last; stable by name
             fps, evals = [], []
-            for path in files[-RECENT_RUNS:]:
-                points = points_or_none(path, "not used to estimate the time left")  # damaged: named once
+            for directory in dirs[-RECENT_RUNS:]:
+                points = points_or_none(directory / METRICS, "not used to estimate the time left")  # damaged: named
                 for values, name in ((fps, "charts/fps"), (evals, "perf/eval_s")):
-                    mine = [value for _, key_, value in points or [] if key_ == name]
-                    if mine:
-                        values.append(statistics.median(mine))
+                    named = [value for _, key_, value in points or [] if key_ == name]
+                    if named:
+                        values.append(statistics.median(named))
             self._cache[key] = (
                 statistics.median(fps) if fps else None,
                 statistics.median(evals) if evals else None,
