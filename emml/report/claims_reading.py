@@ -14,6 +14,7 @@ from typing import Any
 from emml.eval.metrics import TRAIN_COLUMNS
 from emml.experiments.claims.evidence import Chance, Score
 from emml.report.claims_settle import isnan
+from emml.report.efficiency import run_efficiency
 from emml.runs.curve import read_curve
 from emml.runs.rundir import path_of
 
@@ -51,8 +52,6 @@ class Reading:
     def crossing(self, metric: str, mark: str) -> Score | None:
         """None also when the curve stops short of the run's frames by more than its gap (a crossing after it cannot
         be ruled out)."""
-        from emml.report.efficiency import run_efficiency
-
         spec, score = self.run.spec, self.score
         eff = run_efficiency(spec, self.run.name, self.run_root, self.chance, self.run_id)
         if not eff.found or metric not in eff.crossings:

@@ -12,11 +12,13 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.transforms as mtransforms  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 
 from emml.config.profiles import Profile  # noqa: E402
 from emml.eval.metrics import BY_NAME, DECLARED, train_of  # noqa: E402
 from emml.report.aggregate import reference_row  # noqa: E402
-from emml.report.cells import AUX_LABELS, DIFFICULTY_LABELS  # noqa: E402
+from emml.report.cells import AUX_LABELS, DIFFICULTY_LABELS, paper_numbers, table_results  # noqa: E402
 from emml.report.savefig import PAGE_HEIGHT_INCHES, PAGE_INCHES, caption_path, frames_axis, save, wrap  # noqa: E402
 from emml.runs.atomic import write_text  # noqa: E402
 from emml.runs.curve import RunCurve, read_curve  # noqa: E402
@@ -200,7 +202,6 @@ def plot_table(
     run with neither is skipped with a note. When no run has a curve here, existing figures are kept rather than
     replaced by empty ones. Returns (paths, notes)."""
     from emml.report import deviations
-    from emml.report.cells import table_results
     from emml.report.plan import plan_report
     from emml.report.tables import reports_dir
 
@@ -210,28 +211,27 @@ def plot_table(
     if plan.table.placeholder:
         return [], [f"{name} is a placeholder: no runs, no curves"]
     results = table_results(plan.table, plan.profile, plan.results_root)  # its own rows, and those it borrows
-    drawn = table_curves(plan, results)
+    fetched = table_curves(plan, results)  # every curve read before anything is drawn
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{name}-{profile}-curves.png", out / f"{name}-{profile}-curves.pdf"]
-    if not drawn.panels:  # never an empty figure: keep what an earlier machine drew, or draw nothing
+    if not fetched.panels:  # never an empty figure: keep what an earlier machine drew, or draw nothing
         kept = [p for p in paths if p.exists()]
         what = "kept the existing figures" if kept else "no figure written"
-        return kept, drawn.notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
+        return kept, fetched.notes + [f"no run of {name} [{profile}] has a curve here: {what}"]
     rows = {r["run_name"]: r for r in results.to_dict("records")} if not results.empty else {}
-    shown = [deviations.shown_run(run, plan.run_root, rows.get(r)) for r, run in drawn.drawn.items()]
-    fig = _figure(name, profile, plan.table, drawn.panels)
+    shown = [deviations.shown_run(run, plan.run_root, rows.get(r)) for r, run in fetched.drawn.items()]
+    fig = _figure(name, profile, plan.table, fetched.panels)
     for p in paths:
         save(fig, p)
     plt.close(fig)
     runs = deviations.sentence(deviations.summarise(shown)) if shown else ""
     write_text(caption_path(paths[0]), caption(name, profile, runs) + "\n", then=RERUN)
-    return paths, drawn.notes
+    return paths, fetched.notes
 
 
 def _figure(name: str, profile: str, table, panels: dict[Panel, list[Line]]):
     """The figure: a row of panels per metric shown, a column per setting (difficulty, aux) shown; one legend under
     them all."""
-    from emml.report.cells import paper_numbers
     from emml.report.chance import task_ceiling
 
     paper = {(r.row, r.difficulty, r.aux, r.metric): r.value for r in paper_numbers(table.name).itertuples()}
@@ -259,8 +259,6 @@ def _figure(name: str, profile: str, table, panels: dict[Panel, list[Line]]):
 def _panel(ax, panel: Panel, lines: list[Line], paper: dict, ref: str) -> None:
     """A panel's lines: each row's seed mean and band, the reference row (the paper's model) over the others, the
     paper's number of the row marked at the right edge."""
-    import matplotlib.transforms as mtransforms
-
     metric, difficulty, aux = panel
     edge = mtransforms.blended_transform_factory(ax.transAxes, ax.transData)
     for line in lines:
@@ -286,8 +284,6 @@ def _panel(ax, panel: Panel, lines: list[Line], paper: dict, ref: str) -> None:
 def _mark(ax, panel: Panel, lines: list[Line], paper: dict, prior, width: float, first: bool, legend: dict) -> None:
     """A panel's chance line, title and axes (the y labels on the ``first`` column only), and its entries of the
     figure's legend."""
-    from matplotlib.lines import Line2D
-
     metric, difficulty, aux = panel
     key, label = curve_key(metric)
     chance = prior.of(key.removeprefix("eval/"), difficulty)  # the best blind score here

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from emml.eval.metrics import BY_NAME, CURVE_METRICS, label
 from emml.experiments.claims.evidence import LEAVE, Chance, frames_text
+from emml.report.cells import table_results
 from emml.runs.curve import RunCurve, read_curve
 
 __all__ = ["LEAVE", "frames_text", "first_crossing", "run_efficiency", "table_efficiency", "markdown"]
@@ -121,8 +122,6 @@ def table_efficiency(
 
 def results_run_ids(plan) -> dict[str, str]:
     """Run name → the MLflow run id its results row records, over the plan's table and the tables it borrows from."""
-    from emml.report.cells import table_results
-
     results = table_results(plan.table, plan.profile, plan.results_root)
     return {} if results.empty else dict(zip(results["run_name"], results["run_id"]))
 
