@@ -34,16 +34,19 @@ class ShownRun:
     (reproduce/experiments/) set what the paper does not, and their reports name it."""
 
 
-def shown_run(run, run_root: str | Path, row: dict | None = None, declared: bool = False) -> ShownRun:
-    """A planned run (`emml.experiments.pool.PlannedRun`, its config and name made once) with the config its
-    deviations are read from: runs/<table>/<run>/results.json when there, else the config its RunSpec gives under the
+def shown_run(run, run_root: str | Path | None = None, row: dict | None = None, declared: bool = False) -> ShownRun:
+    """A planned run (`emml.experiments.plan.PlannedRun`, its config, name and folder made once) with the config its
+    deviations are read from: its run dir's results.json when there, else the config its RunSpec gives under the
     plan's profile (saying why). ``row``: its results CSV row, whose `eval_episodes` is the size of the evaluation its
-    score came from (a re-scored run's differs from its config's)."""
+    score came from (a re-scored run's differs from its config's). ``run_root``, when given, is the root the caller
+    planned under: it must be the run's own (a ValueError names both), since the run dir read is the run's."""
+    from emml.config.paths import project_path
     from emml.runs.records import note
-    from emml.runs.rundir import RunDirError, path_of, saved_config
+    from emml.runs.rundir import RunDirError, saved_config
 
-    spec, name = run.spec, run.name
-    run_dir = path_of(run_root, spec.table, name)
+    spec, name, run_dir = run.spec, run.name, run.directory
+    if run_root is not None and project_path(run_root) != project_path(run.cfg.run_root):
+        raise ValueError(f"run_root={run_root}: {name} was planned under run_root={run.cfg.run_root}")
     try:
         saved = saved_config(run_dir)
     except RunDirError as e:  # one damaged run dir does not stop a report: named, then shown as declared

@@ -9,9 +9,10 @@ from pathlib import Path
 from emml.config.paths import project_path, project_root
 from emml.config.profiles import Profile, resolve_profile
 from emml.eval.metrics import TRAIN_COLUMNS
+from emml.experiments.plan import PlannedRun
 from emml.runs.atomic import write_text
 from emml.runs.diskspace import RERUN
-from emml.runs.rundir import CHECKPOINT, RunDirError, config_of, finished_run, path_of, variant_dir
+from emml.runs.rundir import CHECKPOINT, RunDirError, finished_run
 
 READING_ORDER = ("quick", "paper")
 """The profiles a reader should read first, in this order; any other (demo…) follows."""
@@ -58,55 +59,32 @@ def _has_runs(table, profile: Profile, results_root: str | Path) -> bool:
     return not df.empty and bool(df["run_name"].isin(plan_report(table, profile, results_root).names).any())
 
 
-def best_checkpoint(
-    table: str,
-    profile: Profile,
-    model: str = "dual_attention",
-    aux: bool = True,
-    results_root: str | Path = "results",
-    run_root: str | Path = "runs",
-) -> tuple[Path, str] | None:
-    """The (checkpoint, run name) of the run of ``model`` with the highest mean training accuracy that has its run
-    dir here; None if there is none (results committed without their run dirs)."""
+def best_run(plan, model: str = "dual_attention", aux: bool = True) -> PlannedRun | None:
+    """The planned run of ``model`` (``plan``: a table's report plan, emml/report/plan.py) with the highest mean
+    training accuracy in the table's results CSV that has its checkpoint here; None if there is none (results
+    committed without their run dirs)."""
     from emml.runs.results import read_results
 
-    df = read_results(project_path(results_root) / table / f"{profile.name}.csv")
+    df = read_results(project_path(plan.results_root) / plan.table.name / f"{plan.profile.name}.csv")
     if df.empty:
         return None
     rows = df[(df["model"] == model) & (df["aux"] == aux)].copy()
     train_cols = [c for c in TRAIN_COLUMNS if c in rows]
     rows["score"] = rows[train_cols].mean(axis=1)
-    for _, row in rows.sort_values("score", ascending=False).iterrows():
-        path = path_of(run_root, table, row["run_name"]) / CHECKPOINT
-        if path.exists():
-            return path, row["run_name"]
+    planned = plan.by_name()
+    for name in rows.sort_values("score", ascending=False)["run_name"]:
+        run = planned.get(name)
+        if run is not None and (run.directory / CHECKPOINT).exists():
+            return run
     return None
 
 
-def finished_no_aux(checkpoint: Path, run_root: str | Path) -> Path | None:
-    """The checkpoint of the No-Aux run beside ``checkpoint``'s run when that run has finished
-    (emml.runs.rundir.finished_run), else None: an interrupted run's checkpoint is not a result, and the figures show
-    results only. For a run its table declares, the No-Aux run that table declares beside it (its `noaux_overrides`
-    included: issue 48's warm-up); for any other, the same run with ``aux=False``."""
-    cfg = config_of(checkpoint.parent)
-    other = declared_no_aux(cfg, run_root) or variant_dir(cfg, run_root, aux=False)
-    return other / CHECKPOINT if finished_run(other) else None
-
-
-def declared_no_aux(cfg, run_root: str | Path) -> Path | None:
-    """The run dir of the No-Aux run that ``cfg``'s table declares in the same row, difficulty and seed as ``cfg``'s
-    run; None where that table is not a declared one or ``cfg``'s run is not one of its runs."""
-    from emml.experiments.table_files import table_names
-    from emml.experiments.tables import load_table
-    from emml.runs.naming import run_name
-
-    if cfg.table not in table_names():
-        return None
-    specs = load_table(cfg.table).runs([cfg.seed])
-    name, same = run_name(cfg), (cfg.env.difficulty, cfg.seed)
-    rows = {s.row for s in specs if s.aux and (s.difficulty, s.seed) == same and s.run_name(cfg.profile) == name}
-    twin = [s for s in specs if not s.aux and s.row in rows and (s.difficulty, s.seed) == same]
-    return path_of(run_root, twin[0].table, twin[0].run_name(cfg.profile)) if twin else None
+def finished_no_aux(plan, run: PlannedRun) -> Path | None:
+    """The checkpoint of the No-Aux run ``plan`` declares beside ``run`` (`ReportPlan.no_aux_of`: its
+    `noaux_overrides` included, issue 48's warm-up) when that run has finished (emml.runs.rundir.finished_run), else
+    None: an interrupted run's checkpoint is not a result, and the figures show results only."""
+    other = plan.no_aux_of(run)
+    return other.directory / CHECKPOINT if other is not None and finished_run(other.directory) else None
 
 
 def figure_name(kind: str, table: str, run: str, suffix: str = "", ext: str = "png") -> str:
@@ -255,12 +233,12 @@ def _table_lines(
         )
     lines += [f"  - note: {n}" for n in notes if n not in missing]
     log(f"{table} [{profile}]: {len(paths)} files")
-    best = best_checkpoint(table, prof, results_root=results_root, run_root=run_root)
-    if best is not None and (table, best[1]) not in drawn:
-        ckpt, name = best
+    best = best_run(plan)
+    if best is not None and (table, best.name) not in drawn:
+        name = best.name
         drawn.add((table, name))
         try:
-            figs = figures(ckpt, out, finished_no_aux(ckpt, run_root), table=table)
+            figs = figures(best.directory / CHECKPOINT, out, finished_no_aux(plan, best), table=table)
         except (RunDirError, CheckpointError) as e:
             log(f"{table} [{profile}]: no figures of {name}: {e}")
             return [*lines, f"  - note: no figures of `{name}` here: {e}"]

@@ -176,7 +176,7 @@ def report_table(
         md += [deviations.markdown(devs), ""]
     md += [flat.to_markdown(), ""]
     names = list(dict.fromkeys(n for c in cells for n in c.runs))  # the runs behind the cells, once
-    md += commits_note(results, names, plan.run_root)  # their commits
+    md += commits_note(results, plan.named(names))  # their commits
     if agg is not None:
         md += [pd.DataFrame(agg[0]).to_markdown(index=False), "", agg[1], ""]
     if names:

@@ -63,7 +63,7 @@ def test_a_damaged_run_dir_is_named_and_the_reports_go_on(tmp_path, monkeypatch,
     text, out = index.read_text(), capsys.readouterr()
     assert "**table2** (2 runs, frames 64)" in text and (tmp_path / "reports" / "table2-demo.md").exists()
     assert f"note: {damaged / RESULTS}: not JSON (" in out.err  # named, once per reader, and the report written
-    assert f"no figures of `{damaged.name}` here: {damaged / RESULTS}: not JSON" in text
+    assert f"no figures of `{damaged.name}` here: checkpoint {damaged / CHECKPOINT}: not a PyTorch checkpoint" in text
 
 
 def test_no_committed_report_names_a_folder_of_the_machine_that_wrote_it():

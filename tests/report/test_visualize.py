@@ -212,44 +212,25 @@ def test_reports_index_links_tables_curves_and_the_best_runs_figures(checkpoints
         assert f"({link})" in text and (tmp_path / "reports" / link).exists()
 
 
-def test_the_channel_figure_compares_with_the_no_aux_run_the_table_declares(checkpoints, tmp_path):
+def test_the_channel_figure_compares_with_the_finished_no_aux_run_the_table_declares(checkpoints, tmp_path):
     """Table 2's No Aux Dual-Attention run is `…-noaux-warm400000-…` (its `noaux_overrides`, issue 48), not the same
-    run with aux=False (the collapsed `…-noaux-…` run, which stays in runs/ as evidence)."""
-    import json
+    run with aux=False (the collapsed `…-noaux-…` run, which stays in runs/ as evidence); an interrupted one (a
+    checkpoint, no results) or one not there is no column."""
     import shutil
 
-    from emml.config.profiles import profile_config
     from emml.report.index import finished_no_aux
+    from emml.report.plan import plan_report
     from emml.runs.rundir import RESULTS
 
     runs = tmp_path / "runs"
-    aux_cfg = profile_config("demo", "easy", {"table": "table2"}, model="dual_attention", aux=True)
     names = {True: "dual_attention-easy-aux-s0-demo", False: "dual_attention-easy-noaux-warm400000-s0-demo"}
     for aux, ckpt in checkpoints.items():
         shutil.copytree(ckpt.parent, runs / "table2" / names[aux])
-    collapsed = runs / "table2" / "dual_attention-easy-noaux-s0-demo"
-    shutil.copytree(checkpoints[False].parent, collapsed)
-    aux_dir = runs / "table2" / names[True]
-    saved = json.loads((aux_dir / RESULTS).read_text())
-    (aux_dir / RESULTS).write_text(json.dumps({**saved, "config": aux_cfg.to_dict()}))  # the table's aux run
-    assert finished_no_aux(aux_dir / CHECKPOINT, runs) == runs / "table2" / names[False] / CHECKPOINT
-    shutil.rmtree(runs / "table2" / names[False])  # not finished (not there): no column, not the collapsed run's
-    assert finished_no_aux(aux_dir / CHECKPOINT, runs) is None
-
-
-def test_the_channel_figure_compares_only_with_a_finished_no_aux_run(checkpoints, tmp_path):
-    import shutil
-
-    from emml.report.index import finished_no_aux
-    from emml.runs.rundir import RESULTS
-
-    runs = tmp_path / "runs"
-    for ckpt in checkpoints.values():
-        shutil.copytree(ckpt.parent, runs / "vis" / ckpt.parent.name)
-    aux_ckpt = runs / "vis" / checkpoints[True].parent.name / CHECKPOINT
-    no_aux_dir = runs / "vis" / checkpoints[False].parent.name
-    assert finished_no_aux(aux_ckpt, runs) == no_aux_dir / CHECKPOINT
-    (no_aux_dir / RESULTS).unlink()  # interrupted: a checkpoint, no results
-    assert finished_no_aux(aux_ckpt, runs) is None
-    shutil.rmtree(no_aux_dir)
-    assert finished_no_aux(aux_ckpt, runs) is None
+    shutil.copytree(checkpoints[False].parent, runs / "table2" / "dual_attention-easy-noaux-s0-demo")  # collapsed
+    plan = plan_report("table2", "demo", tmp_path / "results", runs)
+    best, no_aux = plan.by_name()[names[True]], runs / "table2" / names[False]
+    assert finished_no_aux(plan, best) == no_aux / CHECKPOINT
+    (no_aux / RESULTS).unlink()  # interrupted: a checkpoint, no results
+    assert finished_no_aux(plan, best) is None
+    shutil.rmtree(no_aux)  # not there: no column, not the collapsed run's
+    assert finished_no_aux(plan, best) is None
