@@ -24,6 +24,9 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 @pytest.fixture
 def handlers():
     saved = {sig: signal.getsignal(sig) for sig in SIGNALS}
+    # a terminal's process: a suite started in the background without job control (`nohup make test &`) inherits
+    # SIGINT ignored, which install_signal_handlers rightly keeps (tested below): these tests would then fail
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     stops.install_signal_handlers()
     yield
     for sig, handler in saved.items():
