@@ -116,8 +116,10 @@ def import_runs_cmd(
 ):
     """Import finished run dirs into the MLflow store (`make ui` shows them).
 
-    One FINISHED run each, in its table's experiment, with the trainer's tags, its config as params, its whole
-    curve and its score (final/*), dated when it trained (a progress bar on a terminal). Once, even with two
+    One FINISHED run each, in its table's experiment, with the trainer's tags, its config as params, every point
+    of its evaluation curves (eval/*, diag/*) and its score (final/*), 100 evenly spaced points of each per-update
+    key (losses, charts) and its whole metrics.csv as an artifact, dated when it trained (a progress bar on a
+    terminal). Once, even with two
     imports at once or after one was killed: a run already in the store (trained or imported here) is skipped, and
     so is an unfinished one (its trainer logs it)."""
     from emml.config.paths import project_path

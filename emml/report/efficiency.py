@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from emml.eval.metrics import BY_NAME, CURVE_METRICS, label
+from emml.experiments.claims.claim_format import MARKS  # the crossings: leaving chance (above chance + LEAVE), 0.5, 0.9
 from emml.experiments.claims.evidence import LEAVE, Chance, frames_text
 from emml.report.cells import table_results
 from emml.runs.curve import RunCurve, read_curve
@@ -24,8 +25,6 @@ __all__ = ["LEAVE", "frames_text", "first_crossing", "run_efficiency", "table_ef
 UNIFORM_CHANCE = Chance()
 """The uniform floor (SGN 0.2, EQA 1/3; emml/experiments/claims/evidence.py): a crossing asked for without a
 difficulty (`first_crossing`); a run's and a table's crossings read the task's blind ceiling (`task_ceiling`)."""
-MARKS = ("chance", "0.5", "0.9")
-"""The crossings per metric: leaving chance (above chance + LEAVE), reaching 0.5, reaching 0.9."""
 
 
 def level(metric: str, mark: str, floor: float) -> float:
