@@ -79,6 +79,42 @@ def share_cores(threads: int, cores: int | None = None, others: list[int] | None
     )
 
 
+_OWN_THREADS: list[int] = []
+"""This process's torch threads before any sharing (read once: a campaign trains its runs one after another in one
+process, and a run that shared must not hand its share to the next as its own)."""
+
+
+def take_cores(threads: int) -> str | None:
+    """Set this learner's torch threads: ``threads`` > 0 as given, else all of this process's own or, beside other
+    learners, its share (`share_cores`). Returns the warning to say, or None."""
+    import torch
+
+    if not _OWN_THREADS:
+        _OWN_THREADS.append(torch.get_num_threads())
+    share, warning = share_cores(threads)
+    torch.set_num_threads(share or _OWN_THREADS[0])
+    return warning
+
+
+def retake_cores(threads: int) -> str | None:
+    """At each evaluation: the share taken again from the learners beside it now, so that one seen for a moment at
+    the run's start (a test's short training) does not cost the whole run half its threads (seen: a 3-hour campaign
+    step at 1 thread of 2, the other learner gone a minute later). ``threads`` > 0 (the user's) is never changed.
+    Returns a line saying the change, or None when there is none."""
+    import torch
+
+    if threads or not _OWN_THREADS:
+        return None
+    before = torch.get_num_threads()
+    take_cores(0)
+    after = torch.get_num_threads()
+    return (
+        None
+        if after == before
+        else f"learner threads {before} -> {after} (emml learners beside it: {other_learners() or 'none'})"
+    )
+
+
 LOWEST_PRIORITY = 19
 """The nice value a command that is not a learner takes beside learners (`defer_to_learners`), where the kernel has
 no SCHED_IDLE."""

@@ -28,7 +28,7 @@ from emml.eval.evaluate import evaluate
 from emml.models import build_model
 from emml.models.compiled import compile_model, wants_compile
 from emml.rl import alloc
-from emml.rl.contention import share_cores
+from emml.rl.contention import retake_cores, take_cores
 from emml.rl.graphs import Graphs, Kept, captures, mean_stats
 from emml.rl.ppo import explained_variance, make_optimizer, model_forward, ppo_step, ppo_update
 from emml.rl.precision import conv_precision
@@ -150,11 +150,9 @@ class Trainer:
             record_result(results, self.cfg)  # (re)record it: the results table may be a fresh checkout
             return RunResult(self.dir, saved["run_id"], saved["frames"], results["metrics"], skipped=True)
         alloc.tune_glibc()  # PPO reuses its large buffers from the heap (no-op under tcmalloc): docs/throughput.md
-        threads, warning = share_cores(cfg.threads)
+        warning = take_cores(cfg.threads)
         if warning:
             log.warning(warning)
-        if threads:
-            torch.set_num_threads(threads)
         _seed_everything(cfg.seed)
         env_cfg = cfg.env
         model = build_model(
@@ -420,6 +418,9 @@ def train_loop(trainers: list[Trainer], learner, update: int, frames: int) -> li
                 for r, t in enumerate(trainers):
                     t.evaluate_at(learner.run_model(r), frames)
                 next_eval += cfg.eval_every
+                changed = retake_cores(cfg.threads)
+                if changed and not quiet:
+                    say(changed)
             if update % cfg.checkpoint_every == 0 or update == cfg.num_updates:
                 for r, t in enumerate(trainers):
                     t.checkpoint(learner.run_model(r), learner.optimizer_state(r), update, frames, finished=False)

@@ -115,3 +115,30 @@ def test_under_autogroup_a_yielding_process_lowers_its_sessions_group_and_restor
     group = _autogroup(tmp_path / "low", "1", LOWEST_PRIORITY)
     assert contention._lower_autogroup(tmp_path / "low")
     assert len(exits) == 1  # lowered by another: not this process's to restore
+
+
+def test_a_learner_takes_back_its_threads_once_the_other_learner_is_gone(monkeypatch):
+    """A learner seen at the run's start shares the cores; at a later evaluation without it, the run takes its own
+    threads back (a 3-hour campaign step ran at 1 thread of 2 for a test's training that ended a minute later);
+    a thread count the user gave is never changed."""
+    import torch
+
+    from emml.rl import contention
+
+    before = torch.get_num_threads()
+    others = [[4242]]
+    monkeypatch.setattr(contention, "_OWN_THREADS", [2])
+    monkeypatch.setattr(contention.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(contention, "other_learners", lambda proc=None: others[0])
+    try:
+        assert "1 other emml learner(s) running (pid 4242)" in contention.take_cores(0)
+        assert torch.get_num_threads() == 1
+        assert contention.retake_cores(0) is None  # still beside it
+        others[0] = []
+        assert contention.retake_cores(0) == "learner threads 1 -> 2 (emml learners beside it: none)"
+        assert torch.get_num_threads() == 2
+        others[0] = [4242]
+        torch.set_num_threads(3)
+        assert contention.retake_cores(3) is None and torch.get_num_threads() == 3  # the user's choice
+    finally:
+        torch.set_num_threads(before)
