@@ -2,23 +2,10 @@
 once, by the launch's own plan (`emml.experiments.plan.plan_runs`), and every part of the page reads that plan."""
 
 from emml.config.profiles import resolve_profile
-from emml.config.schema import TrainConfig
 from emml.experiments.tables import load_table
 from emml.report.plan import plan_report
+from tests.experiments.test_plan import configs_built as built
 from tests.report.test_tables import PROFILE, fake_results, report
-
-
-def built(monkeypatch) -> list[int]:
-    """A counter of the TrainConfigs built from here on (each `__post_init__`)."""
-    count = [0]
-    post_init = TrainConfig.__post_init__
-
-    def counted(self):
-        count[0] += 1
-        post_init(self)
-
-    monkeypatch.setattr(TrainConfig, "__post_init__", counted)
-    return count
 
 
 def test_a_table2_report_builds_at_most_two_configs_per_run(tmp_path, monkeypatch):
