@@ -84,14 +84,14 @@ _OWN_THREADS: list[int] = []
 process, and a run that shared must not hand its share to the next as its own)."""
 
 
-def take_cores(threads: int) -> str | None:
+def take_cores(threads: int, others: list[int] | None = None) -> str | None:
     """Set this learner's torch threads: ``threads`` > 0 as given, else all of this process's own or, beside other
-    learners, its share (`share_cores`). Returns the warning to say, or None."""
+    learners (``others``: read from /proc unless given), its share (`share_cores`). Returns the warning, or None."""
     import torch
 
     if not _OWN_THREADS:
         _OWN_THREADS.append(torch.get_num_threads())
-    share, warning = share_cores(threads)
+    share, warning = share_cores(threads, others=others)
     torch.set_num_threads(share or _OWN_THREADS[0])
     return warning
 
@@ -105,13 +105,13 @@ def retake_cores(threads: int) -> str | None:
 
     if threads or not _OWN_THREADS:
         return None
-    before = torch.get_num_threads()
-    take_cores(0)
+    before, others = torch.get_num_threads(), other_learners()  # /proc read once, for the share and the line
+    take_cores(0, others)
     after = torch.get_num_threads()
     return (
         None
         if after == before
-        else f"learner threads {before} -> {after} (emml learners beside it: {other_learners() or 'none'})"
+        else f"learner threads {before} -> {after} (emml learners beside it: {others or 'none'})"
     )
 
 
