@@ -97,10 +97,11 @@ bench-gpu:
 	scripts/gpu-check
 
 # the committed run dirs into the store first (emml import-runs: once each; later calls only skip), then the browser;
-# a run dir that cannot be imported is named and the browser opens all the same
+# a run dir that cannot be imported is named and the browser opens all the same. One web worker and no job runner
+# (MLflow's GenAI jobs, unused here): 2 processes instead of 15, up in 18 s instead of 39 s beside a training
 ui: setup
 	-MLFLOW_TRACKING_URI=sqlite:///$(CURDIR)/mlflow.db $(EMML) import-runs
-	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///mlflow.db
+	MLFLOW_SERVER_ENABLE_JOB_EXECUTION=false $(VENV)/bin/mlflow ui --backend-store-uri sqlite:///mlflow.db --workers 1
 
 # The paper's tables (reproduce/tableN.toml): every run under PROFILE, skipping finished ones, resuming the rest.
 # BACKEND=slurm submits submitit jobs of PACK runs each, requeued at TIME_MIN until their runs finish
